@@ -1,0 +1,1 @@
+"""Gymnasium environments built on tianim. Importing this package registers them."""
