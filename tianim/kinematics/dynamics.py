@@ -1,0 +1,185 @@
+"""Inverse and forward dynamics of planar chains, and forces for a point mass on a path (chapter 15.5).
+
+Conventions are those of :class:`tianim.kinematics.PlanarChain`: ``q[i]`` is the
+angle (rad) of link ``i`` relative to link ``i-1`` (``q[0]`` relative to world +x),
+counter-clockwise positive; the base (joint 0) is fixed in the world; ``tau[i]``
+(N m) is the torque the motor at joint ``i`` applies to link ``i`` (and, with
+opposite sign, to link ``i-1``). Gravity is a world-frame acceleration vector in
+m/s^2, by default ``(0, -9.81)`` (the y axis points up). SI units throughout.
+
+The equations of motion are ``M(q) qdd + h(q, qd) = tau`` with ``h`` the Coriolis,
+centrifugal and gravity terms. :func:`inverse_dynamics` evaluates the left side
+by the recursive Newton-Euler algorithm (Luh, Walker and Paul 1980; Featherstone,
+*Rigid Body Dynamics Algorithms*, 2008, ch. 5) specialised to the plane:
+
+forward pass (base to tip), with ``u_i = (cos phi_i, sin phi_i)``,
+``n_i = (-sin phi_i, cos phi_i)``, ``w_i = sum_{k<=i} qd_k``, ``al_i = sum_{k<=i} qdd_k``::
+
+    a_joint[0] = 0
+    a_com[i]   = a_joint[i] + c_i (al_i n_i - w_i^2 u_i)
+    a_joint[i+1] = a_joint[i] + l_i (al_i n_i - w_i^2 u_i)
+
+backward pass (tip to base), ``f_i`` = force of link i-1 on link i at joint i::
+
+    f_i   = f_{i+1} + m_i (a_com[i] - g)
+    tau_i = tau_{i+1} + I_i al_i + c_i (u_i x f_i) + (l_i - c_i) (u_i x f_{i+1})
+
+with ``f_n = 0``, ``tau_n = 0`` and ``a x b = a_x b_y - a_y b_x``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tianim.kinematics._validate import float_array, joint_vector
+from tianim.kinematics.planar import PlanarChain
+
+DEFAULT_GRAVITY = (0.0, -9.81)
+
+
+def _gravity(gravity) -> np.ndarray:
+    g = float_array("gravity", gravity, "of shape (2,), m/s^2")
+    if g.shape != (2,):
+        raise ValueError(f"gravity has shape {g.shape}; pass a 2-vector in m/s^2, e.g. (0, -9.81)")
+    return g
+
+
+def _check_chain(chain) -> None:
+    if not isinstance(chain, PlanarChain):
+        raise TypeError(f"chain={chain!r} is not a PlanarChain; build one with tianim.kinematics.PlanarChain(...)")
+
+
+def _broadcast_joint_args(chain, **arrays):
+    arrs = [joint_vector(k, v, chain.n) for k, v in arrays.items()]
+    try:
+        return np.broadcast_arrays(*arrs)
+    except ValueError as exc:
+        shapes = {k: np.shape(v) for k, v in arrays.items()}
+        raise ValueError(f"joint arrays have incompatible shapes {shapes}; pass equal shapes (..., n)") from exc
+
+
+def _rnea(chain: PlanarChain, q, qd, qdd, g) -> np.ndarray:
+    phi = np.cumsum(q, axis=-1)
+    w = np.cumsum(qd, axis=-1)
+    al = np.cumsum(qdd, axis=-1)
+    u = np.stack([np.cos(phi), np.sin(phi)], axis=-1)  # (..., n, 2)
+    nrm = np.stack([-u[..., 1], u[..., 0]], axis=-1)
+    rel = al[..., None] * nrm - (w**2)[..., None] * u  # acceleration per unit length along link i
+    # a_joint[i] = sum_{k<i} l_k rel_k
+    step = chain.lengths[:, None] * rel
+    a_joint = np.cumsum(step, axis=-2) - step
+    a_com = a_joint + chain.com[:, None] * rel
+    F = chain.masses[:, None] * (a_com - g)  # net force needed on link i, (..., n, 2)
+    # f_i = sum_{k>=i} F_k
+    f = np.cumsum(F[..., ::-1, :], axis=-2)[..., ::-1, :]
+    f_next = np.zeros_like(f)
+    f_next[..., :-1, :] = f[..., 1:, :]
+
+    def cross(a, b):
+        return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+
+    local = chain.inertias * al + chain.com * cross(u, f) + (chain.lengths - chain.com) * cross(u, f_next)
+    return np.cumsum(local[..., ::-1], axis=-1)[..., ::-1]
+
+
+def inverse_dynamics(chain: PlanarChain, q, qd, qdd, gravity=DEFAULT_GRAVITY) -> np.ndarray:
+    """Joint torques that make a planar chain follow ``q(t)`` (recursive Newton-Euler).
+
+    Parameters
+    ----------
+    chain : PlanarChain
+        Link lengths (m), masses (kg), centre-of-mass offsets (m, from the proximal
+        joint along the link) and inertias about the centre of mass (kg m^2).
+    q, qd, qdd : array_like, shape (..., n)
+        Joint angles (rad, each relative to the previous link), velocities (rad/s)
+        and accelerations (rad/s^2). Leading axes broadcast (e.g. time samples).
+    gravity : array_like, shape (2,)
+        World-frame gravitational acceleration, m/s^2; default ``(0, -9.81)``.
+
+    Returns
+    -------
+    tau : ndarray, shape (..., n)
+        Motor torques (N m), ``tau = M(q) qdd + C(q, qd) qd + G(q)``; see the module
+        docstring for the recursion and sign conventions.
+    """
+    _check_chain(chain)
+    q, qd, qdd = _broadcast_joint_args(chain, q=q, qd=qd, qdd=qdd)
+    return _rnea(chain, q, qd, qdd, _gravity(gravity))
+
+
+def mass_matrix(chain: PlanarChain, q) -> np.ndarray:
+    """Joint-space mass matrix ``M(q)``, shape (..., n, n), kg m^2 (symmetric positive definite).
+
+    Column j is ``inverse_dynamics(q, 0, e_j)`` with gravity off.
+    """
+    _check_chain(chain)
+    q = joint_vector("q", q, chain.n)
+    n = chain.n
+    eye = np.eye(n)
+    qb = np.broadcast_to(q[..., None, :], q.shape[:-1] + (n, n))
+    cols = _rnea(chain, qb, np.zeros_like(qb), np.broadcast_to(eye, qb.shape), np.zeros(2))  # (..., j, i)
+    return np.swapaxes(cols, -1, -2)
+
+
+def bias_torques(chain: PlanarChain, q, qd, gravity=DEFAULT_GRAVITY) -> np.ndarray:
+    """Coriolis, centrifugal and gravity torques ``h(q, qd)``, shape (..., n), N m."""
+    _check_chain(chain)
+    q, qd = _broadcast_joint_args(chain, q=q, qd=qd)
+    return _rnea(chain, q, qd, np.zeros_like(q), _gravity(gravity))
+
+
+def forward_dynamics(chain: PlanarChain, q, qd, tau, gravity=DEFAULT_GRAVITY) -> np.ndarray:
+    """Joint accelerations ``qdd = M(q)^-1 (tau - h(q, qd))``, shape (..., n), rad/s^2.
+
+    The inverse of :func:`inverse_dynamics` (same conventions); integrate it to
+    forward-simulate the chain.
+    """
+    _check_chain(chain)
+    q, qd, tau = _broadcast_joint_args(chain, q=q, qd=qd, tau=tau)
+    h = _rnea(chain, q, qd, np.zeros_like(q), _gravity(gravity))
+    return np.linalg.solve(mass_matrix(chain, q), (tau - h)[..., None])[..., 0]
+
+
+def energy(chain: PlanarChain, q, qd, gravity=DEFAULT_GRAVITY) -> np.ndarray:
+    """Total mechanical energy (J), shape (...): ``qd^T M qd / 2 - sum_i m_i g . c_i``.
+
+    Conserved when ``tau = 0``; used to check the dynamics independently.
+    """
+    _check_chain(chain)
+    q, qd = _broadcast_joint_args(chain, q=q, qd=qd)
+    g = _gravity(gravity)
+    kin = 0.5 * np.einsum("...i,...ij,...j->...", qd, mass_matrix(chain, q), qd)
+    pos = chain.joint_positions(q)
+    phi = np.cumsum(q, axis=-1)
+    coms = pos[..., :-1, :] + chain.com[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+    pot = -np.sum(chain.masses * (coms @ g), axis=-1)
+    return kin + pot
+
+
+def point_mass_forces(mass: float, acceleration, external=None) -> np.ndarray:
+    """Force that makes a point mass follow a path: ``f = m a(t) - f_ext(t)`` (Newton's second law).
+
+    Parameters
+    ----------
+    mass : float
+        Mass in kg, > 0.
+    acceleration : array_like, shape (..., d)
+        Path acceleration ``x''(t)`` in m/s^2 (e.g. ``track.acceleration(t)``).
+    external : array_like, shape (d,) or (..., d), optional
+        External forces (N) acting anyway, e.g. gravity ``m g``; default none.
+
+    Returns
+    -------
+    f : ndarray, shape (..., d), newtons: the control force to apply.
+    """
+    m = float_array("mass", mass, "(a positive scalar, kg)")
+    if m.ndim != 0 or m <= 0:
+        raise ValueError(f"mass={mass!r} must be a positive scalar in kg")
+    a = float_array("acceleration", acceleration, "of shape (..., d), m/s^2")
+    f = m * a
+    if external is not None:
+        ext = float_array("external", external, "of shape (d,) or (..., d), newtons")
+        if ext.shape[-1:] != a.shape[-1:]:
+            raise ValueError(f"external has shape {ext.shape}; its last axis must match acceleration {a.shape}")
+        f = f - ext
+    return f

@@ -1,0 +1,120 @@
+"""Planar serial chains of revolute joints: description, forward kinematics, Jacobian.
+
+Conventions (used by every function in :mod:`tianim.kinematics` that takes a
+:class:`PlanarChain`):
+
+* The chain lies in the x-y plane. Joint 0 sits at ``base`` (metres); link ``i``
+  runs from joint ``i`` to joint ``i+1`` and has length ``lengths[i]`` (m).
+* ``q[i]`` (rad) is the angle of link ``i`` **relative to link i-1** (``q[0]`` is
+  relative to the world +x axis), counter-clockwise positive. The absolute angle
+  of link ``i`` is ``phi_i = q[0] + ... + q[i]``.
+* Forward kinematics is the chapter's closed form generalised to n links
+  (chapter 15.3.1): ``p = (sum_i l_i cos(phi_i), sum_i l_i sin(phi_i)) + base``;
+  for two links ``p = (l1 cos q1 + l2 cos(q1+q2), l1 sin q1 + l2 sin(q1+q2))``.
+* Dynamics parameters (only needed by :mod:`tianim.kinematics.dynamics`):
+  ``masses[i]`` (kg), ``com[i]`` = distance (m) of link ``i``'s centre of mass
+  from joint ``i`` along the link, ``inertias[i]`` = moment of inertia (kg m^2)
+  of link ``i`` about its centre of mass, about the z axis. Defaults: 1 kg
+  uniform rods, ``com = l/2``, ``I = m l^2 / 12``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tianim.kinematics._validate import float_array, joint_limits, joint_vector, per_joint
+
+
+class PlanarChain:
+    """A planar serial chain of ``n`` revolute joints (see the module docstring for conventions).
+
+    Parameters
+    ----------
+    lengths : array_like, shape (n,)
+        Link lengths in metres, each > 0.
+    masses, com, inertias : array_like, shape (n,) or scalar, optional
+        Link masses (kg, > 0), centre-of-mass distances from the proximal joint (m)
+        and moments of inertia about the centre of mass (kg m^2, >= 0).
+    lower, upper : array_like, shape (n,) or scalar, optional
+        Joint limits in radians (None: unlimited). ``lower <= upper`` per joint.
+    base : array_like, shape (2,), optional
+        Position of joint 0 in metres (default origin).
+
+    The object is immutable after construction; bad input raises ValueError or
+    TypeError naming the argument.
+    """
+
+    task_dim = 2
+
+    def __init__(self, lengths, masses=None, com=None, inertias=None, lower=None, upper=None, base=(0.0, 0.0)):
+        lengths = float_array("lengths", lengths, "of shape (n,), metres")
+        if lengths.ndim != 1 or lengths.size == 0:
+            raise ValueError(f"lengths has shape {lengths.shape}; pass a 1-D list of n >= 1 link lengths in metres")
+        if np.any(lengths <= 0):
+            raise ValueError(f"lengths={lengths.tolist()} must all be > 0 metres; remove zero-length links")
+        n = lengths.size
+        masses = per_joint("masses", masses, n, 1.0)
+        if np.any(masses <= 0):
+            raise ValueError(f"masses={masses.tolist()} must all be > 0 kg")
+        com = lengths / 2 if com is None else per_joint("com", com, n, 0.0)
+        inertias = masses * lengths**2 / 12 if inertias is None else per_joint("inertias", inertias, n, 0.0)
+        if np.any(inertias < 0):
+            raise ValueError(f"inertias={inertias.tolist()} must all be >= 0 kg m^2")
+        base = float_array("base", base, "of shape (2,), metres")
+        if base.shape != (2,):
+            raise ValueError(f"base has shape {base.shape}; pass (x, y) in metres")
+        lo, hi = joint_limits(lower, upper, n)
+        for name, arr in (("lengths", lengths), ("masses", masses), ("com", com), ("inertias", inertias),
+                          ("lower", lo), ("upper", hi), ("base", base)):
+            arr.setflags(write=False)
+            setattr(self, name, arr)
+        self.n = n
+
+    @property
+    def reach(self) -> float:
+        """Largest distance (m) from the base the end effector can reach: ``sum(lengths)``."""
+        return float(self.lengths.sum())
+
+    def __repr__(self) -> str:
+        return f"PlanarChain(lengths={self.lengths.tolist()})"
+
+    # -- kinematics -------------------------------------------------------------------------------------
+    def joint_positions(self, q) -> np.ndarray:
+        """Positions of joints 0..n-1 and the end effector, shape (..., n+1, 2), metres, for ``q`` (..., n)."""
+        q = joint_vector("q", q, self.n)
+        phi = np.cumsum(q, axis=-1)
+        steps = np.stack([np.cos(phi), np.sin(phi)], axis=-1) * self.lengths[:, None]
+        out = np.zeros(q.shape[:-1] + (self.n + 1, 2))
+        out[..., 1:, :] = np.cumsum(steps, axis=-2)
+        return out + self.base
+
+    def end_effector(self, q) -> np.ndarray:
+        """End-effector position, shape (..., 2), metres, for ``q`` of shape (..., n)."""
+        return self.joint_positions(q)[..., -1, :]
+
+    def jacobian(self, q) -> np.ndarray:
+        """Analytic Jacobian d(end effector)/dq, shape (..., 2, n), metres per radian.
+
+        Column i is ``z x (p_end - p_i)`` = ``(-(y_end - y_i), x_end - x_i)``.
+        """
+        pos = self.joint_positions(q)
+        d = pos[..., -1:, :] - pos[..., :-1, :]
+        return np.stack([-d[..., 1], d[..., 0]], axis=-2)
+
+    # -- helpers used by the IK solvers (no validation: internal, batched (B, n)) ----------------------
+    def _fk_jac(self, q: np.ndarray):
+        """(end (B,2), J (B,2,n)) for q (B,n), without validation."""
+        phi = np.cumsum(q, axis=1)
+        c = np.cos(phi) * self.lengths
+        s = np.sin(phi) * self.lengths
+        # tail sums: position of the end relative to joint i
+        dx = np.cumsum(c[:, ::-1], axis=1)[:, ::-1]
+        dy = np.cumsum(s[:, ::-1], axis=1)[:, ::-1]
+        end = np.stack([dx[:, 0], dy[:, 0]], axis=1) + self.base
+        jac = np.stack([-dy, dx], axis=1)
+        return end, jac
+
+    def _pivots_axes(self, q: np.ndarray):
+        """Joint pivots (B,n,2), axes None (all about +z), end (B,2) for CCD."""
+        pos = self.joint_positions(q)
+        return pos[:, :-1, :], None, pos[:, -1, :]
