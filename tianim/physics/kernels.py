@@ -1,0 +1,250 @@
+"""Taichi kernels for particle / mass-spring stepping (the thin kernel layer).
+
+One factory, :func:`frame_kernel`, builds a kernel for a combination of
+compile-time choices (float type, dimension, integrator, loop layout, spring
+topology, which force terms and colliders exist) and caches it: creating a
+second scene or the hundredth batch copy compiles nothing new, because every
+kernel takes its data as array arguments.
+
+Forces are gathered per particle (each particle sums the forces of its own
+springs, in a fixed order): no atomics, so results are bit-identical for any
+thread count and any loop layout.
+
+Integrators are written as sequences of *phases*; each phase is one loop over
+(copy, particle). Two layouts run the same phases:
+
+* ``"frame"``: one parallel loop over copies; inside it, the substeps and the
+  per-particle loops run serially. One launch per frame (small scenes, or
+  many copies of a small scene).
+* ``"serial"``: as ``"frame"`` with the loop over copies serial too (a
+  single small scene: no thread-pool wake-up, the cheapest launch).
+* ``"substep"``: one parallel loop over (copy, particle) per phase, one launch
+  per substep (large scenes).
+"""
+
+
+import numpy as np
+
+from tianim.physics.model import GRID_STENCIL, PLANE
+from tianim.runtime import ensure_taichi
+
+#: Phases of each integrator: (``pre`` run once per call, ``step`` per substep).
+#: ``acc_X_V`` computes accelerations from positions X and velocities V.
+PHASES = {
+    # x' = x + dt v ; v' = v + dt a(x, v)
+    "explicit_euler": ((), ("acc_x_v", "euler_update")),
+    # v' = v + dt a(x, v) ; x' = x + dt v'
+    "symplectic_euler": ((), ("acc_x_v", "symplectic_update")),
+    # x' = x + dt v + dt^2/2 a ; a' = a(x', v + dt a) ; v' = v + dt/2 (a + a')
+    "verlet": (("acc_x_v",), ("verlet_drift", "acc_x_vs", "verlet_kick")),
+    # classical 4-stage Runge-Kutta on y = (x, v), y' = (v, a(x, v))
+    "rk4": ((), ("acc_x_v", "rk_stage1", "acc_xs_vs", "rk_stage2", "acc_xs_vs", "rk_stage3", "acc_xs_vs", "rk_final")),
+}
+
+#: Scratch buffers (B, N, D) each integrator needs.
+SCRATCH = {
+    "explicit_euler": ("acc",),
+    "symplectic_euler": ("acc",),
+    "verlet": ("acc", "vs", "kx"),
+    "rk4": ("acc", "xs", "vs", "kx", "kv"),
+}
+
+_cache: dict = {}
+
+
+def frame_kernel(real_np, dim: int, method: str, layout: str, grid: bool, colliders: bool, spring_damping: bool, medium_damping: bool):
+    """Return ``(pre_kernel, step_kernel)`` for the given compile-time choices (cached).
+
+    Both kernels have the signature documented in :func:`_build`.
+    ``pre_kernel`` is None when the integrator has no pre-phase.
+    """
+    key = (np.dtype(real_np).name, dim, method, layout, grid, colliders, spring_damping, medium_damping)
+    if key not in _cache:
+        _cache[key] = _build(*key)
+    return _cache[key]
+
+
+def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medium_damping):
+    ti = ensure_taichi()
+    real = ti.f64 if real_name == "float64" else ti.f32
+    vec = ti.types.vector(dim, real)
+    vec_arr = ti.types.ndarray(dtype=vec, ndim=2)
+    real_arr = ti.types.ndarray(dtype=real, ndim=1)
+    int_arr = ti.types.ndarray(dtype=ti.i32, ndim=1)
+    coll_arr = ti.types.ndarray(dtype=real, ndim=2)
+    mask_arr = ti.types.ndarray(dtype=ti.u8, ndim=2)
+    pre_phases, step_phases = PHASES[method]
+    stencil = GRID_STENCIL
+
+    @ti.func
+    def pair_force(xi, xj, vi, vj, k, rest, damp):
+        """Force on i from a spring to j: -k(|d|-l) d/|d| - c((vi-vj).n) n, d = xi - xj."""
+        d = xi - xj
+        length = d.norm()
+        f = ti.Vector.zero(real, dim)
+        if length > 0:
+            n = d / length
+            f = -k * (length - rest) * n
+            if ti.static(spring_damping):
+                f -= damp * (vi - vj).dot(n) * n
+        return f
+
+    @ti.func
+    def accel(b, i, X: ti.template(), V: ti.template(), pinned: ti.template(), mass: ti.template(),
+              inv_mass: ti.template(), off: ti.template(), spr: ti.template(), oth: ti.template(),
+              k: ti.template(), rest: ti.template(), damp: ti.template(), g, rho, nx):
+        """Acceleration of particle i of copy b: (m g - rho v + sum of spring forces) / m; 0 if pinned."""
+        a = ti.Vector.zero(real, dim)
+        if pinned[b, i] == 0:
+            xi = X[b, i]
+            vi = V[b, i]
+            f = mass[i] * g
+            if ti.static(medium_damping):
+                f -= rho * vi
+            if ti.static(grid):
+                row = i // nx
+                col = i - row * nx
+                ny = X.shape[1] // nx
+                for o in ti.static(range(len(stencil))):
+                    cc = col + stencil[o][0]
+                    rr = row + stencil[o][1]
+                    if 0 <= cc < nx and 0 <= rr < ny:
+                        j = rr * nx + cc
+                        f += pair_force(xi, X[b, j], vi, V[b, j], k[o], rest[o], damp[o])
+            else:
+                for e in range(off[i], off[i + 1]):
+                    s = spr[e]
+                    j = oth[e]
+                    f += pair_force(xi, X[b, j], vi, V[b, j], k[s], rest[s], damp[s])
+            a = f * inv_mass[i]
+        return a
+
+    @ti.func
+    def collide(b, i, x: ti.template(), v: ti.template(), coll: ti.template(), g, dt):
+        """Push particle i out of every collider; restitution and Coulomb friction on its velocity."""
+        xi = x[b, i]
+        vi = v[b, i]
+        v_rest = 2 * g.norm() * dt  # below this normal speed an impact is resting contact (e = 0)
+        for c in range(coll.shape[0]):
+            vec_c = ti.Vector.zero(real, dim)  # plane normal, or sphere centre
+            for a in ti.static(range(dim)):
+                vec_c[a] = coll[c, 4 + a]
+            n = vec_c
+            phi = ti.cast(0, real)
+            if coll[c, 0] == PLANE:
+                phi = xi.dot(n) - coll[c, 3]
+            else:
+                d = xi - vec_c
+                dist = d.norm()
+                phi = dist - coll[c, 3]
+                n = ti.Vector.zero(real, dim)
+                if dist > 0:
+                    n = d / dist
+                else:
+                    n[dim - 1] = 1
+            if phi < 0:
+                xi -= phi * n
+                vn = vi.dot(n)
+                if vn < 0:
+                    e = coll[c, 1]
+                    if -vn <= v_rest:
+                        e = 0
+                    dvn = -(1 + e) * vn
+                    vt = vi - vn * n
+                    vt_norm = vt.norm()
+                    scale = ti.cast(0, real)
+                    if vt_norm > coll[c, 2] * dvn:
+                        scale = 1 - coll[c, 2] * dvn / vt_norm
+                    vi = scale * vt - e * vn * n
+        x[b, i] = xi
+        v[b, i] = vi
+
+    @ti.func
+    def phase(p: ti.template(), b, i, x: ti.template(), v: ti.template(), acc: ti.template(), xs: ti.template(),
+              vs: ti.template(), kx: ti.template(), kv: ti.template(), pinned: ti.template(), mass: ti.template(),
+              inv_mass: ti.template(), off: ti.template(), spr: ti.template(), oth: ti.template(), k: ti.template(),
+              rest: ti.template(), damp: ti.template(), coll: ti.template(), g, rho, dt, nx):
+        half = dt / 2
+        if ti.static(p == "acc_x_v"):
+            acc[b, i] = accel(b, i, x, v, pinned, mass, inv_mass, off, spr, oth, k, rest, damp, g, rho, nx)
+        elif ti.static(p == "acc_x_vs"):
+            acc[b, i] = accel(b, i, x, vs, pinned, mass, inv_mass, off, spr, oth, k, rest, damp, g, rho, nx)
+        elif ti.static(p == "acc_xs_vs"):
+            acc[b, i] = accel(b, i, xs, vs, pinned, mass, inv_mass, off, spr, oth, k, rest, damp, g, rho, nx)
+        elif ti.static(p == "euler_update"):
+            x[b, i] += dt * v[b, i]
+            v[b, i] += dt * acc[b, i]
+        elif ti.static(p == "symplectic_update"):
+            v[b, i] += dt * acc[b, i]
+            x[b, i] += dt * v[b, i]
+        elif ti.static(p == "verlet_drift"):
+            a0 = acc[b, i]
+            kx[b, i] = a0
+            x[b, i] += dt * v[b, i] + (half * dt) * a0
+            vs[b, i] = v[b, i] + dt * a0
+        elif ti.static(p == "verlet_kick"):
+            v[b, i] += half * (kx[b, i] + acc[b, i])
+        elif ti.static(p == "rk_stage1"):
+            vi = v[b, i]
+            kx[b, i] = vi
+            kv[b, i] = acc[b, i]
+            xs[b, i] = x[b, i] + half * vi
+            vs[b, i] = vi + half * acc[b, i]
+        elif ti.static(p == "rk_stage2"):
+            vsi = vs[b, i]
+            kx[b, i] += 2 * vsi
+            kv[b, i] += 2 * acc[b, i]
+            xs[b, i] = x[b, i] + half * vsi
+            vs[b, i] = v[b, i] + half * acc[b, i]
+        elif ti.static(p == "rk_stage3"):
+            vsi = vs[b, i]
+            kx[b, i] += 2 * vsi
+            kv[b, i] += 2 * acc[b, i]
+            xs[b, i] = x[b, i] + dt * vsi
+            vs[b, i] = v[b, i] + dt * acc[b, i]
+        elif ti.static(p == "rk_final"):
+            sixth = dt / 6
+            x[b, i] += sixth * (kx[b, i] + vs[b, i])
+            v[b, i] += sixth * (kv[b, i] + acc[b, i])
+        # Colliders act once per substep, after the last phase that moves particles.
+        if ti.static(colliders and p in ("euler_update", "symplectic_update", "verlet_kick", "rk_final")):
+            if pinned[b, i] == 0:
+                collide(b, i, x, v, coll, g, dt)
+
+    def make(phases, serial_substeps):
+        if layout in ("frame", "serial"):
+
+            @ti.kernel
+            def kernel(x: vec_arr, v: vec_arr, acc: vec_arr, xs: vec_arr, vs: vec_arr, kx: vec_arr, kv: vec_arr,
+                       pinned: mask_arr, mass: real_arr, inv_mass: real_arr, off: int_arr, spr: int_arr,
+                       oth: int_arr, k: real_arr, rest: real_arr, damp: real_arr, coll: coll_arr,
+                       g: vec, rho: real, dt: real, nx: ti.i32, nsub: ti.i32):
+                n = x.shape[1]
+                # One loop over copies (parallel, or serial for the "serial" layout);
+                # substeps and particles run serially inside it.
+                ti.loop_config(serialize=ti.static(layout == "serial"))
+                for b in range(x.shape[0]):
+                    for _s in range(nsub if ti.static(serial_substeps) else 1):
+                        for p in ti.static(phases):
+                            for i in range(n):
+                                phase(p, b, i, x, v, acc, xs, vs, kx, kv, pinned, mass, inv_mass, off, spr,
+                                      oth, k, rest, damp, coll, g, rho, dt, nx)
+
+            return kernel
+
+        @ti.kernel
+        def kernel(x: vec_arr, v: vec_arr, acc: vec_arr, xs: vec_arr, vs: vec_arr, kx: vec_arr, kv: vec_arr,
+                   pinned: mask_arr, mass: real_arr, inv_mass: real_arr, off: int_arr, spr: int_arr,
+                   oth: int_arr, k: real_arr, rest: real_arr, damp: real_arr, coll: coll_arr,
+                   g: vec, rho: real, dt: real, nx: ti.i32, nsub: ti.i32):
+            # One parallel loop over (copy, particle) per phase; one launch per substep.
+            for p in ti.static(phases):
+                for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                    phase(p, b, i, x, v, acc, xs, vs, kx, kv, pinned, mass, inv_mass, off, spr,
+                          oth, k, rest, damp, coll, g, rho, dt, nx)
+
+        return kernel
+
+    pre = make(pre_phases, False) if pre_phases else None
+    step = make(step_phases, True)
+    return pre, step

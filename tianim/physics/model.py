@@ -1,0 +1,391 @@
+"""The static description of a particle / mass-spring scene (the *model*).
+
+A :class:`Model` holds what does not change while a scene runs: particle
+masses and initial positions, springs (index pairs, rest lengths, stiffness,
+damping along the spring), gravity, medium damping, default pins and
+colliders. It is validated once, when it is built, and is read-only after.
+What changes (positions, velocities, time, which particles are pinned) lives
+in a :class:`~tianim.physics.state.State`, with a leading batch axis.
+
+Forces (source chapter 15.6, with the chapter's sign error corrected, see
+DESIGN.md section 2): for a spring between particles i and j with
+``d = x_i - x_j``, rest length ``l``, stiffness ``k`` and damping ``c``,
+
+    f_i = -k (|d| - l) d/|d|  -  c ((v_i - v_j) . d/|d|) d/|d|,     f_j = -f_i
+
+which is minus the gradient of the spring energy ``k/2 (|d| - l)^2`` plus a
+dashpot along the spring. Each free particle also feels gravity ``m g`` and
+medium damping ``-rho v`` (chapter 15.6.1; ``rho`` in kg/s, per particle).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from tianim.physics.validation import as_float_array, as_index_array, check_finite_scalar
+
+
+# --------------------------------------------------------------------------- colliders
+@dataclass(frozen=True)
+class Ground:
+    """An infinite plane ``n . x = height`` that particles cannot cross.
+
+    Parameters
+    ----------
+    height : float
+        Offset of the plane along its normal [m].
+    restitution : float
+        Coefficient of restitution e in [0, 1]: the normal velocity after an
+        impact is ``-e`` times the one before (a drop from h rebounds to e^2 h).
+    friction : float
+        Coulomb friction coefficient mu >= 0: the tangential velocity change in
+        a contact is at most mu times the normal velocity change (a particle
+        sliding at v0 stops after v0^2 / (2 mu g)).
+    normal : sequence of float, optional
+        Outward unit normal. Default: opposite to gravity (``+y`` in 2D/3D when
+        gravity is zero; ``-x`` for the chapter's 1D spring whose x points down).
+    """
+
+    height: float = 0.0
+    restitution: float = 0.0
+    friction: float = 0.0
+    normal: tuple | None = None
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """A solid sphere (a disc in 2D, an interval in 1D) that particles cannot enter.
+
+    Parameters
+    ----------
+    center : sequence of float, shape (D,)
+        Centre [m].
+    radius : float
+        Radius [m], > 0.
+    restitution, friction : float
+        As for :class:`Ground`.
+    """
+
+    center: tuple = (0.0, 0.0, 0.0)
+    radius: float = 1.0
+    restitution: float = 0.0
+    friction: float = 0.0
+
+
+#: Width of one row of the collider table passed to kernels:
+#: ``[kind, restitution, friction, offset_or_radius, n_or_center (3 values)]``.
+COLLIDER_ROW = 7
+PLANE, SPHERE = 0, 1
+
+
+def _collider_table(colliders: Sequence, dim: int, gravity: np.ndarray) -> np.ndarray:
+    rows = []
+    for idx, c in enumerate(colliders):
+        name = f"colliders[{idx}]"
+        if not isinstance(c, (Ground, Sphere)):
+            raise TypeError(f"{name}={c!r} is not a collider; use tianim.physics.Ground(...) or Sphere(...)")
+        e = check_finite_scalar(f"{name}.restitution", c.restitution, lo=0.0, hi=1.0)
+        mu = check_finite_scalar(f"{name}.friction", c.friction, lo=0.0)
+        row = np.zeros(COLLIDER_ROW)
+        row[1], row[2] = e, mu
+        if isinstance(c, Ground):
+            if c.normal is None:
+                gnorm = float(np.linalg.norm(gravity))
+                if gnorm > 0:
+                    n = -gravity / gnorm
+                else:
+                    n = np.zeros(dim)
+                    n[min(1, dim - 1)] = 1.0
+            else:
+                n = as_float_array(f"{name}.normal", c.normal, shape=(dim,))
+                nn = float(np.linalg.norm(n))
+                if nn == 0:
+                    raise ValueError(f"{name}.normal={c.normal!r} has zero length; give a non-zero normal")
+                n = n / nn
+            row[0] = PLANE
+            row[3] = check_finite_scalar(f"{name}.height", c.height)
+            row[4 : 4 + dim] = n
+        else:
+            row[0] = SPHERE
+            row[3] = check_finite_scalar(f"{name}.radius", c.radius, lo=0.0, lo_open=True)
+            row[4 : 4 + dim] = as_float_array(f"{name}.center", c.center, shape=(dim,))
+        rows.append(row)
+    return np.array(rows, dtype=np.float64).reshape(len(rows), COLLIDER_ROW)
+
+
+# --------------------------------------------------------------------------- grid topology
+#: Stencil of a regular cloth grid: (d_col, d_row, kind) with kind 0 structural,
+#: 1 shear, 2 bend. Each particle gathers the forces of its 12 neighbours.
+GRID_STENCIL = (
+    (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0),
+    (1, 1, 1), (-1, -1, 1), (1, -1, 1), (-1, 1, 1),
+    (2, 0, 2), (-2, 0, 2), (0, 2, 2), (0, -2, 2),
+)
+
+
+@dataclass(frozen=True)
+class GridTopology:
+    """Implicit spring topology of a regular ``nx`` x ``ny`` cloth grid.
+
+    Particle index is ``row * nx + col``. Springs connect the 12 stencil
+    neighbours of :data:`GRID_STENCIL`; per-offset stiffness, rest length and
+    damping are uniform over the grid, so kernels need no index arrays.
+    """
+
+    nx: int
+    ny: int
+    stiffness: tuple  # (12,) per stencil offset [N/m]
+    rest_length: tuple  # (12,) [m]
+    damping: tuple  # (12,) [N s/m]
+
+
+# --------------------------------------------------------------------------- the model
+class Model:
+    """A validated, read-only particle / mass-spring scene.
+
+    Use a builder (:func:`~tianim.physics.builders.rope`, ``cloth``, ``lattice``,
+    ``spring1d``, ``chain``, ``from_edges``) rather than this constructor.
+
+    Parameters
+    ----------
+    positions : array_like, shape (N, D)
+        Initial particle positions [m], D in {1, 2, 3}.
+    mass : float or array_like, shape (N,)
+        Particle masses [kg], finite and > 0.
+    springs : array_like of int, shape (S, 2)
+        Particle index pairs; no self-springs, no repeated pairs.
+    stiffness, rest_length, damping : float or array_like, shape (S,)
+        Spring stiffness k >= 0 [N/m], rest length l > 0 [m] (default: the
+        initial distance) and damping along the spring c >= 0 [N s/m].
+    gravity : float or array_like, shape (D,)
+        Gravitational acceleration [m/s^2] (a float means that magnitude along
+        -y in 2D/3D and +x in 1D, the chapter's downward x axis).
+    medium_damping : float
+        rho >= 0 [kg/s]: each free particle feels ``-rho v``.
+    pins : array_like of int, optional
+        Particles pinned by default (kinematic: they move with their own velocity).
+    colliders : sequence of Ground / Sphere
+    faces : array_like of int, shape (F, 3), optional
+        Triangles for rendering surfaces.
+    grid : GridTopology, optional
+        Set by the cloth builder: kernels then use the implicit 12-neighbour stencil.
+    name : str
+    """
+
+    def __init__(
+        self,
+        positions,
+        mass=1.0,
+        springs=None,
+        stiffness=0.0,
+        rest_length=None,
+        damping=0.0,
+        gravity=9.81,
+        medium_damping=0.0,
+        pins: Iterable[int] | None = None,
+        colliders: Sequence = (),
+        faces=None,
+        grid: GridTopology | None = None,
+        name: str = "model",
+    ):
+        pos = np.asarray(positions) if not isinstance(positions, np.ndarray) else positions
+        if pos.ndim == 1:
+            raise ValueError(
+                f"positions has shape {pos.shape}; give shape (N, D) with D in 1, 2, 3 "
+                "(for 1D particles use positions.reshape(-1, 1))"
+            )
+        pos = as_float_array("positions", positions, ndim=2)
+        n, dim = pos.shape
+        if dim not in (1, 2, 3):
+            raise ValueError(f"positions has shape {pos.shape}: dimension D={dim} must be 1, 2 or 3")
+        if n < 1:
+            raise ValueError("positions is empty; a model needs at least one particle")
+
+        if np.ndim(mass) == 0:
+            check_finite_scalar("mass", mass)
+            mass = np.full(n, mass, dtype=float)
+        m = as_float_array("mass", mass, shape=(n,))
+        if np.any(m <= 0):
+            bad = int(np.flatnonzero(m <= 0)[0])
+            raise ValueError(
+                f"mass[{bad}]={m[bad]!r} must be > 0 [kg]; to fix a particle in place pin it "
+                "(pins=[...]) instead of giving it zero mass"
+            )
+
+        if springs is None:
+            springs = np.zeros((0, 2), dtype=np.int32)
+        sp = as_index_array("springs", springs, n, ndim=2)
+        if sp.shape[1] != 2:
+            raise ValueError(f"springs has shape {sp.shape}; give shape (S, 2) of particle index pairs")
+        s = sp.shape[0]
+        if s:
+            self_loops = np.flatnonzero(sp[:, 0] == sp[:, 1])
+            if self_loops.size:
+                i = int(self_loops[0])
+                raise ValueError(f"springs[{i}]={sp[i].tolist()} connects a particle to itself; remove it")
+            key = np.sort(sp, axis=1).astype(np.int64)
+            key = key[:, 0] * n + key[:, 1]
+            uniq, first, counts = np.unique(key, return_index=True, return_counts=True)
+            if np.any(counts > 1):
+                dup = uniq[counts > 1][0]
+                idx = np.flatnonzero(key == dup)
+                raise ValueError(
+                    f"springs[{idx[0]}] and springs[{idx[1]}] both connect particles "
+                    f"{sp[idx[0]].tolist()}; merge them into one spring (add their stiffnesses)"
+                )
+
+        def per_spring(argname, value):
+            if np.ndim(value) == 0:
+                check_finite_scalar(argname, value)
+                value = np.full(s, value, dtype=float)
+            return as_float_array(argname, value, shape=(s,))
+
+        k = per_spring("stiffness", stiffness)
+        if np.any(k < 0):
+            bad = int(np.flatnonzero(k < 0)[0])
+            raise ValueError(f"stiffness[{bad}]={k[bad]!r} must be >= 0 [N/m]")
+        dist = np.linalg.norm(pos[sp[:, 0]] - pos[sp[:, 1]], axis=1) if s else np.zeros(0)
+        rest = dist.copy() if rest_length is None else per_spring("rest_length", rest_length)
+        if np.any(rest <= 0):
+            bad = int(np.flatnonzero(rest <= 0)[0])
+            raise ValueError(
+                f"rest_length[{bad}]={rest[bad]!r} must be > 0 [m] (a zero-length spring has no direction); "
+                "give a positive rest length or separate the two particles"
+            )
+        c = per_spring("damping", damping)
+        if np.any(c < 0):
+            bad = int(np.flatnonzero(c < 0)[0])
+            raise ValueError(f"damping[{bad}]={c[bad]!r} must be >= 0 [N s/m]")
+
+        if np.ndim(gravity) == 0:
+            gmag = check_finite_scalar("gravity", gravity)
+            g = np.zeros(dim)
+            if dim == 1:
+                g[0] = gmag  # chapter 15.6.1: x increases downward
+            else:
+                g[1] = -gmag
+        else:
+            g = as_float_array("gravity", gravity, shape=(dim,))
+        rho = check_finite_scalar("medium_damping", medium_damping, lo=0.0)
+
+        pin_idx = np.zeros(0, dtype=np.int32) if pins is None else as_index_array("pins", list(pins) if not isinstance(pins, np.ndarray) else pins, n, ndim=1)
+        table = _collider_table(tuple(colliders), dim, g)
+
+        if faces is not None:
+            faces = as_index_array("faces", faces, n, ndim=2)
+            if faces.shape[1] != 3:
+                raise ValueError(f"faces has shape {faces.shape}; give shape (F, 3) of triangles")
+
+        self.name = str(name)
+        self.dim = int(dim)
+        self.n_particles = int(n)
+        self.positions = _frozen(pos)
+        self.mass = _frozen(m)
+        self.springs = _frozen(sp.astype(np.int32))
+        self.stiffness = _frozen(k)
+        self.rest_length = _frozen(rest)
+        self.damping = _frozen(c)
+        self.gravity = _frozen(g)
+        self.medium_damping = float(rho)
+        self.pins = _frozen(np.unique(pin_idx).astype(np.int32))
+        self.colliders = tuple(colliders)
+        self.collider_table = _frozen(table)
+        self.faces = None if faces is None else _frozen(faces.astype(np.int32))
+        self.grid = grid
+        self._csr = None
+        self._kernel_data: dict = {}
+
+    # ------------------------------------------------------------------ properties
+    @property
+    def n_springs(self) -> int:
+        return int(self.springs.shape[0])
+
+    @property
+    def has_spring_damping(self) -> bool:
+        return bool(np.any(self.damping > 0))
+
+    def __repr__(self) -> str:
+        topo = f"grid {self.grid.nx}x{self.grid.ny}" if self.grid else "edges"
+        return (
+            f"Model({self.name!r}, dim={self.dim}, particles={self.n_particles}, springs={self.n_springs} "
+            f"({topo}), pins={self.pins.size}, colliders={len(self.colliders)})"
+        )
+
+    # ------------------------------------------------------------------ derived data
+    def incidence(self):
+        """CSR incidence lists: ``(offsets (N+1,), spring (2S,), other (2S,))``.
+
+        The springs of particle i are ``spring[offsets[i]:offsets[i+1]]`` and the
+        particles at their other ends ``other[...]``, in increasing spring order:
+        the per-particle gather that kernels perform is atomic-free and
+        deterministic.
+        """
+        if self._csr is None:
+            n, sp = self.n_particles, self.springs
+            ends = np.concatenate([sp[:, 0], sp[:, 1]])
+            others = np.concatenate([sp[:, 1], sp[:, 0]])
+            sid = np.concatenate([np.arange(sp.shape[0]), np.arange(sp.shape[0])])
+            order = np.lexsort((sid, ends))
+            counts = np.bincount(ends, minlength=n)
+            offsets = np.zeros(n + 1, dtype=np.int32)
+            np.cumsum(counts, out=offsets[1:])
+            self._csr = tuple(_frozen(a.astype(np.int32)) for a in (offsets, sid[order], others[order]))
+        return self._csr
+
+    def kernel_data(self, dtype) -> dict:
+        """Model arrays converted to ``dtype`` for kernels (cached per dtype)."""
+        dtype = np.dtype(dtype)
+        if dtype not in self._kernel_data:
+            off, spr, oth = self.incidence()
+            if self.grid is not None:
+                k = np.asarray(self.grid.stiffness, dtype=dtype)
+                rest = np.asarray(self.grid.rest_length, dtype=dtype)
+                damp = np.asarray(self.grid.damping, dtype=dtype)
+            else:
+                k, rest, damp = (np.ascontiguousarray(a, dtype=dtype) for a in (self.stiffness, self.rest_length, self.damping))
+            if k.size == 0:  # kernels need non-empty arrays
+                k = rest = damp = np.zeros(1, dtype=dtype)
+            inv_mass = (1.0 / self.mass).astype(dtype)
+            coll = self.collider_table.astype(dtype) if len(self.colliders) else np.zeros((1, COLLIDER_ROW), dtype=dtype)
+            self._kernel_data[dtype] = dict(
+                mass=self.mass.astype(dtype),
+                inv_mass=inv_mass,
+                off=off,
+                spr=spr if spr.size else np.zeros(1, np.int32),
+                oth=oth if oth.size else np.zeros(1, np.int32),
+                k=k,
+                rest=rest,
+                damp=damp,
+                coll=coll,
+            )
+        return self._kernel_data[dtype]
+
+    def state(self, batch: int = 1, dtype=np.float32):
+        """A fresh :class:`~tianim.physics.state.State` with ``batch`` copies at the initial positions."""
+        from tianim.physics.state import State
+
+        return State(self, batch=batch, dtype=dtype)
+
+    def omega_max(self) -> float:
+        """Upper bound on the largest angular frequency of the free particles [rad/s].
+
+        Gershgorin bound on the largest eigenvalue of M^-1 K for the linearised
+        springs (each spring of stiffness k adds k/m_i to the diagonal and to one
+        off-diagonal entry of row i, so lambda_max <= max_i 2 sum_s k_s / m_i).
+        """
+        if self.n_springs == 0:
+            return 0.0
+        row = np.zeros(self.n_particles)
+        np.add.at(row, self.springs[:, 0], self.stiffness)
+        np.add.at(row, self.springs[:, 1], self.stiffness)
+        return float(math.sqrt(2.0 * np.max(row / self.mass)))
+
+
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, copy=True)
+    a.setflags(write=False)
+    return a

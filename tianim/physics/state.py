@@ -1,0 +1,178 @@
+"""What changes while a scene runs (the *state*), for B copies at once.
+
+A :class:`State` holds positions ``x`` and velocities ``v`` of shape
+(B, N, D), simulated time ``t`` of shape (B,) and the pin mask ``pinned`` of
+shape (B, N): B independent copies of one :class:`~tianim.physics.model.Model`,
+each with its own initial conditions and pins, stepped together by one kernel
+launch. The arrays are plain NumPy: read and write them in place.
+
+Pinned particles are kinematic: integrators give them zero acceleration, so
+they move with their own velocity. To drive a pin along a target path, set
+its position and velocity each frame with :meth:`State.move_pins`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tianim.physics.validation import as_float_array, as_index_array, check_positive_int
+
+_DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
+
+
+class State:
+    """Positions, velocities, time and pins of B copies of a model.
+
+    Parameters
+    ----------
+    model : Model
+    batch : int
+        Number of independent copies B >= 1.
+    dtype : numpy float dtype
+        ``np.float32`` (default, fast) or ``np.float64`` (accuracy work).
+
+    Attributes
+    ----------
+    x, v : ndarray, shape (B, N, D), dtype ``dtype``
+        Positions [m] and velocities [m/s], initialised from ``model.positions``
+        and zero.
+    t : ndarray, shape (B,), float64
+        Simulated time of each copy [s].
+    pinned : ndarray, shape (B, N), bool
+        Which particles are pinned (initialised from ``model.pins``).
+    """
+
+    def __init__(self, model, batch: int = 1, dtype=np.float32):
+        batch = check_positive_int("batch", batch)
+        dt = np.dtype(dtype)
+        if dt not in _DTYPES:
+            raise TypeError(f"dtype={dtype!r} is not supported; use np.float32 or np.float64")
+        self.model = model
+        self.dtype = dt
+        n, d = model.n_particles, model.dim
+        self.x = np.ascontiguousarray(np.broadcast_to(model.positions.astype(dt), (batch, n, d)))
+        self.v = np.zeros((batch, n, d), dtype=dt)
+        self.t = np.zeros(batch, dtype=np.float64)
+        self.pinned = np.zeros((batch, n), dtype=bool)
+        self.pinned[:, model.pins] = True
+        self._scratch: dict = {}
+
+    # ------------------------------------------------------------------ shape
+    @property
+    def batch(self) -> int:
+        return int(self.x.shape[0])
+
+    def __repr__(self) -> str:
+        return f"State(batch={self.batch}, particles={self.x.shape[1]}, dim={self.x.shape[2]}, dtype={self.dtype.name})"
+
+    def check_arrays(self) -> None:
+        """Raise if ``x``, ``v``, ``t`` or ``pinned`` were replaced by arrays of the wrong shape or dtype."""
+        b, n, d = self.batch, self.model.n_particles, self.model.dim
+        for name in ("x", "v"):
+            a = getattr(self, name)
+            if not isinstance(a, np.ndarray) or a.shape != (b, n, d) or a.dtype != self.dtype:
+                raise ValueError(
+                    f"state.{name} has shape {getattr(a, 'shape', None)} and dtype {getattr(a, 'dtype', None)}; "
+                    f"expected ({b}, {n}, {d}) {self.dtype.name}: write into it in place (state.{name}[...] = ...)"
+                )
+            if not a.flags.c_contiguous:
+                raise ValueError(f"state.{name} must be C-contiguous; assign with state.{name}[...] = values")
+        if not isinstance(self.pinned, np.ndarray) or self.pinned.shape != (b, n) or self.pinned.dtype != bool:
+            raise ValueError(f"state.pinned must be a ({b}, {n}) bool array; write into it in place")
+        if not isinstance(self.t, np.ndarray) or self.t.shape != (b,):
+            raise ValueError(f"state.t must be a ({b},) array; write into it in place")
+
+    # ------------------------------------------------------------------ pins
+    def _copies(self, copies) -> np.ndarray:
+        if copies is None:
+            return np.arange(self.batch)
+        return as_index_array("copies", np.atleast_1d(copies), self.batch)
+
+    def pin(self, indices, copies=None) -> None:
+        """Pin particles ``indices`` in copies ``copies`` (default: all copies)."""
+        idx = as_index_array("indices", np.atleast_1d(indices), self.model.n_particles)
+        cps = self._copies(copies)
+        self.pinned[np.ix_(cps, idx)] = True
+
+    def release(self, indices, copies=None) -> None:
+        """Release pinned particles: from now on they move under forces."""
+        idx = as_index_array("indices", np.atleast_1d(indices), self.model.n_particles)
+        cps = self._copies(copies)
+        self.pinned[np.ix_(cps, idx)] = False
+
+    def move_pins(self, indices, positions, velocities=None, copies=None) -> None:
+        """Set positions (and velocities) of particles ``indices`` and pin them.
+
+        Parameters
+        ----------
+        indices : int or array_like, shape (P,)
+        positions : array_like, broadcastable to (C, P, D)
+            Target positions [m] for the C selected copies.
+        velocities : array_like, broadcastable to (C, P, D), optional
+            Target velocities [m/s]; default zero. A pinned particle keeps this
+            velocity during the next step, so giving the pin's true velocity
+            makes it follow a smooth path between frames.
+        copies : int or array_like, optional
+            Copies to change (default all).
+        """
+        idx = as_index_array("indices", np.atleast_1d(indices), self.model.n_particles)
+        cps = self._copies(copies)
+        shape = (cps.size, idx.size, self.model.dim)
+        pos = _broadcast("positions", positions, shape)
+        vel = np.zeros(shape) if velocities is None else _broadcast("velocities", velocities, shape)
+        sel = np.ix_(cps, idx)
+        self.x[sel] = pos
+        self.v[sel] = vel
+        self.pinned[sel] = True
+
+    # ------------------------------------------------------------------ snapshots
+    def snapshot(self) -> dict:
+        """An exact copy of everything that changes: ``{"x", "v", "t", "pinned"}``."""
+        return {"x": self.x.copy(), "v": self.v.copy(), "t": self.t.copy(), "pinned": self.pinned.copy()}
+
+    def restore(self, snap: dict) -> None:
+        """Restore a :meth:`snapshot` exactly (bit for bit), in place."""
+        for key, ref in (("x", self.x), ("v", self.v), ("t", self.t), ("pinned", self.pinned)):
+            if key not in snap:
+                raise ValueError(f"snapshot is missing {key!r}; pass a dict returned by State.snapshot()")
+            a = np.asarray(snap[key])
+            if a.shape != ref.shape or a.dtype != ref.dtype:
+                raise ValueError(
+                    f"snapshot[{key!r}] has shape {a.shape} dtype {a.dtype}; this state needs {ref.shape} {ref.dtype}"
+                )
+        for key in ("x", "v", "t", "pinned"):
+            getattr(self, key)[...] = snap[key]
+
+    def copy(self) -> "State":
+        """An independent copy of this state (same model)."""
+        other = State.__new__(State)
+        other.model, other.dtype = self.model, self.dtype
+        other.x, other.v, other.t, other.pinned = self.x.copy(), self.v.copy(), self.t.copy(), self.pinned.copy()
+        other._scratch = {}
+        return other
+
+    def save(self, path) -> None:
+        """Write the state to an ``.npz`` file (exact)."""
+        np.savez(path, **self.snapshot())
+
+    def load(self, path) -> None:
+        """Read a state written by :meth:`save` into this state (shapes must match)."""
+        with np.load(path) as data:
+            self.restore({k: data[k] for k in ("x", "v", "t", "pinned")})
+
+    # ------------------------------------------------------------------ scratch buffers
+    def scratch(self, name: str) -> np.ndarray:
+        """A (B, N, D) work buffer for integrators (not part of the snapshot)."""
+        buf = self._scratch.get(name)
+        if buf is None or buf.shape != self.x.shape:
+            buf = np.zeros_like(self.x)
+            self._scratch[name] = buf
+        return buf
+
+
+def _broadcast(name: str, value, shape) -> np.ndarray:
+    arr = as_float_array(name, value)
+    try:
+        return np.broadcast_to(arr, shape)
+    except ValueError:
+        raise ValueError(f"{name} has shape {arr.shape}; it must broadcast to {shape} (copies, pins, dim)") from None
