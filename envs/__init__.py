@@ -1,1 +1,32 @@
-"""Gymnasium environments built on tianim. Importing this package registers them."""
+"""Gymnasium environments built on tianim. Importing this package registers them.
+
+| id                    | single env                    | batched (``gym.make_vec``)         |
+|-----------------------|-------------------------------|------------------------------------|
+| tianim/ArmReach-v0    | :class:`envs.arm_reach.ArmReachEnv`   | :class:`envs.arm_reach.ArmReachVectorEnv`   |
+
+``gym.make("tianim/ArmReach-v0")`` after ``import envs``, or
+``gym.make("envs:tianim/ArmReach-v0")`` without it (gymnasium imports ``envs``).
+``envs.sb3.SB3VecEnv`` adapts a batched env to Stable-Baselines3;
+``envs.baselines`` has a scripted controller per task.
+"""
+import os
+
+from gymnasium.envs.registration import register, registry
+
+# Tests run on the CPU backend unless told otherwise, with Taichi's offline cache on.
+os.environ.setdefault("TIANIM_ARCH", "cpu")
+
+_ENVS = {
+    "ArmReach-v0": ("arm_reach", "ArmReachEnv", "ArmReachVectorEnv", 100),
+}
+
+ENV_IDS = tuple(f"tianim/{name}" for name in _ENVS)
+
+for _name, (_module, _single, _vector, _steps) in _ENVS.items():
+    if f"tianim/{_name}" not in registry:
+        register(
+            id=f"tianim/{_name}",
+            entry_point=f"envs.{_module}:{_single}",
+            vector_entry_point=f"envs.{_module}:{_vector}",
+            max_episode_steps=_steps,
+        )

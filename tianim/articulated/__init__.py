@@ -24,7 +24,7 @@ from . import scalar
 from .codegen import compile_stepper
 from .model import PlanarArm, planar_arm
 
-__all__ = ["PlanarArm", "planar_arm", "forward_dynamics", "step", "step_batch", "energy", "tip_position"]
+__all__ = ["PlanarArm", "planar_arm", "forward_dynamics", "step", "stepper", "step_batch", "energy", "tip_position"]
 
 
 def _vec(name: str, value, n: int) -> list:
@@ -51,6 +51,13 @@ def _params(arm: PlanarArm) -> tuple:
 @lru_cache(maxsize=64)
 def _stepper(arm: PlanarArm, dt: float, substeps: int):
     return compile_stepper(_params(arm), dt, substeps)
+
+
+def stepper(arm: PlanarArm, dt: float, substeps: int = 1):
+    """The fast function behind :func:`step`: ``f(q, qd, tau) -> (q, qd)`` on lists of
+    Python floats, with no validation (for environments' inner loops). Cached per arm."""
+    _check_dt(dt, substeps)
+    return _stepper(arm, float(dt), int(substeps))
 
 
 def forward_dynamics(arm: PlanarArm, q, qd, tau) -> np.ndarray:

@@ -1,0 +1,240 @@
+"""ArmReach-v0: a planar n-link arm with joint dynamics reaches for a target.
+
+## Description
+
+A planar serial arm of ``n_links`` revolute joints (default 2, at most 7; reach
+1 m, total mass 1 kg split equally, uniform-rod links) lies in a horizontal plane,
+like MuJoCo's Reacher, but with its dynamics written out in
+:mod:`tianim.articulated`: link masses and inertias, viscous joint damping
+(0.1 N m s/rad), joint limits (the base joint is free, the others are limited
+to +-2.6 rad with an inelastic stop) and a 20 rad/s joint speed limit. The
+agent commands joint torques; the goal is to bring the tip to a target.
+
+## Action space
+
+``Box(-1, 1, (n_links,), float32)``: torque of each motor as a fraction of its
+maximum, ``tau_i = a_i * max_torque_i`` with ``max_torque = 2 (n - i) / n`` N m
+(2 and 1 N m for two links). Finite actions outside [-1, 1] are clipped; NaN or
+infinite actions raise ``ValueError``.
+
+## Observation space
+
+``Box(float32, (3 n + 4,))``:
+
+| index          | observation                       | min    | max   | unit  |
+|----------------|-----------------------------------|--------|-------|-------|
+| 0 .. n-1       | cos of joint angles q_i (relative)| -1     | 1     |       |
+| n .. 2n-1      | sin of joint angles               | -1     | 1     |       |
+| 2n .. 3n-1     | joint velocities                  | -20    | 20    | rad/s |
+| 3n, 3n+1       | target x, y                       | -1     | 1     | m     |
+| 3n+2, 3n+3     | tip minus target, x and y         | -2     | 2     | m     |
+
+## Rewards
+
+``r = -|tip - target| - 0.1 * sum_i a_i^2`` (clipped actions), as Reacher-v5.
+
+## Starting state
+
+Joint angles uniform in [-0.1, 0.1] rad, velocities uniform in [-0.005, 0.005]
+rad/s; the target is the tip of the arm at joint angles drawn uniformly within
+the limits (base in [-pi, pi]), hence always reachable. All from ``np_random``.
+
+## Episode end
+
+Never terminates. Truncated after 100 steps (2 s) by ``TimeLimit`` (single
+env) or by the per-copy step counter (``gym.make_vec``).
+
+## Physics (fixed for version 0)
+
+Control step 0.02 s (``render_fps`` 50) = 4 substeps of 0.005 s, semi-implicit
+Euler on float64 state. The single environment steps the arm in plain Python
+floats (no kernel launch); ``gym.make_vec`` steps every copy in one Taichi
+kernel launch; both perform identical float64 operations, so observations agree
+bit for bit between a single env and copy ``k`` of a batch seeded alike.
+
+## Arguments
+
+``gym.make("tianim/ArmReach-v0", n_links=2, render_mode=None)``;
+``gym.make_vec("tianim/ArmReach-v0", num_envs=N, n_links=2)``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+from tianim import articulated
+from tianim.articulated import scalar
+
+from ._batched import BatchedEnv, check_action
+
+DT = 0.02
+SUBSTEPS = 4
+MAX_EPISODE_STEPS = 100
+CTRL_COST = 0.1
+JOINT_LIMIT = 2.6
+MAX_VELOCITY = 20.0
+INIT_NOISE_Q = 0.1
+INIT_NOISE_QD = 0.005
+MAX_LINKS = 7
+
+
+def make_arm(n_links: int) -> articulated.PlanarArm:
+    """The arm of ArmReach-v0 with ``n_links`` links (see the module docstring)."""
+    if isinstance(n_links, bool) or not isinstance(n_links, (int, np.integer)) or not 1 <= n_links <= MAX_LINKS:
+        raise ValueError(f"n_links={n_links!r} must be an integer from 1 to {MAX_LINKS}")
+    n = int(n_links)
+    lower = [-math.inf] + [-JOINT_LIMIT] * (n - 1)
+    upper = [math.inf] + [JOINT_LIMIT] * (n - 1)
+    return articulated.planar_arm(
+        n, lengths=1.0 / n, masses=1.0 / n, damping=0.1, max_torque=[2.0 * (n - i) / n for i in range(n)],
+        lower=lower, upper=upper, max_velocity=MAX_VELOCITY, gravity=0.0)
+
+
+def observation_space(n: int) -> spaces.Box:
+    high = np.concatenate([np.ones(2 * n), np.full(n, MAX_VELOCITY), np.ones(2), np.full(2, 2.0)]).astype(np.float32)
+    return spaces.Box(-high, high, dtype=np.float32)
+
+
+def sample_start(rng: np.random.Generator, params: tuple) -> tuple[list, list, float, float]:
+    """Initial ``(q, qd, target_x, target_y)`` drawn with ONE call to ``rng`` (single env and
+    batch copies draw identically)."""
+    n = params[0]
+    lim = [math.pi] + [JOINT_LIMIT] * (n - 1)
+    high = np.array([INIT_NOISE_Q] * n + [INIT_NOISE_QD] * n + lim)
+    u = rng.uniform(-high, high).tolist()
+    _, _, tx, ty = scalar.observe(params, u[2 * n:])
+    return u[:n], u[n:2 * n], tx, ty
+
+
+class ArmReachEnv(gym.Env):
+    """Single ArmReach-v0 environment (see the module docstring)."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / DT)}
+
+    def __init__(self, n_links: int = 2, render_mode: str | None = None):
+        self.arm = make_arm(n_links)
+        if render_mode not in (None, *self.metadata["render_modes"]):
+            raise ValueError(f"render_mode={render_mode!r}; choose one of {self.metadata['render_modes']} or None")
+        self.render_mode = render_mode
+        self.n_links = n = self.arm.n_links
+        self._params = scalar.unpack(self.arm)
+        self._stepper = articulated.stepper(self.arm, DT, SUBSTEPS)
+        self._max_torque = self.arm.max_torque.tolist()
+        self.action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
+        self.observation_space = observation_space(n)
+        self._state = None
+        self._renderer = None
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        q, qd, tx, ty = sample_start(self.np_random, self._params)
+        self._state = (q, qd, tx, ty)
+        obs, _dist = self._observe()
+        return obs, {}
+
+    def _observe(self):
+        q, qd, tx, ty = self._state
+        cq, sq, x, y = scalar.observe(self._params, q)
+        dx = x - tx
+        dy = y - ty
+        obs = np.array(cq + sq + qd + [tx, ty, dx, dy], dtype=np.float32)
+        return obs, math.sqrt(dx * dx + dy * dy)
+
+    def step(self, action):
+        if self._state is None:
+            raise RuntimeError("call reset() before step()")
+        a = check_action(action, self.action_space.shape).astype(np.float64).tolist()
+        q, qd, tx, ty = self._state
+        tau = [a[i] * self._max_torque[i] for i in range(self.n_links)]
+        q, qd = self._stepper(q, qd, tau)
+        self._state = (q, qd, tx, ty)
+        obs, dist = self._observe()
+        ctrl = a[0] * a[0]
+        for i in range(1, self.n_links):
+            ctrl = ctrl + a[i] * a[i]
+        reward = -dist - CTRL_COST * ctrl
+        return obs, reward, False, False, {"distance": dist}
+
+    def render(self):
+        if self.render_mode != "rgb_array" or self._state is None:
+            return None
+        from ._render import arm_frame
+
+        q, _qd, tx, ty = self._state
+        return arm_frame(self.arm, q, (tx, ty))
+
+    def close(self):
+        self._state = None
+        self._renderer = None
+
+
+class ArmReachVectorEnv(BatchedEnv):
+    """``num_envs`` ArmReach-v0 copies stepped in one Taichi kernel launch per step."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / DT),
+                "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, n_links: int = 2, max_episode_steps: int = MAX_EPISODE_STEPS,
+                 render_mode: str | None = None, autoreset_mode=AutoresetMode.NEXT_STEP):
+        self.arm = make_arm(n_links)
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode={render_mode!r}; choose 'rgb_array' or None")
+        super().__init__(num_envs, max_episode_steps, autoreset_mode)
+        self.render_mode = render_mode
+        n, b = self.arm.n_links, self.num_envs
+        self.n_links = n
+        self._params = scalar.unpack(self.arm)
+        self.single_action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
+        self.action_space = batch_space(self.single_action_space, b)
+        self.single_observation_space = observation_space(n)
+        self.observation_space = batch_space(self.single_observation_space, b)
+        self.q = np.zeros((b, n))
+        self.qd = np.zeros((b, n))
+        self.target = np.zeros((b, 2))
+        self._cos = np.zeros((b, n))
+        self._sin = np.zeros((b, n))
+        self._tip = np.zeros((b, 2))
+        self._zero_tau = np.zeros((b, n))
+
+    def _reset_copies(self, idx):
+        for k in idx.tolist():
+            q, qd, tx, ty = sample_start(self._rngs[k], self._params)
+            self.q[k] = q
+            self.qd[k] = qd
+            self.target[k] = (tx, ty)
+
+    def _launch(self, tau, active):
+        articulated.step_batch(self.arm, self.q, self.qd, tau, DT, SUBSTEPS, active, self._cos, self._sin, self._tip)
+
+    def _obs(self):
+        rel = self._tip - self.target
+        obs = np.concatenate([self._cos, self._sin, self.qd, self.target, rel], axis=1).astype(np.float32)
+        dist = np.sqrt(rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1])
+        return obs, dist
+
+    def _advance(self, actions, reset_mask):
+        a = actions.astype(np.float64)
+        tau = a * self.arm.max_torque
+        self._launch(tau, (~reset_mask).astype(np.int32))
+        obs, dist = self._obs()
+        ctrl = a[:, 0] * a[:, 0]
+        for i in range(1, self.n_links):
+            ctrl = ctrl + a[:, i] * a[:, i]
+        return obs, -dist - CTRL_COST * ctrl, np.zeros(self.num_envs, bool)
+
+    def _observe_all(self):
+        self._launch(self._zero_tau, np.zeros(self.num_envs, np.int32))
+        return self._obs()[0]
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        from ._render import arm_frame
+
+        return tuple(arm_frame(self.arm, self.q[k].tolist(), self.target[k]) for k in range(self.num_envs))
