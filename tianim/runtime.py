@@ -113,3 +113,15 @@ def num_threads() -> int | None:
         return None
     n = ti.lang.impl.current_cfg().cpu_max_num_threads
     return int(n)
+
+
+def compiled_kernel_count() -> int:
+    """Number of kernel instances Taichi has compiled in this process.
+
+    Tests use it to show that creating another scene or environment compiles
+    nothing new.
+    """
+    ti = _ti()
+    if not is_initialized():
+        return 0
+    return sum(len(k.compiled_kernels) for k in ti.lang.impl.get_runtime().kernels)

@@ -13,10 +13,11 @@ from tianim.physics.diagnostics import energy, max_strain, momentum, spring_leng
 from tianim.physics.integrators import METHODS, STABILITY_LIMIT, DivergenceError, choose_layout, stable_dt, step
 from tianim.physics.model import Ground, GridTopology, Model, Sphere
 from tianim.physics.state import State
+from tianim.physics.stepping import substeps_for
 
 __all__ = [
     "Model", "State", "Ground", "Sphere", "GridTopology",
     "spring1d", "chain", "rope", "cloth", "lattice", "from_edges", "particles",
-    "step", "stable_dt", "choose_layout", "METHODS", "STABILITY_LIMIT", "DivergenceError",
+    "step", "stable_dt", "substeps_for", "choose_layout", "METHODS", "STABILITY_LIMIT", "DivergenceError",
     "energy", "max_strain", "momentum", "spring_lengths",
 ]

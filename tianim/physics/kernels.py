@@ -81,12 +81,12 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
         """Force on i from a spring to j: -k(|d|-l) d/|d| - c((vi-vj).n) n, d = xi - xj."""
         d = xi - xj
         length = d.norm()
-        f = ti.Vector.zero(real, dim)
-        if length > 0:
-            n = d / length
-            f = -k * (length - rest) * n
-            if ti.static(spring_damping):
-                f -= damp * (vi - vj).dot(n) * n
+        # Coincident particles (length 0) exert no force: no direction is defined.
+        inv_len = ti.select(length > 0, 1 / length, 0)
+        n = d * inv_len
+        f = -k * (length - rest) * n
+        if ti.static(spring_damping):
+            f -= damp * (vi - vj).dot(n) * n
         return f
 
     @ti.func

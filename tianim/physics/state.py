@@ -50,7 +50,7 @@ class State:
         self.model = model
         self.dtype = dt
         n, d = model.n_particles, model.dim
-        self.x = np.ascontiguousarray(np.broadcast_to(model.positions.astype(dt), (batch, n, d)))
+        self.x = np.repeat(model.positions.astype(dt)[None], batch, axis=0)
         self.v = np.zeros((batch, n, d), dtype=dt)
         self.t = np.zeros(batch, dtype=np.float64)
         self.pinned = np.zeros((batch, n), dtype=bool)
