@@ -1,0 +1,329 @@
+"""Offscreen 3D rendering of meshes, ropes, particles and colliders to (H, W, 3) uint8.
+
+Usage::
+
+    from tianim.render import Scene3D
+    scene = Scene3D(640, 480)                        # camera frames the scene unless given
+    scene.ground(height=0.0)
+    scene.sphere((0, 0.5, 0), 0.3, color="orange")
+    scene.surface(x.reshape(ny, nx, 3), color="blue")  # a regular cloth grid
+    frame = scene.render()                            # (480, 640, 3) uint8
+    scene.clear()                                     # keep camera and buffers, drop primitives
+
+Everything is rasterised by the Taichi kernels in :mod:`tianim.render._kernels3d`
+(visibility buffer + deferred shading, supersampled, with a shadow map), with
+no window, display or GPU. Kernels take arrays, so new scenes compile nothing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tianim.render import _kernels3d as K
+from tianim.render.camera import Camera
+from tianim.render.colors import rgb, rgb_array
+from tianim.render.validate import check_size, points_array
+from tianim.runtime import ensure_taichi
+
+_GRID_FACES: dict = {}
+
+
+def grid_faces(ny: int, nx: int) -> np.ndarray:
+    """Triangles (2 (ny-1)(nx-1), 3) int32 of a regular ny x nx grid, index = row * nx + col."""
+    key = (ny, nx)
+    if key not in _GRID_FACES:
+        idx = np.arange(ny * nx, dtype=np.int32).reshape(ny, nx)
+        a, b = idx[:-1, :-1].ravel(), idx[:-1, 1:].ravel()
+        c, d = idx[1:, :-1].ravel(), idx[1:, 1:].ravel()
+        _GRID_FACES[key] = np.concatenate([np.stack([a, c, b], 1), np.stack([b, c, d], 1)]).astype(np.int32)
+    return _GRID_FACES[key]
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted vertex normals (V, 3) float32 of a triangle mesh (sum of face cross products)."""
+    v = np.asarray(vertices, dtype=np.float32)
+    fn = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
+    n = np.zeros_like(v)
+    for k in range(3):
+        for j in range(3):
+            n[:, j] += np.bincount(faces[:, k], weights=fn[:, j], minlength=len(v)).astype(np.float32)
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-20)
+    return n
+
+
+class Scene3D:
+    """A 3D scene rendered offscreen to an (H, W, 3) uint8 array.
+
+    Parameters
+    ----------
+    width, height : int
+        Image size [pixels].
+    camera : Camera, optional
+        If None, each :meth:`render` frames the scene (:meth:`Camera.framing`);
+        call :meth:`frame` once to freeze a framing for a whole animation.
+    light : (3,) array_like
+        Direction *towards* the light (world space; normalised).
+    ssaa : int
+        Supersampling factor per axis (1 = none, 2 = 4 samples per pixel).
+    shadows : bool
+        Cast shadows with a shadow map of ``shadow_size`` x ``shadow_size`` texels.
+    up : (3,) array_like
+        World up (+y by default, the physics convention); the ground is normal to it.
+    background : (top, bottom)
+        Colours of the vertical sky gradient.
+    """
+
+    def __init__(
+        self,
+        width: int = 640,
+        height: int = 480,
+        camera: Camera | None = None,
+        light=(0.45, 1.0, 0.35),
+        ssaa: int = 2,
+        shadows: bool = True,
+        shadow_size: int = 1024,
+        up=(0.0, 1.0, 0.0),
+        background=("#c9d9ea", "#f4f6f8"),
+        ambient: float = 0.35,
+        specular: float = 0.2,
+    ):
+        self.width, self.height = check_size(width, height)
+        if camera is not None and not isinstance(camera, Camera):
+            raise TypeError(f"camera={camera!r} must be a tianim.render.Camera or None (auto framing)")
+        if int(ssaa) != ssaa or not 1 <= int(ssaa) <= 4:
+            raise ValueError(f"ssaa={ssaa!r} must be an integer in 1..4 (samples per pixel per axis)")
+        if not 0.0 <= float(ambient) <= 1.0:
+            raise ValueError(f"ambient={ambient!r} must be in [0, 1]")
+        up = np.asarray(up, dtype=np.float64)
+        axis = int(np.argmax(np.abs(up)))
+        if up.shape != (3,) or np.count_nonzero(up) != 1 or up[axis] <= 0:
+            raise ValueError(f"up={up.tolist()!r} must be +x, +y or +z, e.g. (0, 1, 0)")
+        L = np.asarray(light, dtype=np.float64)
+        if L.shape != (3,) or not np.linalg.norm(L) > 0:
+            raise ValueError(f"light={light!r} must be a non-zero 3-vector pointing towards the light")
+        self.camera = camera
+        self.light = L / np.linalg.norm(L)
+        self.ssaa = int(ssaa)
+        self.shadows = bool(shadows)
+        self.shadow_size = int(shadow_size)
+        self.up = up
+        self.up_axis = axis
+        self.background = (rgb(background[0], "background[0]"), rgb(background[1], "background[1]"))
+        self.ambient = float(ambient)
+        self.specular = float(specular)
+        self._buf = None
+        self._smap = None
+        self.clear()
+
+    # ------------------------------------------------------------------ primitives
+    def clear(self) -> "Scene3D":
+        """Remove all primitives (the camera and buffers stay)."""
+        self._meshes = []  # (vertices, faces, normals, vertex colours, back colour)
+        self._spheres = []  # (centres (P,3), radii (P,), colours (P,3))
+        self._ground = None
+        return self
+
+    def mesh(self, vertices, faces, color="blue", back_color=None, normals=None) -> "Scene3D":
+        """A triangle mesh: vertices (V, 3) [m], faces (F, 3) int indices; smooth (vertex-normal) shading.
+
+        ``color`` is one colour or (V, 3) per-vertex colours for the front side;
+        ``back_color`` (default a darker ``color``) for the side facing away.
+        """
+        v = points_array(vertices, "vertices", dim=3)
+        f = np.asarray(faces)
+        if f.ndim != 2 or f.shape[1] != 3 or not np.issubdtype(f.dtype, np.integer):
+            raise ValueError(f"faces has shape {f.shape} and dtype {f.dtype}; it must be (F, 3) integers")
+        if f.size and (f.min() < 0 or f.max() >= len(v)):
+            raise ValueError(f"faces index vertices in [{f.min()}, {f.max()}] but there are {len(v)} vertices")
+        f = f.astype(np.int32)
+        vcol = rgb_array(color, len(v), "color")
+        back = rgb(back_color, "back_color") if back_color is not None else 0.6 * vcol.mean(axis=0)
+        n = vertex_normals(v, f) if normals is None else points_array(normals, "normals", dim=3)
+        self._meshes.append((v, f, n, vcol, np.asarray(back, dtype=np.float32)))
+        return self
+
+    def surface(self, grid, color="blue", back_color=None) -> "Scene3D":
+        """A regular surface grid (ny, nx, 3) [m] (cloth: ``x.reshape(ny, nx, 3)``)."""
+        g = np.asarray(grid, dtype=np.float32)
+        if g.ndim != 3 or g.shape[2] != 3 or g.shape[0] < 2 or g.shape[1] < 2:
+            raise ValueError(f"grid has shape {g.shape}; it must be (ny, nx, 3) with ny, nx >= 2")
+        return self.mesh(g.reshape(-1, 3), grid_faces(g.shape[0], g.shape[1]), color, back_color)
+
+    def particles(self, points, radius=0.01, color="orange") -> "Scene3D":
+        """Particles as shaded spheres: points (N, 3) [m], radius [m] (scalar or (N,))."""
+        p = points_array(points, "points", dim=3)
+        r = np.broadcast_to(np.asarray(radius, dtype=np.float32), (len(p),))
+        if r.size and not np.all(r > 0):
+            raise ValueError(f"radius must be > 0 metres, got min {float(r.min())!r}")
+        self._spheres.append((p, r.astype(np.float32), rgb_array(color, len(p), "color")))
+        return self
+
+    def sphere(self, center, radius, color="orange") -> "Scene3D":
+        """One sphere (a collider) with exact silhouette: centre (3,) [m], radius [m]."""
+        return self.particles(np.asarray(center, dtype=np.float32).reshape(1, 3), float(radius), color)
+
+    def segments(self, points, edges, radius=0.005, color="dark") -> "Scene3D":
+        """Line segments (springs) between ``points[edges[:, 0]]`` and ``points[edges[:, 1]]`` as tubes.
+
+        A tube of radius ``radius`` [m] is drawn as spheres spaced ``radius/2`` apart;
+        ``color`` is one colour or one per edge (E, 3).
+        """
+        p = points_array(points, "points", dim=3)
+        e = np.asarray(edges)
+        if e.ndim != 2 or e.shape[1] != 2 or (e.size and (e.min() < 0 or e.max() >= len(p))):
+            raise ValueError(f"edges has shape {e.shape}; it must be (E, 2) indices into the {len(p)} points")
+        if not radius > 0:
+            raise ValueError(f"radius={radius!r} must be > 0 metres")
+        cols = rgb_array(color, len(e), "color")
+        a, b = p[e[:, 0]], p[e[:, 1]]
+        n = np.maximum(np.ceil(np.linalg.norm(b - a, axis=1) / (0.5 * radius)).astype(np.int64), 1)
+        seg = np.repeat(np.arange(len(e)), n)
+        start = np.repeat(np.cumsum(n) - n, n)
+        t = ((np.arange(n.sum()) - start) / np.repeat(n, n))[:, None]
+        centres = a[seg] + t * (b[seg] - a[seg])
+        centres = np.concatenate([centres, b[-1:]]) if len(e) else centres
+        cols = np.concatenate([cols[seg], cols[-1:]]) if len(e) else cols
+        return self.particles(centres, radius, cols)
+
+    def rope(self, points, radius=0.01, color="dark") -> "Scene3D":
+        """A rope through ``points`` (N, 3) [m] in order, as a tube of radius ``radius`` [m]."""
+        p = points_array(points, "points", dim=3)
+        edges = np.stack([np.arange(len(p) - 1), np.arange(1, len(p))], 1)
+        if len(edges) == 0:
+            return self.particles(p, radius, color)
+        return self.segments(p, edges, radius, color)
+
+    def ground(self, height=0.0, size=None, color="#e9ecef", color2="#cfd5dc", cell=None) -> "Scene3D":
+        """A checkered ground plane at ``height`` [m] along ``up`` (an exact, infinite plane).
+
+        It fades into the sky beyond ``size``/2 [m] from the scene's centre (default
+        2.5x the scene's extent); ``cell`` is the checker size [m] (default an eighth of the extent).
+        """
+        if not np.isfinite(height):
+            raise ValueError(f"height={height!r} must be finite (metres along up)")
+        self._ground = (float(height), size, rgb(color, "color"), rgb(color2, "color2"), cell)
+        return self
+
+    # ------------------------------------------------------------------ framing
+    def bounds(self):
+        """(lo, hi) corners (3,) of everything but the ground, or None if empty."""
+        pts = [m[0] for m in self._meshes]
+        pts += [s[0] + s[1][:, None] for s in self._spheres] + [s[0] - s[1][:, None] for s in self._spheres]
+        pts = [p for p in pts if len(p)]
+        if not pts:
+            return None
+        allp = np.concatenate(pts)
+        return allp.min(axis=0).astype(np.float64), allp.max(axis=0).astype(np.float64)
+
+    def _frame_points(self):
+        b = self.bounds()
+        if b is None:
+            b = (np.full(3, -0.5), np.full(3, 0.5))
+        lo, hi = b
+        corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+        if self._ground is not None:
+            flat = corners.copy()
+            flat[:, self.up_axis] = self._ground[0]
+            corners = np.concatenate([corners, flat])
+        return corners
+
+    def frame(self, **kwargs) -> Camera:
+        """Set (and return) a camera framing the current primitives; kwargs go to :meth:`Camera.framing`."""
+        kwargs.setdefault("up", tuple(self.up))
+        kwargs.setdefault("aspect", self.width / self.height)
+        self.camera = Camera.framing(self._frame_points(), **kwargs)
+        return self.camera
+
+    # ------------------------------------------------------------------ rendering
+    def _buffers(self):
+        ss = (self.height * self.ssaa, self.width * self.ssaa)
+        if self._buf is None or self._buf.shape != ss:
+            self._buf = np.empty(ss, dtype=np.int64)
+            self._out = np.empty((self.height, self.width, 3), dtype=np.uint8)
+        if self.shadows and (self._smap is None or self._smap.shape[0] != self.shadow_size):
+            self._smap = np.empty((self.shadow_size, self.shadow_size), dtype=np.int64)
+        return self._buf, self._out
+
+    def render(self) -> np.ndarray:
+        """Rasterise the scene; returns a new (height, width, 3) uint8 array."""
+        ensure_taichi()
+        buf, out = self._buffers()
+        camera = self.camera
+        if camera is None:
+            camera = Camera.framing(self._frame_points(), up=tuple(self.up), aspect=self.width / self.height)
+        b = self.bounds()
+        lo, hi = b if b is not None else (np.zeros(3), np.zeros(3))
+        extent = max(float(np.max(hi - lo)), 1e-3)
+        M = self._meshes
+        V = np.concatenate([m[0] for m in M]) if M else np.zeros((0, 3), np.float32)
+        offsets = np.cumsum([0] + [len(m[0]) for m in M])
+        F = np.concatenate([m[1] + o for m, o in zip(M, offsets)]) if M else np.zeros((0, 3), np.int32)
+        N = np.concatenate([m[2] for m in M]) if M else np.zeros((0, 3), np.float32)
+        C = np.concatenate([m[3] for m in M]) if M else np.zeros((0, 3), np.float32)
+        BK = np.stack([m[4] for m in M]) if M else np.zeros((1, 3), np.float32)
+        FM = np.concatenate([np.full(len(m[1]), i, np.int32) for i, m in enumerate(M)]) if M else np.zeros(0, np.int32)
+        V, F, N, C = V.astype(np.float32), F.astype(np.int32), N.astype(np.float32), C.astype(np.float32)
+        if self._spheres:
+            SP = np.concatenate([s[0] for s in self._spheres]).astype(np.float64)
+            SR = np.concatenate([s[1] for s in self._spheres]).astype(np.float32)
+            SC = np.concatenate([s[2] for s in self._spheres]).astype(np.float32)
+        else:
+            SP, SR, SC = np.zeros((0, 3)), np.zeros(0, np.float32), np.zeros((0, 3), np.float32)
+
+        W, H = self.width * self.ssaa, self.height * self.ssaa
+        focal = camera.focal(H)
+        near = 1e-4 * float(np.linalg.norm(np.subtract(camera.target, camera.eye)))
+        scr = camera.project(V, W, H).astype(np.float32)
+        sview = camera.to_view(SP).astype(np.float32)
+
+        K.clear(buf)
+        if len(F):
+            K.raster_triangles(scr, F, 0, 0, near, buf)
+        if len(SR):
+            K.raster_spheres(sview, SR, focal, 0, near, len(F), buf)
+
+        smap, lcam, lfocal, bias = self._shadow_pass(V, F, SP, SR, lo, hi)
+
+        cam = np.concatenate([camera.basis, np.asarray(camera.eye)[None]]).astype(np.float32)
+        bg0, bg1 = self.background
+        if self._ground is not None:
+            h, size, c1, c2, cell = self._ground
+            centre = (lo + hi) / 2
+            centre[self.up_axis] = h
+            fade = 0.5 * float(size) if size is not None else 2.5 * extent
+            cell = float(cell) if cell is not None else max(extent / 8.0, 1e-3)
+            ground = [1.0, h, *c1, *c2, cell, *centre, fade]
+        else:
+            ground = [0.0] * 13
+        params = np.array([focal, self.ambient, self.specular, bias, self.up_axis, *bg0, *bg1, lfocal, *ground],
+                          dtype=np.float32)
+        K.resolve(buf, self.ssaa, len(F), scr, V, N, C, F, FM, BK, sview, SR, SC, cam,
+                  self.light.astype(np.float32), params, smap, lcam, out)
+        return out.copy()
+
+    def _shadow_pass(self, V, F, SP, SR, lo, hi):
+        """Orthographic depth map seen from the light (Williams 1978)."""
+        dummy = (np.full((1, 1), K.EMPTY, np.int64), np.zeros((4, 3), np.float32), 1.0, 0.0)
+        if not self.shadows or (len(F) == 0 and len(SR) == 0):
+            return dummy
+        smap = self._smap
+        centre = (lo + hi) / 2
+        radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3) * 1.05
+        fwd = -self.light
+        ref = np.array([0.0, 0.0, 1.0]) if abs(fwd[2]) < 0.9 else np.array([1.0, 0.0, 0.0])
+        r = np.cross(fwd, ref)
+        r /= np.linalg.norm(r)
+        u = np.cross(r, fwd)
+        origin = centre - 2.0 * radius * fwd
+        basis = np.stack([r, u, fwd])
+        lfocal = 0.5 * self.shadow_size / radius
+        lscr = (V - origin) @ basis.T
+        lscr = np.stack([0.5 * self.shadow_size + lfocal * lscr[:, 0],
+                         0.5 * self.shadow_size - lfocal * lscr[:, 1], lscr[:, 2]], 1).astype(np.float32)
+        K.clear(smap)
+        if len(F):
+            K.raster_triangles(lscr, F, 0, 1, 0.0, smap)
+        if len(SR):
+            K.raster_spheres(((SP - origin) @ basis.T).astype(np.float32), SR, lfocal, 1, 0.0, 0, smap)
+        lcam = np.concatenate([basis, origin[None]]).astype(np.float32)
+        return smap, lcam, float(lfocal), 2.5 / lfocal
