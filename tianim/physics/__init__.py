@@ -10,7 +10,9 @@ Model (static scene) -> State (what changes, B copies) -> integrators (advance a
 
 from tianim.physics.builders import chain, cloth, from_edges, lattice, particles, rope, spring1d
 from tianim.physics.diagnostics import energy, max_strain, momentum, spring_lengths
-from tianim.physics.integrators import METHODS, STABILITY_LIMIT, DivergenceError, choose_layout, stable_dt, step
+from tianim.physics.integrators import (
+    METHODS, STABILITY_LIMIT, DivergenceError, accelerations, choose_layout, stable_dt, step,
+)
 from tianim.physics.model import Ground, GridTopology, Model, Sphere
 from tianim.physics.state import State
 from tianim.physics.stepping import substeps_for
@@ -18,6 +20,6 @@ from tianim.physics.stepping import substeps_for
 __all__ = [
     "Model", "State", "Ground", "Sphere", "GridTopology",
     "spring1d", "chain", "rope", "cloth", "lattice", "from_edges", "particles",
-    "step", "stable_dt", "substeps_for", "choose_layout", "METHODS", "STABILITY_LIMIT", "DivergenceError",
+    "step", "accelerations", "stable_dt", "substeps_for", "choose_layout", "METHODS", "STABILITY_LIMIT", "DivergenceError",
     "energy", "max_strain", "momentum", "spring_lengths",
 ]

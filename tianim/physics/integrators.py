@@ -34,7 +34,7 @@ import numpy as np
 from tianim.physics.kernels import PHASES, SCRATCH, frame_kernel
 from tianim.physics.validation import check_finite_scalar, check_positive_int
 
-METHODS = tuple(PHASES)
+METHODS = tuple(m for m in PHASES if m != "accelerations")
 LAYOUTS = ("auto", "serial", "frame", "substep")
 
 
@@ -80,7 +80,7 @@ def step(model, state, dt: float, substeps: int = 1, method: str = "symplectic_e
     State
         ``state`` itself.
     """
-    if method not in PHASES:
+    if method not in METHODS:
         raise ValueError(f"method={method!r} is not an integrator; choose one of {METHODS}")
     if layout not in LAYOUTS:
         raise ValueError(f"layout={layout!r} is not a loop layout; choose one of {LAYOUTS}")
@@ -89,6 +89,26 @@ def step(model, state, dt: float, substeps: int = 1, method: str = "symplectic_e
     if getattr(state, "model", None) is not model:
         raise ValueError("state does not belong to this model; create it with model.state(batch=...)")
     state.check_arrays()
+    backup = (state.x.copy(), state.v.copy()) if check else None
+    _launch(model, state, dt, substeps, method, layout)
+
+    if check and not (np.isfinite(state.x).all() and np.isfinite(state.v).all()):
+        finite = np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2))
+        copies = np.flatnonzero(~finite).tolist()
+        state.x[...], state.v[...] = backup
+        limit = stable_dt(model, method)
+        raise DivergenceError(
+            f"{method} diverged (non-finite positions or velocities in copies {copies[:8]}) within {substeps} substeps of "
+            f"dt={dt:.4g} s from t={float(state.t.min()):.6g} s; the stiffest mode limits dt to about "
+            f"{limit:.4g} s for this method (tianim.physics.stable_dt). Use a smaller dt or more substeps, "
+            "or a more stable method. The state was rolled back to the start of this call."
+        )
+    state.t += dt * substeps
+    return state
+
+
+def _launch(model, state, dt, substeps, method, layout):
+    """Run the kernels of ``method`` on ``state`` (no validation: callers validate)."""
     if layout == "auto":
         layout = choose_layout(model, state.batch)
 
@@ -111,8 +131,6 @@ def step(model, state, dt: float, substeps: int = 1, method: str = "symplectic_e
         model.gravity.astype(state.dtype), real(model.medium_damping), real(dt),
         model.grid.nx if model.grid is not None else 1,
     )
-    backup = (state.x.copy(), state.v.copy()) if check else None
-
     if pre is not None:
         pre(*args, 1)
     if layout == "substep":
@@ -121,19 +139,17 @@ def step(model, state, dt: float, substeps: int = 1, method: str = "symplectic_e
     else:
         kernel(*args, substeps)
 
-    if check and not (np.isfinite(state.x).all() and np.isfinite(state.v).all()):
-        finite = np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2))
-        copies = np.flatnonzero(~finite).tolist()
-        state.x[...], state.v[...] = backup
-        limit = stable_dt(model, method)
-        raise DivergenceError(
-            f"{method} diverged (non-finite positions or velocities in copies {copies[:8]}) within {substeps} substeps of "
-            f"dt={dt:.4g} s from t={float(state.t.min()):.6g} s; the stiffest mode limits dt to about "
-            f"{limit:.4g} s for this method (tianim.physics.stable_dt). Use a smaller dt or more substeps, "
-            "or a more stable method. The state was rolled back to the start of this call."
-        )
-    state.t += dt * substeps
-    return state
+
+def accelerations(model, state) -> np.ndarray:
+    """Accelerations ``a(x, v)`` of every particle, shape (B, N, D) [m/s^2], computed by the kernels.
+
+    Springs, spring damping, gravity and medium damping; zero for pinned particles.
+    """
+    if getattr(state, "model", None) is not model:
+        raise ValueError("state does not belong to this model; create it with model.state(batch=...)")
+    state.check_arrays()
+    _launch(model, state, 1.0, 1, "accelerations", "auto")
+    return state.scratch("acc").copy()
 
 
 #: Largest stable omega*dt of each integrator on an undamped oscillator

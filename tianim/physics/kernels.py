@@ -39,6 +39,8 @@ PHASES = {
     "verlet": (("acc_x_v",), ("verlet_drift", "acc_x_vs", "verlet_kick")),
     # classical 4-stage Runge-Kutta on y = (x, v), y' = (v, a(x, v))
     "rk4": ((), ("acc_x_v", "rk_stage1", "acc_xs_vs", "rk_stage2", "acc_xs_vs", "rk_stage3", "acc_xs_vs", "rk_final")),
+    # not an integrator: fills the acceleration buffer only (tianim.physics.accelerations)
+    "accelerations": ((), ("acc_x_v",)),
 }
 
 #: Scratch buffers (B, N, D) each integrator needs.
@@ -47,6 +49,7 @@ SCRATCH = {
     "symplectic_euler": ("acc",),
     "verlet": ("acc", "vs", "kx"),
     "rk4": ("acc", "xs", "vs", "kx", "kv"),
+    "accelerations": ("acc",),
 }
 
 _cache: dict = {}
