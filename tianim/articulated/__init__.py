@@ -106,7 +106,7 @@ def step_batch(arm: PlanarArm, q: np.ndarray, qd: np.ndarray, tau: np.ndarray, d
     ensure_taichi()
     from .kernels import arm_step
 
-    arm_step(n, int(substeps), float(dt), arm.packed, q, qd, tau, active, cos_q, sin_q, tip)
+    arm_step(n, bool(arm.gravity != 0.0), int(substeps), float(dt), arm.packed, q, qd, tau, active, cos_q, sin_q, tip)
 
 
 def tip_position(arm: PlanarArm, q) -> np.ndarray:

@@ -15,7 +15,7 @@ f64 = ti.f64
 
 
 @ti.func
-def _accelerations(n: ti.template(), c, g, damp, q, qd, tau):
+def _accelerations(n: ti.template(), gravity_on: ti.template(), c, g, damp, q, qd, tau):
     phi = ti.Vector.zero(f64, n)
     w = ti.Vector.zero(f64, n)
     phi[0] = q[0]
@@ -28,10 +28,13 @@ def _accelerations(n: ti.template(), c, g, damp, q, qd, tau):
         u[i] = tau[i] - damp[i] * qd[i]
     r = ti.Vector.zero(f64, n)
     for j in ti.static(range(n)):
+        qj = u[j]
         if ti.static(j + 1 < n):
-            r[j] = (u[j] - u[j + 1]) - g[j] * ti.cos(phi[j])
+            qj = u[j] - u[j + 1]
+        if ti.static(gravity_on):
+            r[j] = qj - g[j] * ti.cos(phi[j])
         else:
-            r[j] = u[j] - g[j] * ti.cos(phi[j])
+            r[j] = qj
     h = ti.Matrix.zero(f64, n, n)
     for j in ti.static(range(n)):
         h[j, j] = c[j, j]
@@ -76,6 +79,7 @@ def _accelerations(n: ti.template(), c, g, damp, q, qd, tau):
 @ti.kernel
 def arm_step(
     n: ti.template(),
+    gravity_on: ti.template(),
     substeps: ti.i32,
     dt: f64,
     p: ti.types.ndarray(dtype=f64, ndim=1),
@@ -114,7 +118,7 @@ def arm_step(
             tv[i] = tau[b, i]
         if active[b] != 0:
             for _ in range(substeps):
-                acc = _accelerations(n, c, g, damp, qv, vv, tv)
+                acc = _accelerations(n, gravity_on, c, g, damp, qv, vv, tv)
                 for i in ti.static(range(n)):
                     v = vv[i] + dt * acc[i]
                     if v > vmax:

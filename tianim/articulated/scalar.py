@@ -51,9 +51,10 @@ def accelerations(params: tuple, q: list, qd: list, tau: list, ops=math) -> list
         w[j] = w[j - 1] + qd[j]
     u = [tau[i] - b[i] * qd[i] for i in range(n)]
     r = [0.0] * n
+    gravity_on = any(gj != 0.0 for gj in g)  # a horizontal arm skips the gravity terms
     for j in range(n):
         qj = u[j] - u[j + 1] if j + 1 < n else u[j]
-        r[j] = qj - g[j] * ops.cos(phi[j])
+        r[j] = qj - g[j] * ops.cos(phi[j]) if gravity_on else qj
     h = [[0.0] * n for _ in range(n)]
     for j in range(n):
         h[j][j] = c[j][j]

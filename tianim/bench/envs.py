@@ -1,0 +1,114 @@
+"""``tianim bench envs``: environment steps per second, single and batched, against MuJoCo.
+
+Measures, with pre-generated actions and medians over ``--repeats``:
+
+* ``armreach_steps_per_s``: one ``gym.make("tianim/ArmReach-v0")`` (with its
+  gymnasium wrappers), resetting when an episode ends;
+* ``armreach_vec_steps_per_s``: ``gym.make_vec`` with N = 4096 copies (env-steps/s);
+* ``ropeswing_vec_steps_per_s`` (N = 256) and ``clothfold_steps_per_s`` (single env);
+* ``mujoco_reacher_steps_per_s`` (``gym.make("Reacher-v5")`` measured the same way
+  in the same run, when mujoco is installed) and ``ratio_vs_mujoco``.
+
+This benchmark drives the Gymnasium environments of the ``envs`` package, so it
+imports gymnasium and ``envs`` inside :func:`main` (the ``tianim`` library itself
+never does; the benchmark is a tool layered above both).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tianim.bench.common import median_time, parser, print_table, write_json
+
+
+def _single_rate(env, steps: int, repeats: int, seed: int = 0) -> float:
+    rng = np.random.default_rng(seed)
+    shape = env.action_space.shape
+    acts = rng.uniform(-1, 1, (steps, *shape)).astype(np.float32)
+    env.reset(seed=seed)
+
+    def run():
+        for a in acts:
+            _, _, term, trunc, _ = env.step(a)
+            if term or trunc:
+                env.reset()
+
+    return steps / median_time(run, repeats=repeats, warmup=1)
+
+
+def _vector_rate(venv, steps: int, repeats: int, seed: int = 0) -> float:
+    rng = np.random.default_rng(seed)
+    acts = rng.uniform(-1, 1, (steps, *venv.action_space.shape)).astype(np.float32)
+    venv.reset(seed=seed)
+
+    def run():
+        for a in acts:
+            venv.step(a)
+
+    return steps * venv.num_envs / median_time(run, repeats=repeats, warmup=1)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = parser("envs", __doc__.splitlines()[0])
+    p.add_argument("--num-envs", type=int, default=4096, help="copies for the batched ArmReach (default 4096)")
+    args = p.parse_args(argv)
+    import gymnasium as gym
+
+    import envs  # noqa: F401  (registers the environments)
+
+    quick = args.quick
+    repeats = 2 if quick else args.repeats
+    single_steps = 2000 if quick else 20000
+    rows, summary = [], {}
+
+    env = gym.make("tianim/ArmReach-v0")
+    summary["armreach_steps_per_s"] = _single_rate(env, single_steps, repeats)
+    env.close()
+    rows.append({"benchmark": "ArmReach-v0 single (gym.make)", "steps_per_s": summary["armreach_steps_per_s"]})
+
+    n = 256 if quick else args.num_envs
+    venv = gym.make_vec("tianim/ArmReach-v0", num_envs=n)
+    summary["armreach_vec_steps_per_s"] = _vector_rate(venv, 20 if quick else 200, repeats)
+    venv.close()
+    rows.append({"benchmark": f"ArmReach-v0 make_vec N={n}", "steps_per_s": summary["armreach_vec_steps_per_s"]})
+
+    if "tianim/RopeSwing-v0" in gym.registry:
+        nr = 16 if quick else 256
+        venv = gym.make_vec("tianim/RopeSwing-v0", num_envs=nr)
+        summary["ropeswing_vec_steps_per_s"] = _vector_rate(venv, 10 if quick else 100, repeats)
+        venv.close()
+        rows.append({"benchmark": f"RopeSwing-v0 make_vec N={nr}", "steps_per_s": summary["ropeswing_vec_steps_per_s"]})
+        env = gym.make("tianim/RopeSwing-v0")
+        summary["ropeswing_steps_per_s"] = _single_rate(env, 200 if quick else 2000, repeats)
+        env.close()
+        rows.append({"benchmark": "RopeSwing-v0 single", "steps_per_s": summary["ropeswing_steps_per_s"]})
+    if "tianim/ClothFold-v0" in gym.registry:
+        env = gym.make("tianim/ClothFold-v0")
+        summary["clothfold_steps_per_s"] = _single_rate(env, 100 if quick else 1000, repeats)
+        env.close()
+        rows.append({"benchmark": "ClothFold-v0 single", "steps_per_s": summary["clothfold_steps_per_s"]})
+        nc = 8 if quick else 64
+        venv = gym.make_vec("tianim/ClothFold-v0", num_envs=nc)
+        summary["clothfold_vec_steps_per_s"] = _vector_rate(venv, 5 if quick else 50, repeats)
+        venv.close()
+        rows.append({"benchmark": f"ClothFold-v0 make_vec N={nc}", "steps_per_s": summary["clothfold_vec_steps_per_s"]})
+
+    try:
+        import mujoco  # noqa: F401
+
+        env = gym.make("Reacher-v5")
+    except Exception as exc:  # mujoco missing or broken: report, do not fail
+        summary["mujoco_reacher_steps_per_s"] = None
+        summary["ratio_vs_mujoco"] = None
+        print(f"(MuJoCo Reacher-v5 not measured: {exc})")
+    else:
+        summary["mujoco_reacher_steps_per_s"] = _single_rate(env, single_steps, repeats)
+        env.close()
+        summary["ratio_vs_mujoco"] = summary["armreach_steps_per_s"] / summary["mujoco_reacher_steps_per_s"]
+        rows.append({"benchmark": "MuJoCo Reacher-v5 single (gym.make)",
+                     "steps_per_s": summary["mujoco_reacher_steps_per_s"]})
+    print_table(rows)
+    if summary["ratio_vs_mujoco"] is not None:
+        print(f"ratio_vs_mujoco (ArmReach single / Reacher-v5): {summary['ratio_vs_mujoco']:.2f}")
+    write_json(args.json, summary, rows=rows)
+    return 0
