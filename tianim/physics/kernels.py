@@ -77,7 +77,7 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
     coll_arr = ti.types.ndarray(dtype=real, ndim=2)
     mask_arr = ti.types.ndarray(dtype=ti.u8, ndim=2)
     pre_phases, step_phases = PHASES[method]
-    stencil = GRID_STENCIL
+    n_stencil = len(GRID_STENCIL)
 
     @ti.func
     def pair_force(xi, xj, vi, vj, k, rest, damp):
@@ -105,12 +105,15 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
             if ti.static(medium_damping):
                 f -= rho * vi
             if ti.static(grid):
+                # Regular grid: off holds the stencil offsets (d_col, d_row) of GRID_STENCIL,
+                # k/rest/damp its per-offset parameters. A runtime loop (not unrolled) keeps
+                # compile time short; it costs little at run time.
                 row = i // nx
                 col = i - row * nx
                 ny = X.shape[1] // nx
-                for o in ti.static(range(len(stencil))):
-                    cc = col + stencil[o][0]
-                    rr = row + stencil[o][1]
+                for o in range(n_stencil):
+                    cc = col + off[2 * o]
+                    rr = row + off[2 * o + 1]
                     if 0 <= cc < nx and 0 <= rr < ny:
                         j = rr * nx + cc
                         f += pair_force(xi, X[b, j], vi, V[b, j], k[o], rest[o], damp[o])

@@ -342,6 +342,7 @@ class Model:
         if dtype not in self._kernel_data:
             off, spr, oth = self.incidence()
             if self.grid is not None:
+                off = np.array([a for dc, dr, _ in GRID_STENCIL for a in (dc, dr)], dtype=np.int32)
                 k = np.asarray(self.grid.stiffness, dtype=dtype)
                 rest = np.asarray(self.grid.rest_length, dtype=dtype)
                 damp = np.asarray(self.grid.damping, dtype=dtype)
