@@ -1,6 +1,9 @@
 """Kinematics and dynamics of articulated chains (chapter 15.3 and 15.5).
 
 * :class:`PlanarChain` - planar revolute chain (FK, Jacobian, dynamics parameters)
+* :class:`JointTree` (skeletons), :class:`SerialChain` - 3D revolute/prismatic joints, FK, Jacobians
+* :func:`solve_ik` (DLS, Jacobian transpose, CCD, FABRIK; batched; limits; redundant and
+  unreachable targets), :func:`two_link_ik` (closed form, both elbows)
 * :func:`inverse_dynamics`, :func:`forward_dynamics`, :func:`mass_matrix`,
   :func:`bias_torques`, :func:`energy` - planar chain dynamics (recursive Newton-Euler)
 * :func:`point_mass_forces` - forces for a point mass to follow a path
@@ -15,11 +18,20 @@ from tianim.kinematics.dynamics import (
     mass_matrix,
     point_mass_forces,
 )
+from tianim.kinematics.ik import METHODS, IKResult, solve_ik, two_link_ik
 from tianim.kinematics.planar import PlanarChain
+from tianim.kinematics.tree import JointTree, SerialChain, rotation
 
 __all__ = [
     "DEFAULT_GRAVITY",
+    "IKResult",
+    "JointTree",
+    "METHODS",
     "PlanarChain",
+    "SerialChain",
+    "rotation",
+    "solve_ik",
+    "two_link_ik",
     "bias_torques",
     "energy",
     "forward_dynamics",

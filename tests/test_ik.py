@@ -1,0 +1,151 @@
+"""Inverse kinematics: every method on 2-, 3- and 7-link chains, limits, redundancy, unreachable targets."""
+
+import numpy as np
+import pytest
+
+from tianim.kinematics import METHODS, PlanarChain, SerialChain, solve_ik, two_link_ik
+
+LIMIT = 2.5
+
+
+def _chain(n, limited=True):
+    lengths = np.linspace(1.2, 0.8, n) / n
+    return PlanarChain(lengths, lower=-LIMIT if limited else None, upper=LIMIT if limited else None)
+
+
+def _targets(chain, count, seed):
+    """Reachable targets: FK of random poses inside the limits, elbows bent by >= 0.2 rad.
+
+    (Exactly stretched poses are singular; CCD and FABRIK converge sublinearly there.)
+    """
+    rng = np.random.default_rng(seed)
+    q = rng.uniform(-LIMIT, LIMIT, size=(count, chain.n))
+    q[:, 1:] = np.sign(q[:, 1:]) * np.maximum(np.abs(q[:, 1:]), 0.2)
+    return chain.end_effector(q)
+
+
+@pytest.mark.parametrize("n", [2, 3, 7])
+@pytest.mark.parametrize("method", METHODS)
+def test_every_method_reaches_all_reachable_targets_within_limits(method, n):
+    chain = _chain(n)
+    targets = _targets(chain, 20, seed=n)
+    res = solve_ik(chain, targets, method=method, tol=1e-6)
+    assert res.converged.all(), (res.residual.max(), np.nonzero(~res.converged))
+    assert np.all(res.residual <= 1e-6)
+    np.testing.assert_allclose(chain.end_effector(res.q), targets, atol=1.01e-6)
+    assert np.all(res.q >= chain.lower) and np.all(res.q <= chain.upper)
+
+
+def test_analytic_two_link_both_elbows_match_fk_and_iterative():
+    chain = _chain(2, limited=False)
+    targets = _targets(chain, 30, seed=7)
+    sol, reachable = two_link_ik(*chain.lengths, targets)
+    assert reachable.all()
+    for k in range(2):
+        np.testing.assert_allclose(chain.end_effector(sol[:, k]), targets, atol=1e-12)
+    assert np.all(sol[:, 0, 1] >= 0) and np.all(sol[:, 1, 1] <= 0)
+    res = solve_ik(chain, targets, method="dls", tol=1e-10)
+    # the iterative answer is one of the two closed-form elbows
+    wrap = lambda a: np.arctan2(np.sin(a), np.cos(a))  # noqa: E731
+    d = np.min(np.abs(wrap(res.q[:, None, :] - sol)).max(axis=2), axis=1)
+    assert d.max() < 1e-8
+
+
+def test_chapter_closed_form_fk_and_jacobian_finite_differences():
+    rng = np.random.default_rng(3)
+    l1, l2 = 0.9, 0.6
+    chain = PlanarChain([l1, l2])
+    q = rng.uniform(-3, 3, size=(10, 2))
+    want = np.stack([l1 * np.cos(q[:, 0]) + l2 * np.cos(q.sum(1)), l1 * np.sin(q[:, 0]) + l2 * np.sin(q.sum(1))], 1)
+    np.testing.assert_allclose(chain.end_effector(q), want, atol=1e-14)
+    for ch, qq in ((_chain(7), rng.uniform(-2, 2, (4, 7))), (_serial7(), rng.uniform(-1, 1, (4, 7)))):
+        J = ch.jacobian(qq)
+        h = 1e-6
+        for i in range(ch.n):
+            dq = np.zeros(ch.n)
+            dq[i] = h
+            fd = (ch.end_effector(qq + dq) - ch.end_effector(qq - dq)) / (2 * h)
+            np.testing.assert_allclose(J[..., i], fd, atol=1e-8)
+
+
+def _serial7():
+    axes = [[0, 0, 1], [0, 1, 0], [0, 0, 1], [0, 1, 0], [0, 0, 1], [0, 1, 0], [1, 0, 0]]
+    offsets = [[0, 0, 0.1], [0, 0, 0.3], [0, 0, 0.25], [0, 0, 0.25], [0, 0, 0.2], [0, 0, 0.15], [0, 0, 0.1]]
+    kinds = ["revolute"] * 6 + ["prismatic"]
+    return SerialChain(offsets, axes, kinds, tip=[0.05, 0, 0.05], lower=-2.0, upper=2.0)
+
+
+@pytest.mark.parametrize("method", ["dls", "jt", "ccd"])
+def test_3d_chain_with_prismatic_joint(method):
+    chain = _serial7()
+    rng = np.random.default_rng(11)
+    targets = chain.end_effector(rng.uniform(-1.5, 1.5, size=(10, 7)))
+    res = solve_ik(chain, targets, method=method, tol=1e-6)
+    assert res.converged.all()
+    assert np.all(res.q >= chain.lower) and np.all(res.q <= chain.upper)
+
+
+def test_redundant_chain_unique_answer_via_null_space_rest_pose():
+    # 7 joints, 2 task equations: underdetermined (infinitely many solutions)
+    chain = _chain(7, limited=False)
+    target = _targets(chain, 1, seed=5)[0]
+    rest = np.full(7, 0.3)
+    rng = np.random.default_rng(0)
+    sols = [solve_ik(chain, target, q0=rng.uniform(-0.5, 0.5, 7) + 0.3, rest=rest, tol=1e-9).q for _ in range(4)]
+    for q in sols:
+        np.testing.assert_allclose(chain.end_effector(q), target, atol=1e-9)
+        # first-order optimality: q - rest has no component in the Jacobian's null space
+        J = chain.jacobian(q)
+        N = np.eye(7) - np.linalg.pinv(J) @ J
+        assert np.linalg.norm(N @ (q - rest)) < 1e-6
+    spread = np.max(np.abs(np.array(sols) - sols[0]))
+    assert spread < 1e-5
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_unreachable_target_returns_closest_point(method):
+    chain = _chain(3, limited=False)
+    direction = np.array([0.6, -0.8])
+    target = 2.0 * chain.reach * direction
+    res = solve_ik(chain, target, method=method, tol=1e-6, restarts=1)
+    assert not res.converged
+    np.testing.assert_allclose(res.residual, np.linalg.norm(target) - chain.reach, atol=1e-5)
+    np.testing.assert_allclose(chain.end_effector(res.q), chain.reach * direction, atol=1e-3)
+
+
+def test_unreachable_two_link_analytic_closest_point():
+    sol, reachable = two_link_ik(1.0, 0.5, [[3.0, 0.0], [0.2, 0.0]])
+    assert not reachable.any()
+    ch = PlanarChain([1.0, 0.5])
+    np.testing.assert_allclose(ch.end_effector(sol[0, 0]), [1.5, 0.0], atol=1e-12)
+    np.testing.assert_allclose(ch.end_effector(sol[1, 0]), [0.5, 0.0], atol=1e-12)
+
+
+def test_same_seed_bit_identical():
+    chain = _chain(7)
+    targets = _targets(chain, 8, seed=1)
+    a = solve_ik(chain, targets, method="dls", seed=3)
+    b = solve_ik(chain, targets, method="dls", seed=3)
+    assert np.array_equal(a.q, b.q)
+
+
+def test_bad_ik_input_raises_and_changes_nothing():
+    chain = _chain(3)
+    lengths = chain.lengths.copy()
+    with pytest.raises(ValueError, match="target"):
+        solve_ik(chain, [1.0, 2.0, 3.0])
+    with pytest.raises(ValueError, match="NaN"):
+        solve_ik(chain, [np.nan, 0.0])
+    with pytest.raises(ValueError, match="method"):
+        solve_ik(chain, [0.1, 0.1], method="newton")
+    with pytest.raises(ValueError, match="q0"):
+        solve_ik(chain, [0.1, 0.1], q0=[0.0, 0.0])
+    with pytest.raises(ValueError, match="fabrik"):
+        solve_ik(_serial7(), [0.1, 0.1, 0.5], method="fabrik")
+    with pytest.raises(ValueError, match="l1"):
+        two_link_ik(0.0, 1.0, [0.5, 0.5])
+    with pytest.raises(ValueError, match="lower > upper"):
+        SerialChain([[0, 0, 1]], [[0, 0, 1]], lower=1.0, upper=0.0)
+    with pytest.raises(TypeError, match="chain"):
+        solve_ik("arm", [0.1, 0.1])
+    assert np.array_equal(chain.lengths, lengths)

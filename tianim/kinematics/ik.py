@@ -1,0 +1,353 @@
+"""Inverse kinematics: analytic 2-link, CCD, FABRIK, Jacobian transpose, damped least squares (chapter 15.3.2).
+
+``q = f^-1(p)`` is rarely a plain inverse. With more joints than task dimensions the
+system is **underdetermined** (fewer independent equations than unknowns): a
+reachable target has infinitely many solutions. With a target out of reach it is
+**overdetermined** / inconsistent (no solution): the best one can do is the
+least-squares closest pose. (The source chapter swaps the definitions; these are
+the correct ones.) The solvers here therefore
+
+* make redundant solutions unique and stable with a secondary objective in the
+  null space of the Jacobian (``rest``: minimise ``|q - rest|^2`` over the
+  solution set; ``rest = q0`` is least motion; Liegeois 1977),
+* return the least-squares closest pose of an unreachable target with its
+  residual and ``converged = False``, instead of oscillating,
+* respect joint limits by projection (clamping) after every update.
+
+All solvers are batched over targets: ``target`` has shape (task_dim,) or
+(B, task_dim) and every array operation runs on the whole batch.
+Methods (``method=``):
+
+``"dls"``  damped least squares with adaptive (Levenberg-Marquardt) damping:
+           ``dq = J^T (J J^T + lam^2 I)^-1 e``; lam shrinks after a step that lowers
+           the error and grows after one that does not (Wampler 1986; Nakamura and
+           Hanafusa 1986; Buss, "Introduction to inverse kinematics with Jacobian
+           transpose, pseudoinverse and damped least squares methods", 2004).
+``"jt"``   Jacobian transpose ``dq = mu a J^T e`` with Buss's step
+           ``a = <e, J J^T e> / |J J^T e|^2`` (Buss 2004, eq. 7), and a multiplier
+           mu that doubles after a step that lowers the error and drops below 1 after one
+           that does not (the step is then rejected): a backtracking line search.
+``"ccd"``  cyclic coordinate descent (Wang and Chen 1991): each joint in turn,
+           tip to base, rotates (slides) to bring the end effector closest to the target.
+``"fabrik"`` forward and backward reaching IK (Aristidou and Lasenby 2011), planar chains.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from tianim.kinematics._validate import float_array, joint_vector
+from tianim.kinematics.planar import PlanarChain
+
+METHODS = ("dls", "jt", "ccd", "fabrik")
+_DEFAULT_ITERS = {"dls": 200, "jt": 5000, "ccd": 1000, "fabrik": 1000}
+
+
+@dataclass
+class IKResult:
+    """Result of :func:`solve_ik`.
+
+    q : joint coordinates, shape (B, n) (or (n,) for a single target)
+    residual : |target - end effector|, shape (B,) (or scalar), task units
+    converged : residual <= tol, shape (B,) (or scalar bool)
+    iterations : iterations used by the last attempt, shape (B,)
+    """
+
+    q: np.ndarray
+    residual: np.ndarray
+    converged: np.ndarray
+    iterations: np.ndarray
+
+
+def two_link_ik(l1: float, l2: float, target) -> tuple[np.ndarray, np.ndarray]:
+    """Both closed-form solutions of the planar 2-link arm (chapter 15.3's example).
+
+    With ``c2 = (x^2 + y^2 - l1^2 - l2^2) / (2 l1 l2)``: ``q2 = +-acos(c2)``,
+    ``q1 = atan2(y, x) - atan2(l2 sin q2, l1 + l2 cos q2)``. For an unreachable
+    target ``c2`` is clipped to [-1, 1], which gives the closest reachable point
+    (arm stretched toward it, or folded when it is too close).
+
+    Parameters
+    ----------
+    l1, l2 : float
+        Link lengths (m), > 0.
+    target : array_like, shape (..., 2)
+
+    Returns
+    -------
+    q : ndarray, shape (..., 2, 2): ``q[..., 0, :]`` has ``q2 >= 0`` (elbow
+        counter-clockwise), ``q[..., 1, :]`` has ``q2 <= 0``.
+    reachable : ndarray of bool, shape (...)
+    """
+    for name, v in (("l1", l1), ("l2", l2)):
+        if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):
+            raise ValueError(f"{name}={v!r} must be a positive link length in metres")
+    t = _check_target(target, 2)
+    x, y = t[..., 0], t[..., 1]
+    c2 = (x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+    reachable = np.abs(c2) <= 1 + 1e-12
+    q2 = np.arccos(np.clip(c2, -1.0, 1.0))
+    out = []
+    for sgn in (1.0, -1.0):
+        b = sgn * q2
+        q1 = np.arctan2(y, x) - np.arctan2(l2 * np.sin(b), l1 + l2 * np.cos(b))
+        out.append(np.stack([np.arctan2(np.sin(q1), np.cos(q1)), b], axis=-1))
+    return np.stack(out, axis=-2), reachable
+
+
+def _check_target(target, dim: int) -> np.ndarray:
+    t = float_array("target", target, f"of shape ({dim},) or (B, {dim})")
+    if t.ndim == 0 or t.shape[-1] != dim:
+        raise ValueError(f"target has shape {t.shape}; this chain needs shape ({dim},) or (B, {dim})")
+    return t
+
+
+def _check_chain(chain) -> None:
+    if not hasattr(chain, "_fk_jac"):
+        raise TypeError(f"chain={chain!r} is not a kinematic chain; use PlanarChain or SerialChain")
+
+
+def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max_iter: int | None = None,
+             rest=None, restarts: int = 16, seed: int = 0) -> IKResult:
+    """Joint coordinates that put the end effector of ``chain`` on ``target`` (see the module docstring).
+
+    Parameters
+    ----------
+    chain : PlanarChain or SerialChain
+    target : array_like, shape (task_dim,) or (B, task_dim)
+        Target positions, metres.
+    method : {"dls", "jt", "ccd", "fabrik"}
+    q0 : array_like, shape (n,) or (B, n), optional
+        Initial poses (default zeros clipped into the limits).
+    tol : float
+        Success threshold on the residual |target - end effector| (m).
+    max_iter : int, optional
+        Iterations per attempt (defaults: dls 200, jt 20000, ccd/fabrik 3000).
+    rest : array_like, shape (n,) or (B, n), or "q0", optional
+        DLS only: secondary objective for redundant chains, minimise |q - rest|
+        in the null space (``"q0"``: least motion from ``q0``). Default: none,
+        unless the chain is redundant, where it is ``q0`` (least motion).
+    restarts : int
+        Targets not reached are retried from random poses inside the limits
+        (generator seeded with ``seed``, so results are reproducible); the
+        attempt with the smallest residual is returned.
+    seed : int
+
+    Returns
+    -------
+    IKResult
+    """
+    _check_chain(chain)
+    if method not in METHODS:
+        raise ValueError(f"method={method!r} is unknown; use one of {METHODS}")
+    if method == "fabrik" and not isinstance(chain, PlanarChain):
+        raise ValueError("method='fabrik' supports PlanarChain only; use 'ccd' or 'dls' for 3D chains")
+    if not (isinstance(tol, (int, float)) and tol > 0):
+        raise ValueError(f"tol={tol!r} must be a positive distance in metres")
+    m, n = chain.task_dim, chain.n
+    tgt = _check_target(target, m)
+    single = tgt.ndim == 1
+    tgt = np.atleast_2d(tgt).reshape(-1, m)
+    B = len(tgt)
+    if q0 is None:
+        q_init = np.broadcast_to(np.clip(0.0, chain.lower, chain.upper), (B, n)).copy()
+    else:
+        q_init = joint_vector("q0", q0, n)
+        try:
+            q_init = np.broadcast_to(q_init, (B, n)).copy()
+        except ValueError as exc:
+            raise ValueError(f"q0 has shape {np.shape(q0)}; pass ({n},) or ({B}, {n})") from exc
+        q_init = np.clip(q_init, chain.lower, chain.upper)
+    if isinstance(rest, str) and rest == "q0":
+        rest_arr = q_init.copy()
+    elif rest is not None:
+        rest_arr = np.broadcast_to(joint_vector("rest", rest, n), (B, n)).copy()
+    elif n > m and method == "dls":
+        rest_arr = q_init.copy()
+    else:
+        rest_arr = None
+    iters = max_iter if max_iter is not None else _DEFAULT_ITERS[method]
+    step = {"dls": _dls, "jt": _jt, "ccd": _ccd, "fabrik": _fabrik}[method]
+
+    q, res, it = step(chain, tgt, q_init, tol, iters, rest_arr)
+    rng = np.random.default_rng(seed)
+    lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)
+    hi = np.where(np.isfinite(chain.upper), chain.upper, np.pi)
+    for _ in range(restarts):
+        todo = np.nonzero(res > tol)[0]
+        if todo.size == 0:
+            break
+        qr = rng.uniform(lo, hi, size=(todo.size, n))
+        rr = None if rest_arr is None else rest_arr[todo]
+        q2, res2, it2 = step(chain, tgt[todo], qr, tol, iters, rr)
+        better = res2 < res[todo]
+        q[todo[better]], res[todo[better]], it[todo[better]] = q2[better], res2[better], it2[better]
+    conv = res <= tol
+    if single:
+        return IKResult(q[0], res[0], bool(conv[0]), it[0])
+    return IKResult(q, res, conv, it)
+
+
+def _stalled(k: int, idx: np.ndarray, r: np.ndarray, r_check: np.ndarray, every: int = 100) -> np.ndarray:
+    """Every ``every`` iterations: mask of targets whose residual fell by < 0.1% since the last check."""
+    if k % every != every - 1:
+        return np.zeros(idx.size, dtype=bool)
+    stalled = r[idx] > 0.999 * r_check[idx]
+    r_check[idx] = r[idx]
+    return stalled
+
+
+def _residual(chain, q, tgt):
+    end, jac = chain._fk_jac(q)
+    e = tgt - end
+    return e, np.sqrt(np.einsum("bi,bi->b", e, e)), jac
+
+
+def _dls(chain, tgt, q, tol, iters, rest):
+    B, n = q.shape
+    m = tgt.shape[1]
+    lo, hi = chain.lower, chain.upper
+    lam2 = np.full(B, 1e-2)
+    ns_gain = np.full(B, 0.5)
+    e, r, J = _residual(chain, q, tgt)
+    active = np.ones(B, dtype=bool)
+    it = np.zeros(B, dtype=np.int64)
+    eye = np.eye(m)
+    for k in range(iters):
+        idx = np.nonzero(active)[0]
+        if idx.size == 0:
+            break
+        Ji, ei = J[idx], e[idx]
+        A = Ji @ np.swapaxes(Ji, 1, 2) + lam2[idx, None, None] * eye
+        dq = np.einsum("bij,bi->bj", Ji, np.linalg.solve(A, ei[..., None])[..., 0])
+        if rest is not None:
+            pinv = np.linalg.pinv(Ji)
+            N = np.eye(n) - pinv @ Ji
+            dq = dq - ns_gain[idx, None] * np.einsum("bij,bj->bi", N, q[idx] - rest[idx])
+        qn = np.clip(q[idx] + dq, lo, hi)
+        en, rn, Jn = _residual(chain, qn, tgt[idx])
+        r_old = r[idx]
+        moved = np.linalg.norm(qn - q[idx], axis=1)
+        ok = (rn < r_old) | ((rn <= tol) & (rest is not None))
+        acc = idx[ok]
+        q[acc], e[acc], r[acc], J[acc] = qn[ok], en[ok], rn[ok], Jn[ok]
+        lam2[acc] = np.maximum(lam2[acc] * 0.25, 1e-12)
+        lam2[idx[~ok]] *= 16.0
+        ns_gain[acc] = np.minimum(ns_gain[acc] * 2, 0.5)
+        ns_gain[idx[~ok]] *= 0.25
+        it[idx] = k + 1
+        if rest is None:
+            done = r[idx] <= tol
+        else:
+            done = (r[idx] <= tol) & ok & (moved < 1e-10)
+        # unreachable: stationary (no progress) or damping blown up -> least-squares closest pose
+        stalled = (lam2[idx] > 1e12) | (ok & (r_old - rn <= 1e-15 * r_old) & (rn > tol))
+        active[idx[done | stalled]] = False
+    return q, r, it
+
+
+def _jt(chain, tgt, q, tol, iters, rest):
+    lo, hi = chain.lower, chain.upper
+    e, r, J = _residual(chain, q, tgt)
+    it = np.zeros(len(q), dtype=np.int64)
+    active = r > tol
+    r_check = r.copy()
+    mu = np.ones(len(q))
+    for k in range(iters):
+        idx = np.nonzero(active)[0]
+        if idx.size == 0:
+            break
+        Ji, ei = J[idx], e[idx]
+        g = np.einsum("bij,bi->bj", Ji, ei)  # J^T e
+        jg = np.einsum("bij,bj->bi", Ji, g)  # J J^T e
+        den = np.einsum("bi,bi->b", jg, jg)
+        alpha = np.where(den > 0, np.einsum("bi,bi->b", ei, jg) / np.where(den > 0, den, 1.0), 0.0)
+        qn = np.clip(q[idx] + (mu[idx] * alpha)[:, None] * g, lo, hi)
+        en, rn, Jn = _residual(chain, qn, tgt[idx])
+        moved = np.abs(qn - q[idx]).max(axis=1)
+        # step-size adaptation: grow the step while it keeps lowering the error, else fall back to Buss's step
+        ok = rn < r[idx]
+        acc = idx[ok]
+        q[acc], e[acc], r[acc], J[acc] = qn[ok], en[ok], rn[ok], Jn[ok]
+        mu[acc] = np.minimum(mu[acc] * 2.0, 1e6)
+        mu[idx[~ok]] = np.minimum(mu[idx[~ok]], 1.0) * 0.25
+        it[idx] = k + 1
+        stuck = (moved < 1e-15) | (mu[idx] < 1e-12) | _stalled(k, idx, r, r_check)
+        active[idx[(r[idx] <= tol) | stuck]] = False
+    return q, r, it
+
+
+def _ccd(chain, tgt, q, tol, iters, rest):
+    lo, hi = chain.lower, chain.upper
+    n = q.shape[1]
+    it = np.zeros(len(q), dtype=np.int64)
+    r = np.linalg.norm(tgt - chain._fk_jac(q)[0], axis=1)
+    active = r > tol
+    r_check = r.copy()
+    for k in range(iters):
+        idx = np.nonzero(active)[0]
+        if idx.size == 0:
+            break
+        qi, ti = q[idx], tgt[idx]
+        q_before = qi.copy()
+        for j in range(n - 1, -1, -1):
+            piv, axes, end = chain._pivots_axes(qi)
+            p = piv[:, j]
+            a, b = end - p, ti - p
+            if axes is None:  # planar: rotation about z
+                delta = np.arctan2(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0], np.einsum("bi,bi->b", a, b))
+            else:
+                ax = axes[:, j]
+                if chain.revolute[j]:
+                    a = a - np.einsum("bi,bi->b", a, ax)[:, None] * ax
+                    b = b - np.einsum("bi,bi->b", b, ax)[:, None] * ax
+                    delta = np.arctan2(np.einsum("bi,bi->b", ax, np.cross(a, b)), np.einsum("bi,bi->b", a, b))
+                else:
+                    delta = np.einsum("bi,bi->b", ti - end, ax)
+            qi[:, j] = np.clip(qi[:, j] + delta, lo[j], hi[j])
+        rn = np.linalg.norm(ti - chain._fk_jac(qi)[0], axis=1)
+        q[idx], r[idx] = qi, rn
+        it[idx] = k + 1
+        moved = np.abs(qi - q_before).max(axis=1)
+        active[idx[(rn <= tol) | (moved < 1e-14) | _stalled(k, idx, r, r_check)]] = False
+    return q, r, it
+
+
+def _fabrik(chain: PlanarChain, tgt, q, tol, iters, rest):
+    lo, hi = chain.lower, chain.upper
+    L = chain.lengths
+    it = np.zeros(len(q), dtype=np.int64)
+    r = np.linalg.norm(tgt - chain._fk_jac(q)[0], axis=1)
+    active = r > tol
+    limited = np.any(np.isfinite(lo)) or np.any(np.isfinite(hi))
+    r_check = r.copy()
+    for k in range(iters):
+        idx = np.nonzero(active)[0]
+        if idx.size == 0:
+            break
+        P = chain.joint_positions(q[idx])
+        ti = tgt[idx]
+        P[:, -1] = ti
+        for j in range(chain.n - 1, -1, -1):  # backward: tip to base
+            d = P[:, j] - P[:, j + 1]
+            nd = np.linalg.norm(d, axis=1, keepdims=True)
+            P[:, j] = P[:, j + 1] + L[j] * d / np.where(nd > 0, nd, 1.0)
+        P[:, 0] = chain.base
+        for j in range(chain.n):  # forward: base to tip
+            d = P[:, j + 1] - P[:, j]
+            nd = np.linalg.norm(d, axis=1, keepdims=True)
+            P[:, j + 1] = P[:, j] + L[j] * d / np.where(nd > 0, nd, 1.0)
+        seg = np.diff(P, axis=1)
+        phi = np.arctan2(seg[..., 1], seg[..., 0])
+        qn = np.diff(phi, axis=1, prepend=0.0)
+        qn = np.arctan2(np.sin(qn), np.cos(qn))
+        if limited:
+            qn = np.clip(qn, lo, hi)
+        rn = np.linalg.norm(ti - chain._fk_jac(qn)[0], axis=1)
+        moved = np.abs(qn - q[idx]).max(axis=1)
+        q[idx], r[idx] = qn, rn
+        it[idx] = k + 1
+        active[idx[(rn <= tol) | (moved < 1e-14) | _stalled(k, idx, r, r_check)]] = False
+    return q, r, it
