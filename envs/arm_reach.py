@@ -64,6 +64,7 @@ bit for bit between a single env and copy ``k`` of a batch seeded alike.
 from __future__ import annotations
 
 import math
+from functools import lru_cache
 
 import gymnasium as gym
 import numpy as np
@@ -88,10 +89,16 @@ MAX_LINKS = 7
 
 
 def make_arm(n_links: int) -> articulated.PlanarArm:
-    """The arm of ArmReach-v0 with ``n_links`` links (see the module docstring)."""
+    """The arm of ArmReach-v0 with ``n_links`` links (see the module docstring). One
+    immutable object per link count, shared by every environment (nothing is rebuilt
+    or recompiled per instance)."""
     if isinstance(n_links, bool) or not isinstance(n_links, (int, np.integer)) or not 1 <= n_links <= MAX_LINKS:
         raise ValueError(f"n_links={n_links!r} must be an integer from 1 to {MAX_LINKS}")
-    n = int(n_links)
+    return _arm(int(n_links))
+
+
+@lru_cache(maxsize=None)
+def _arm(n: int) -> articulated.PlanarArm:
     lower = [-math.inf] + [-JOINT_LIMIT] * (n - 1)
     upper = [math.inf] + [JOINT_LIMIT] * (n - 1)
     return articulated.planar_arm(
