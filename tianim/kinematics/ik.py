@@ -223,8 +223,8 @@ def _dls(chain, tgt, q, tol, iters, rest):
         A = Ji @ np.swapaxes(Ji, 1, 2) + lam2[idx, None, None] * eye
         dq = np.einsum("bij,bi->bj", Ji, np.linalg.solve(A, ei[..., None])[..., 0])
         if rest is not None:
-            pinv = np.linalg.pinv(Ji)
-            N = np.eye(n) - pinv @ Ji
+            JJt = Ji @ np.swapaxes(Ji, 1, 2) + 1e-12 * eye  # J^+ = J^T (J J^T)^-1 (full row rank)
+            N = np.eye(n) - np.swapaxes(Ji, 1, 2) @ np.linalg.solve(JJt, Ji)
             dq = dq - ns_gain[idx, None] * np.einsum("bij,bj->bi", N, q[idx] - rest[idx])
         qn = np.clip(q[idx] + dq, lo, hi)
         en, rn, Jn = _residual(chain, qn, tgt[idx])
@@ -241,7 +241,7 @@ def _dls(chain, tgt, q, tol, iters, rest):
         if rest is None:
             done = r[idx] <= tol
         else:
-            done = (r[idx] <= tol) & ok & (moved < 1e-10)
+            done = (r[idx] <= tol) & ok & (moved < 1e-8)
         # unreachable: stationary (no progress) or damping blown up -> least-squares closest pose
         stalled = (lam2[idx] > 1e12) | (ok & (r_old - rn <= 1e-15 * r_old) & (rn > tol))
         active[idx[done | stalled]] = False
