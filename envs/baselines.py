@@ -49,12 +49,31 @@ class ArmReachIKPD:
         return np.clip(tau / self.arm.max_torque, -1.0, 1.0).astype(np.float32)
 
 
+class RopeSwingDamped:
+    """RopeSwing: a damped pin trajectory. The pin's horizontal velocity is a P term on
+    the pin-to-target error plus an anti-sway term that moves the pin toward the free end
+    (the crane operator's rule); vertically the pin follows the end's height error:
+    ``v_xz = kp (target - pin)_xz + ks (end - pin)_xz``, ``v_y = kp (target - end)_y``."""
+
+    def __init__(self, kp: float = 1.0, ks: float = 1.0):
+        self.kp, self.ks = kp, ks
+
+    def __call__(self, obs):
+        obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
+        pin, end, target = obs[:, 0:3], obs[:, 12:15], obs[:, 24:27]
+        v = self.kp * (target - pin) + self.ks * (end - pin)
+        v[:, 1] = self.kp * (target[:, 1] - end[:, 1])
+        return np.clip(v, -1.0, 1.0).astype(np.float32)
+
+
 def make_baseline(env_id: str, env):
     """The scripted controller of ``env_id`` for the (single or vector) env ``env``."""
     base = env.unwrapped
     if env_id.endswith("ArmReach-v0"):
         return ArmReachIKPD(base.arm)
-    raise ValueError(f"env_id={env_id!r} has no scripted baseline; known: tianim/ArmReach-v0")
+    if env_id.endswith("RopeSwing-v0"):
+        return RopeSwingDamped()
+    raise ValueError(f"env_id={env_id!r} has no scripted baseline; known: tianim/ArmReach-v0, tianim/RopeSwing-v0")
 
 
 def evaluate(env, policy, episodes: int, seed: int = 0) -> np.ndarray:
@@ -75,4 +94,4 @@ def evaluate(env, policy, episodes: int, seed: int = 0) -> np.ndarray:
     return np.array(returns)
 
 
-__all__ = ["ArmReachIKPD", "make_baseline", "evaluate"]
+__all__ = ["ArmReachIKPD", "RopeSwingDamped", "make_baseline", "evaluate"]

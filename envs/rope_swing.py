@@ -1,0 +1,226 @@
+"""RopeSwing-v0: move the pin of a hanging rope to bring its free end to a target, and hold it still.
+
+## Description
+
+A 3D rope of 16 particles (0.8 m, 0.2 kg, mass-spring chain from
+``tianim.physics.rope``: the default stiffness that stretches the top spring by
+about 1%, light air drag 0.0025 kg/s per particle) hangs from particle 0, a pin
+that the agent moves (a crane trolley in 3D). Goal: bring the free end to a
+target and damp the sway (anti-sway control).
+
+## Action space
+
+``Box(-1, 1, (3,), float32)``: pin velocity as a fraction of 1 m/s along x, y, z.
+The pin stays in the box x, z in [-0.5, 0.5] m, y in [0.6, 1.4] m (a velocity that
+would leave it is cut at the wall). Finite actions outside [-1, 1] are clipped;
+NaN or infinite actions raise ``ValueError``.
+
+## Observation space
+
+``Box(float32, (30,))``, every entry clipped to its bounds:
+
+| index   | observation                                              | bound | unit |
+|---------|----------------------------------------------------------|-------|------|
+| 0-2     | pin position                                             | 3     | m    |
+| 3-5     | pin velocity                                             | 5     | m/s  |
+| 6-14    | positions of particles 5, 10, 15 (15: the free end)      | 3     | m    |
+| 15-23   | velocities of particles 5, 10, 15                        | 20    | m/s  |
+| 24-26   | target                                                   | 3     | m    |
+| 27-29   | free end minus target                                    | 3     | m    |
+
+## Rewards
+
+``r = -|end - target| - 0.1 |v_end| - 0.01 |a|^2`` (distance, sway, effort).
+
+## Starting state
+
+Pin at (x0, 1, z0) with x0, z0 uniform in [-0.2, 0.2] m, rope hanging straight
+down at rest; target at (tx, 1 + dy - 0.8, tz) with tx, tz uniform in
+[-0.3, 0.3] m and dy uniform in [-0.2, 0.2] m (reachable by the end under the
+pin). All from ``np_random``.
+
+## Episode end
+
+Never terminates; truncated after 200 steps (4 s).
+
+## Physics (fixed for version 0)
+
+Control step 0.02 s (``render_fps`` 50) = 22 substeps of 0.02/22 s,
+symplectic Euler, float32 state: 22 is ``tianim.physics.substeps_for(model,
+frame_dt=0.02, safety=0.5)`` (half the stability limit of the stiffest spring
+mode); a test keeps them equal. The single env and the batch run the same
+code (``RopeSwingSim``) on a batch of 1 or N copies; the physics kernels give
+bit-identical results for every batch size.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+import tianim.physics as tp
+
+from ._batched import BatchedEnv, check_action
+
+N_PARTICLES = 16
+LENGTH = 0.8
+TOTAL_MASS = 0.2
+MEDIUM_DAMPING = 0.0025
+DT = 0.02
+SUBSTEPS = 22
+MAX_EPISODE_STEPS = 200
+PIN_SPEED = 1.0
+PIN_LOW = np.array([-0.5, 0.6, -0.5], np.float32)
+PIN_HIGH = np.array([0.5, 1.4, 0.5], np.float32)
+SAMPLES = np.array([5, 10, 15])
+OBS_HIGH = np.concatenate([np.full(3, 3.0), np.full(3, 5.0), np.full(9, 3.0), np.full(9, 20.0),
+                           np.full(6, 3.0)]).astype(np.float32)
+
+
+@lru_cache(maxsize=None)
+def make_model() -> tp.Model:
+    """The rope of RopeSwing-v0 hanging from (0, 1, 0) (shared by every instance)."""
+    return tp.rope(n=N_PARTICLES, length=LENGTH, mass=TOTAL_MASS / N_PARTICLES, medium_damping=MEDIUM_DAMPING,
+                   direction=(0.0, -1.0, 0.0), origin=(0.0, 1.0, 0.0))
+
+
+def sample_start(rng: np.random.Generator) -> np.ndarray:
+    """``[x0, z0, tx, dy, tz]`` drawn with one call (single env and copies draw alike)."""
+    return rng.uniform([-0.2, -0.2, -0.3, -0.2, -0.3], [0.2, 0.2, 0.3, 0.2, 0.3])
+
+
+class RopeSwingSim:
+    """B copies of the task on batched state: the code both env classes run."""
+
+    def __init__(self, batch: int):
+        self.model = make_model()
+        self.state = self.model.state(batch=batch, dtype=np.float32)
+        self.target = np.zeros((batch, 3), np.float32)
+
+    def reset(self, k: int, rng: np.random.Generator) -> None:
+        x0, z0, tx, dy, tz = sample_start(rng).tolist()
+        s = self.state
+        s.x[k] = self.model.positions + np.array([x0, 0.0, z0])
+        s.v[k] = 0.0
+        s.t[k] = 0.0
+        self.target[k] = (tx, 1.0 + dy - LENGTH, tz)
+
+    def step(self, actions: np.ndarray) -> np.ndarray:
+        """Move the pins with velocities ``actions * PIN_SPEED`` (cut at the box); return the
+        reward (B,) float64."""
+        s = self.state
+        pin = s.x[:, 0, :]
+        v = actions * np.float32(PIN_SPEED)
+        goal = np.clip(pin + v * np.float32(DT), PIN_LOW, PIN_HIGH)
+        s.v[:, 0, :] = (goal - pin) / np.float32(DT)
+        tp.step(self.model, s, DT / SUBSTEPS, SUBSTEPS, method="symplectic_euler")
+        end, vend = s.x[:, -1, :].astype(np.float64), s.v[:, -1, :].astype(np.float64)
+        d = end - self.target
+        dist = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
+        sway = np.sqrt(vend[:, 0] * vend[:, 0] + vend[:, 1] * vend[:, 1] + vend[:, 2] * vend[:, 2])
+        a = actions.astype(np.float64)
+        effort = a[:, 0] * a[:, 0] + a[:, 1] * a[:, 1] + a[:, 2] * a[:, 2]
+        return -dist - 0.1 * sway - 0.01 * effort
+
+    def observe(self) -> np.ndarray:
+        s = self.state
+        b = s.batch
+        obs = np.concatenate([s.x[:, 0], s.v[:, 0], s.x[:, SAMPLES].reshape(b, -1), s.v[:, SAMPLES].reshape(b, -1),
+                              self.target, s.x[:, -1] - self.target], axis=1)
+        return np.clip(obs, -OBS_HIGH, OBS_HIGH)
+
+
+def _spaces():
+    return spaces.Box(-1.0, 1.0, (3,), np.float32), spaces.Box(-OBS_HIGH, OBS_HIGH, dtype=np.float32)
+
+
+def _frame(sim: RopeSwingSim, k: int) -> np.ndarray:
+    from ._render import particles_frame
+
+    x = sim.state.x[k]
+    edges = np.stack([np.arange(N_PARTICLES - 1), np.arange(1, N_PARTICLES)], 1)
+    markers = [(x[0], 0.02, (30, 30, 30)), (sim.target[k], 0.025, (220, 60, 50))]
+    return particles_frame(x, edges, (-0.7, 0.7, -0.1, 1.5), markers, axes=(0, 1))
+
+
+class RopeSwingEnv(gym.Env):
+    """Single RopeSwing-v0 environment (see the module docstring)."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / DT)}
+
+    def __init__(self, render_mode: str | None = None):
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode={render_mode!r}; choose 'rgb_array' or None")
+        self.render_mode = render_mode
+        self.action_space, self.observation_space = _spaces()
+        self._sim = None
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        if self._sim is None:
+            self._sim = RopeSwingSim(1)
+        self._sim.reset(0, self.np_random)
+        return self._sim.observe()[0], {}
+
+    def step(self, action):
+        if self._sim is None:
+            raise RuntimeError("call reset() before step()")
+        a = check_action(action, self.action_space.shape)
+        reward = self._sim.step(a[None])
+        return self._sim.observe()[0], float(reward[0]), False, False, {}
+
+    def render(self):
+        if self.render_mode == "rgb_array" and self._sim is not None:
+            return _frame(self._sim, 0)
+        return None
+
+    def close(self):
+        self._sim = None
+
+
+class RopeSwingVectorEnv(BatchedEnv):
+    """``num_envs`` RopeSwing-v0 copies, all stepped in one physics launch per step."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / DT),
+                "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, max_episode_steps: int = MAX_EPISODE_STEPS,
+                 render_mode: str | None = None, autoreset_mode=AutoresetMode.NEXT_STEP):
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode={render_mode!r}; choose 'rgb_array' or None")
+        super().__init__(num_envs, max_episode_steps, autoreset_mode)
+        self.render_mode = render_mode
+        self.single_action_space, self.single_observation_space = _spaces()
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self._sim = RopeSwingSim(self.num_envs)
+
+    def _reset_copies(self, idx):
+        for k in idx.tolist():
+            self._sim.reset(k, self._rngs[k])
+
+    def _advance(self, actions, reset_mask):
+        # Copies being reset were re-initialised before this call; stepping them would move them,
+        # so their fresh state is saved and put back (the physics steps every copy in one launch).
+        saved = None
+        if reset_mask.any():
+            s = self._sim.state
+            saved = (s.x[reset_mask].copy(), s.v[reset_mask].copy())
+        reward = self._sim.step(actions)
+        if saved is not None:
+            s.x[reset_mask], s.v[reset_mask] = saved
+            s.t[reset_mask] = 0.0
+        return self._sim.observe(), reward, np.zeros(self.num_envs, bool)
+
+    def _observe_all(self):
+        return self._sim.observe()
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        return tuple(_frame(self._sim, k) for k in range(self.num_envs))
