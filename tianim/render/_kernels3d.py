@@ -43,8 +43,9 @@ def _depth(key: ti.i64) -> ti.f32:
 
 @ti.kernel
 def clear(buf: i64a2):
-    for i, j in ti.ndrange(buf.shape[0], buf.shape[1]):
-        buf[i, j] = ti.i64(EMPTY)
+    for i in range(buf.shape[0]):
+        for j in range(buf.shape[1]):
+            buf[i, j] = ti.i64(EMPTY)
 
 
 @ti.kernel
@@ -154,9 +155,9 @@ def _shadow(P, smap: ti.template(), lb: ti.template(), lfocal, lorigin, bias):
 
 
 @ti.func
-def _shade(P, N, base, V, L, ambient, spec, lit):
+def _shade(N, up, base, V, L, ambient, spec, lit):
     """Hemisphere ambient + Lambert + Blinn-Phong in linear RGB; returns linear RGB."""
-    up_term = 0.5 + 0.5 * N[1]
+    up_term = 0.5 + 0.5 * N.dot(up)
     amb = ambient * (0.55 + 0.45 * up_term)
     ndl = ti.max(N.dot(L), 0.0) * lit
     Hh = (L + V).normalized()
@@ -173,7 +174,7 @@ def _shade(P, N, base, V, L, ambient, spec, lit):
 @ti.kernel
 def resolve(
     buf: i64a2,
-    ssaa: ti.template(),
+    ssaa: ti.i32,
     n_tri: ti.i32,
     scr: f32a2,
     world: f32a2,
@@ -196,16 +197,15 @@ def resolve(
 
     cam: (4, 3) rows right, up, forward, eye; light: (3,) unit vector towards the light;
     params: [0] focal of the sample grid [px], [1] ambient, [2] specular, [3] shadow bias [m],
-    [4] up axis, [5:8] sky top rgb, [8:11] sky bottom rgb, [11] shadow-map focal [px/m],
+    [4] unused, [5:8] sky top rgb, [8:11] sky bottom rgb, [11] shadow-map focal [px/m],
     [12] ground on, [13] ground height [m], [14:17] and [17:20] checker rgb, [20] checker cell [m],
-    [21:24] ground centre, [24] ground fade radius [m];
+    [21:24] ground centre, [24] ground fade radius [m], [25:28] up, [28:31] and [31:34] ground axes;
     mats: (M, 3) back-side rgb per material; lcam: (4, 3) light-space basis rows and origin.
     The ground is an analytic plane (ray/plane intersection), fading into the sky with distance.
     """
     Hs, Ws = buf.shape[0], buf.shape[1]
     focal = params[0]
     ambient, spec, bias = params[1], params[2], params[3]
-    up_axis = ti.cast(params[4], ti.i32)
     lfocal = params[11]
     ground_on = params[12] > 0.5
     gh, cell, fade = params[13], params[20], params[24]
@@ -218,93 +218,99 @@ def resolve(
     Fw = ti.Vector([cam[2, 0], cam[2, 1], cam[2, 2]])
     L = ti.Vector([light[0], light[1], light[2]])
     lorigin = ti.Vector([lcam[3, 0], lcam[3, 1], lcam[3, 2]])
-    upv = ti.Vector([0.0, 0.0, 0.0])
-    upv[up_axis] = 1.0
+    upv = ti.Vector([params[25], params[26], params[27]])  # unit up; e1, e2 span the ground plane
+    e1 = ti.Vector([params[28], params[29], params[30]])
+    e2 = ti.Vector([params[31], params[32], params[33]])
+    eye_up = eye.dot(upv)
+    inv_cell = 1.0 / cell
+    inv_fade2 = 1.0 / (fade * fade)
+    gc_1, gc_2 = gcen.dot(e1), gcen.dot(e2)
+    g_amb = ambient * (0.55 + 0.45 * (0.5 + 0.5 * upv.dot(upv)))
+    g_dif = (1.0 - ambient) * ti.max(upv.dot(L), 0.0)
     inv_s2 = 1.0 / (ssaa * ssaa)
-    for y, x in ti.ndrange(out.shape[0], out.shape[1]):
-        acc = ti.Vector([0.0, 0.0, 0.0])
-        prev = ti.cast(-1, ti.i64)
-        prev_col = ti.Vector([0.0, 0.0, 0.0])
+    for y in range(out.shape[0]):  # parallel over rows, serial along a row (much faster than ndrange on CPU)
         tt = (y + 0.5) / out.shape[0]
         bg = ti.Vector([0.0, 0.0, 0.0])
         for k in ti.static(range(3)):
             bg[k] = _srgb_to_lin(params[5 + k] * (1.0 - tt) + params[8 + k] * tt)
-        for sy, sx in ti.static(ti.ndrange(ssaa, ssaa)):
-            py, px = y * ssaa + sy, x * ssaa + sx
-            key = buf[py, px]
-            dx = (px + 0.5 - 0.5 * Ws) / focal
-            dy = -(py + 0.5 - 0.5 * Hs) / focal
-            D = dx * R + dy * U + Fw  # world ray direction; the hit at t has view depth t
-            tg = ti.f32(3.0e38)
-            if ground_on and D[up_axis] < 0.0:
-                tg = (gh - eye[up_axis]) / D[up_axis]
-                if tg <= 0.0:
-                    tg = ti.f32(3.0e38)
-            hit = ti.cast(key & ti.i64(_ID_MASK), ti.i64)
-            if key == ti.i64(EMPTY):
-                hit = -2
-            if tg < 1.0e38 and (key == ti.i64(EMPTY) or tg < _depth(key)):
-                hit = -3
-            col = bg
-            if hit == prev:
-                col = prev_col
-            elif hit == -2:
+        for x in range(out.shape[1]):
+            acc = ti.Vector([0.0, 0.0, 0.0])
+            prev = ti.cast(-1, ti.i64)  # samples of one pixel that see the same primitive share its shading
+            prev_col = ti.Vector([0.0, 0.0, 0.0])
+            for sy, sx in ti.ndrange(ssaa, ssaa):
+                py, px = y * ssaa + sy, x * ssaa + sx
+                key = buf[py, px]
+                dx = (px + 0.5 - 0.5 * Ws) / focal
+                dy = -(py + 0.5 - 0.5 * Hs) / focal
+                D = dx * R + dy * U + Fw  # world ray direction; the hit at t has view depth t
+                tg = ti.f32(3.0e38)
+                d_up = D.dot(upv)
+                if ground_on and d_up < 0.0:
+                    tg = (gh - eye_up) / d_up
+                    if tg <= 0.0:
+                        tg = ti.f32(3.0e38)
+                hit = ti.cast(key & ti.i64(_ID_MASK), ti.i64)
+                if key == ti.i64(EMPTY):
+                    hit = -2
+                if tg < 1.0e38 and (key == ti.i64(EMPTY) or tg < _depth(key)):
+                    hit = -3
                 col = bg
-            elif hit == -3:
-                P = eye + tg * D
-                i0 = ti.cast(ti.floor(P[(up_axis + 1) % 3] / cell), ti.i32)
-                i1 = ti.cast(ti.floor(P[(up_axis + 2) % 3] / cell), ti.i32)
-                base = gc1
-                if (i0 + i1) % 2 != 0:
-                    base = gc2
-                lit = _shadow(P, smap, lcam, lfocal, lorigin, bias)
-                col = _shade(P, upv, base, -D.normalized(), L, ambient, 0.0, lit)
-                dd = P - gcen
-                dd[up_axis] = 0.0
-                f = ti.min(dd.norm() / fade, 1.0)
-                f = f * f * (3.0 - 2.0 * f)
-                col = col * (1.0 - f) + bg * f
-            elif hit < n_tri:
-                ident = ti.cast(hit, ti.i32)
-                a, b, c = faces[ident, 0], faces[ident, 1], faces[ident, 2]
-                x0, y0, z0 = scr[a, 0], scr[a, 1], scr[a, 2]
-                x1, y1, z1 = scr[b, 0], scr[b, 1], scr[b, 2]
-                x2, y2, z2 = scr[c, 0], scr[c, 1], scr[c, 2]
-                cx, cy = px + 0.5, py + 0.5
-                area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-                w0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) / area
-                w1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) / area
-                w2 = 1.0 - w0 - w1
-                p0, p1, p2 = w0 / z0, w1 / z1, w2 / z2
-                s = p0 + p1 + p2
-                p0, p1, p2 = p0 / s, p1 / s, p2 / s
-                P = ti.Vector([0.0, 0.0, 0.0])
-                N = ti.Vector([0.0, 0.0, 0.0])
-                base = ti.Vector([0.0, 0.0, 0.0])
-                for k in ti.static(range(3)):
-                    P[k] = p0 * world[a, k] + p1 * world[b, k] + p2 * world[c, k]
-                    N[k] = p0 * normals[a, k] + p1 * normals[b, k] + p2 * normals[c, k]
-                    base[k] = p0 * vcol[a, k] + p1 * vcol[b, k] + p2 * vcol[c, k]
-                N = N.normalized(1e-12)
-                V = (eye - P).normalized(1e-12)
-                if N.dot(V) < 0.0:
-                    N = -N
-                    m = fmat[ident]
-                    base = ti.Vector([mats[m, 0], mats[m, 1], mats[m, 2]])
-                lit = _shadow(P, smap, lcam, lfocal, lorigin, bias)
-                col = _shade(P, N, _srgb_to_lin(base), V, L, ambient, spec, lit)
-            else:
-                q = ti.cast(hit, ti.i32) - n_tri
-                t = _depth(key)
-                hv = ti.Vector([dx * t - sph_view[q, 0], dy * t - sph_view[q, 1], t - sph_view[q, 2]])
-                N = (hv[0] * R + hv[1] * U + hv[2] * Fw).normalized(1e-12)
-                P = eye + t * D
-                base = _srgb_to_lin(ti.Vector([sph_col[q, 0], sph_col[q, 1], sph_col[q, 2]]))
-                lit = _shadow(P + N * bias, smap, lcam, lfocal, lorigin, bias)
-                col = _shade(P, N, base, -D.normalized(), L, ambient, spec, lit)
-            prev = hit
-            prev_col = col
-            acc += col
-        acc *= inv_s2
-        for k in ti.static(range(3)):
-            out[y, x, k] = ti.cast(ti.min(ti.sqrt(ti.max(acc[k], 0.0)), 1.0) * 255.0 + 0.5, ti.u8)
+                if hit == prev:
+                    col = prev_col
+                elif hit == -2:
+                    col = bg
+                elif hit == -3:
+                    P = eye + tg * D
+                    u1, u2 = P.dot(e1), P.dot(e2)
+                    base = gc1
+                    if (ti.cast(ti.floor(u1 * inv_cell), ti.i32) + ti.cast(ti.floor(u2 * inv_cell), ti.i32)) % 2 != 0:
+                        base = gc2
+                    lit = _shadow(P, smap, lcam, lfocal, lorigin, bias)
+                    col = base * (g_amb + g_dif * lit)  # constant normal: Lambert needs no per-pixel vectors
+                    f = ti.min(((u1 - gc_1) ** 2 + (u2 - gc_2) ** 2) * inv_fade2, 1.0)
+                    f = f * f * (3.0 - 2.0 * f)
+                    col = col * (1.0 - f) + bg * f
+                elif hit < n_tri:
+                    ident = ti.cast(hit, ti.i32)
+                    a, b, c = faces[ident, 0], faces[ident, 1], faces[ident, 2]
+                    x0, y0, z0 = scr[a, 0], scr[a, 1], scr[a, 2]
+                    x1, y1, z1 = scr[b, 0], scr[b, 1], scr[b, 2]
+                    x2, y2, z2 = scr[c, 0], scr[c, 1], scr[c, 2]
+                    cx, cy = px + 0.5, py + 0.5
+                    area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+                    w0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) / area
+                    w1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) / area
+                    w2 = 1.0 - w0 - w1
+                    p0, p1, p2 = w0 / z0, w1 / z1, w2 / z2
+                    s = p0 + p1 + p2
+                    p0, p1, p2 = p0 / s, p1 / s, p2 / s
+                    P = ti.Vector([0.0, 0.0, 0.0])
+                    N = ti.Vector([0.0, 0.0, 0.0])
+                    base = ti.Vector([0.0, 0.0, 0.0])
+                    for k in ti.static(range(3)):
+                        P[k] = p0 * world[a, k] + p1 * world[b, k] + p2 * world[c, k]
+                        N[k] = p0 * normals[a, k] + p1 * normals[b, k] + p2 * normals[c, k]
+                        base[k] = p0 * vcol[a, k] + p1 * vcol[b, k] + p2 * vcol[c, k]
+                    N = N.normalized(1e-12)
+                    V = (eye - P).normalized(1e-12)
+                    if N.dot(V) < 0.0:
+                        N = -N
+                        m = fmat[ident]
+                        base = ti.Vector([mats[m, 0], mats[m, 1], mats[m, 2]])
+                    lit = _shadow(P, smap, lcam, lfocal, lorigin, bias)
+                    col = _shade(N, upv, _srgb_to_lin(base), V, L, ambient, spec, lit)
+                else:
+                    q = ti.cast(hit, ti.i32) - n_tri
+                    t = _depth(key)
+                    hv = ti.Vector([dx * t - sph_view[q, 0], dy * t - sph_view[q, 1], t - sph_view[q, 2]])
+                    N = (hv[0] * R + hv[1] * U + hv[2] * Fw).normalized(1e-12)
+                    P = eye + t * D
+                    base = _srgb_to_lin(ti.Vector([sph_col[q, 0], sph_col[q, 1], sph_col[q, 2]]))
+                    lit = _shadow(P + N * bias, smap, lcam, lfocal, lorigin, bias)
+                    col = _shade(N, upv, base, -D.normalized(), L, ambient, spec, lit)
+                prev = hit
+                prev_col = col
+                acc += col
+            acc *= inv_s2
+            for k in ti.static(range(3)):
+                out[y, x, k] = ti.cast(ti.min(ti.sqrt(ti.max(acc[k], 0.0)), 1.0) * 255.0 + 0.5, ti.u8)

@@ -276,7 +276,7 @@ class Scene3D:
         scr = camera.project(V, W, H).astype(np.float32)
         sview = camera.to_view(SP).astype(np.float32)
 
-        K.clear(buf)
+        buf.fill(K.EMPTY)
         if len(F):
             K.raster_triangles(scr, F, 0, 0, near, buf)
         if len(SR):
@@ -295,7 +295,8 @@ class Scene3D:
             ground = [1.0, h, *c1, *c2, cell, *centre, fade]
         else:
             ground = [0.0] * 13
-        params = np.array([focal, self.ambient, self.specular, bias, self.up_axis, *bg0, *bg1, lfocal, *ground],
+        axes = np.eye(3)[[self.up_axis, (self.up_axis + 1) % 3, (self.up_axis + 2) % 3]].ravel()
+        params = np.array([focal, self.ambient, self.specular, bias, self.up_axis, *bg0, *bg1, lfocal, *ground, *axes],
                           dtype=np.float32)
         K.resolve(buf, self.ssaa, len(F), scr, V, N, C, F, FM, BK, sview, SR, SC, cam,
                   self.light.astype(np.float32), params, smap, lcam, out)
@@ -320,7 +321,7 @@ class Scene3D:
         lscr = (V - origin) @ basis.T
         lscr = np.stack([0.5 * self.shadow_size + lfocal * lscr[:, 0],
                          0.5 * self.shadow_size - lfocal * lscr[:, 1], lscr[:, 2]], 1).astype(np.float32)
-        K.clear(smap)
+        smap.fill(K.EMPTY)
         if len(F):
             K.raster_triangles(lscr, F, 0, 1, 0.0, smap)
         if len(SR):
