@@ -11,7 +11,7 @@ Model (static scene) -> State (what changes, B copies) -> integrators (advance a
 from tianim.physics.builders import chain, cloth, from_edges, lattice, particles, rope, spring1d
 from tianim.physics.diagnostics import energy, max_strain, momentum, spring_lengths
 from tianim.physics.integrators import (
-    METHODS, STABILITY_LIMIT, DivergenceError, accelerations, choose_layout, stable_dt, step,
+    ALL_METHODS, METHODS, STABILITY_LIMIT, STIFF_METHODS, DivergenceError, accelerations, choose_layout, stable_dt, step,
 )
 from tianim.physics.model import Ground, GridTopology, Model, Sphere
 from tianim.physics.state import State

@@ -33,13 +33,16 @@ import numpy as np
 
 from tianim.physics.kernels import PHASES, SCRATCH, frame_kernel
 from tianim.physics.validation import check_finite_scalar, check_positive_int
+from tianim.physics.watchdog import DivergenceError, Watchdog
 
+#: The explicit integrators (Taichi kernels of :mod:`tianim.physics.kernels`).
 METHODS = tuple(m for m in PHASES if m != "accelerations")
+#: Solvers for stiff scenes: backward Euler (:mod:`tianim.physics.implicit`) and XPBD (:mod:`tianim.physics.xpbd`).
+STIFF_METHODS = ("implicit_euler", "xpbd")
+#: Every method :func:`step` accepts.
+ALL_METHODS = METHODS + STIFF_METHODS
 LAYOUTS = ("auto", "serial", "frame", "substep")
-
-
-class DivergenceError(RuntimeError):
-    """A simulation produced non-finite values. The state is rolled back to the start of the call."""
+_DEFAULT_WATCHDOG = Watchdog()
 
 
 def choose_layout(model, batch: int) -> str:
@@ -68,20 +71,23 @@ def step(model, state, dt: float, substeps: int = 1, method: str = "symplectic_e
     substeps : int
         Number of steps, >= 1 (all of them run in one kernel launch for small scenes).
     method : str
-        One of :data:`METHODS`.
+        One of :data:`METHODS` (explicit) or :data:`STIFF_METHODS` (``"implicit_euler"``, ``"xpbd"``:
+        stable at any dt; they ignore ``layout`` and run one launch per call, parallel over copies).
     layout : str
         ``"auto"`` (see :func:`choose_layout`), ``"serial"``, ``"frame"`` or ``"substep"``.
-    check : bool
-        If True (default), a call that produces non-finite values is rolled back and
-        raises :class:`DivergenceError` naming the dt and the stable limit estimate.
+    check : bool or Watchdog
+        If True (default), the divergence watchdog (:mod:`tianim.physics.watchdog`) watches the call:
+        non-finite values or energy growing past its bound roll the state back and raise
+        :class:`DivergenceError` naming the step, the dt and the stable limit estimate. A
+        :class:`~tianim.physics.watchdog.Watchdog` instance sets the bound; False turns it off.
 
     Returns
     -------
     State
         ``state`` itself.
     """
-    if method not in METHODS:
-        raise ValueError(f"method={method!r} is not an integrator; choose one of {METHODS}")
+    if method not in ALL_METHODS:
+        raise ValueError(f"method={method!r} is not an integrator; choose one of {ALL_METHODS}")
     if layout not in LAYOUTS:
         raise ValueError(f"layout={layout!r} is not a loop layout; choose one of {LAYOUTS}")
     dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
@@ -89,20 +95,25 @@ def step(model, state, dt: float, substeps: int = 1, method: str = "symplectic_e
     if getattr(state, "model", None) is not model:
         raise ValueError("state does not belong to this model; create it with model.state(batch=...)")
     state.check_arrays()
-    backup = (state.x.copy(), state.v.copy()) if check else None
-    _launch(model, state, dt, substeps, method, layout)
-
-    if check and not (np.isfinite(state.x).all() and np.isfinite(state.v).all()):
-        finite = np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2))
-        copies = np.flatnonzero(~finite).tolist()
-        state.x[...], state.v[...] = backup
-        limit = stable_dt(model, method)
-        raise DivergenceError(
-            f"{method} diverged (non-finite positions or velocities in copies {copies[:8]}) within {substeps} substeps of "
-            f"dt={dt:.4g} s from t={float(state.t.min()):.6g} s; the stiffest mode limits dt to about "
-            f"{limit:.4g} s for this method (tianim.physics.stable_dt). Use a smaller dt or more substeps, "
-            "or a more stable method. The state was rolled back to the start of this call."
+    if method in STIFF_METHODS and len(model.colliders):
+        raise ValueError(
+            f"method={method!r} does not handle colliders (model has {len(model.colliders)}); "
+            "use an explicit method (symplectic_euler, verlet, rk4) for scenes with contacts"
         )
+    watchdog = check if isinstance(check, Watchdog) else (_DEFAULT_WATCHDOG if check else None)
+    token = watchdog.before(model, state) if watchdog is not None else None
+    if method == "implicit_euler":
+        from tianim.physics.implicit import implicit_euler
+
+        implicit_euler(model, state, dt, substeps)
+    elif method == "xpbd":
+        from tianim.physics.xpbd import xpbd
+
+        xpbd(model, state, dt, substeps)
+    else:
+        _launch(model, state, dt, substeps, method, layout)
+    if watchdog is not None:
+        watchdog.after(model, state, token, dt, substeps, method, lambda: stable_dt(model, method))
     state.t += dt * substeps
     return state
 
@@ -159,6 +170,8 @@ STABILITY_LIMIT = {
     "symplectic_euler": 2.0,
     "verlet": 2.0,
     "rk4": 2.0 * math.sqrt(2.0),
+    "implicit_euler": math.inf,  # L-stable: |1 / (1 + i omega h)| < 1 for every h
+    "xpbd": math.inf,  # every substep projects positions: no growth at any h (measured: tianim bench stability)
 }
 
 
@@ -172,9 +185,9 @@ def stable_dt(model, method: str = "symplectic_euler") -> float:
     Returns ``inf`` for a model without springs.
     """
     if method not in STABILITY_LIMIT:
-        raise ValueError(f"method={method!r} is not an integrator; choose one of {METHODS}")
+        raise ValueError(f"method={method!r} is not an integrator; choose one of {ALL_METHODS}")
     w = model.omega_max()
-    if w == 0.0:
+    if w == 0.0 or math.isinf(STABILITY_LIMIT[method]):
         return math.inf
     if method == "explicit_euler":
         # x'' + 2 zeta w x' + w^2 x = 0 under forward Euler: stable iff h < 2 zeta / w (for zeta < 1).
