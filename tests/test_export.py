@@ -1,0 +1,72 @@
+"""Export: MP4, GIF and PNG sequences read back; bad paths, extensions and sizes fail early."""
+
+import os
+
+import imageio.v2 as iio2
+import imageio.v3 as iio3
+import numpy as np
+import pytest
+
+from tianim.render import check_output, export
+
+
+def _frames(n=6, w=32, h=24):
+    out = []
+    for k in range(n):
+        f = np.zeros((h, w, 3), np.uint8)
+        f[:, : (k + 1) * w // n] = (200, 80, 40)
+        out.append(f)
+    return out
+
+
+def test_mp4_roundtrip(tmp_path):
+    p = tmp_path / "a.mp4"
+    res = export(_frames(), p, fps=24)
+    assert res.frames == 6 and res.bytes > 0
+    r = iio2.get_reader(str(p))
+    assert r.count_frames() == 6 and tuple(r.get_meta_data()["size"]) == (32, 24)
+    assert r.get_meta_data()["fps"] == pytest.approx(24)
+
+
+def test_gif_roundtrip(tmp_path):
+    p = tmp_path / "a.gif"
+    export(_frames(5), p, fps=25)
+    g = iio3.imread(p)
+    assert g.shape[:3] == (5, 24, 32)
+
+
+def test_png_sequence_roundtrip(tmp_path):
+    res = export(_frames(4), tmp_path / "f.png")
+    assert [os.path.basename(p) for p in res.paths] == [f"f_{k:04d}.png" for k in range(4)]
+    for p, f in zip(res.paths, _frames(4)):
+        assert np.array_equal(iio3.imread(p)[..., :3], f)
+    res = export(_frames(2), str(tmp_path / "g%03d.png"))
+    assert os.path.basename(res.paths[1]) == "g001.png"
+
+
+@pytest.mark.parametrize(
+    "path,size,match",
+    [
+        ("out.avi", None, "extension"),
+        ("no/such/dir/out.mp4", None, "does not exist"),
+        ("out.mp4", (31, 24), "even"),
+        ("out.mp4", (0, 24), "width"),
+        ("out.gif", "640by480", "WIDTHxHEIGHT"),
+    ],
+)
+def test_bad_outputs_fail_early(tmp_path, path, size, match):
+    with pytest.raises(ValueError, match=match):
+        check_output(str(tmp_path / path), size)
+
+
+def test_directory_path_rejected(tmp_path):
+    d = tmp_path / "d.mp4"
+    d.mkdir()
+    with pytest.raises(ValueError, match="directory"):
+        check_output(str(d))
+
+
+def test_frame_size_mismatch(tmp_path):
+    fr = _frames(2)
+    with pytest.raises(ValueError, match="one size"):
+        export([fr[0], np.zeros((10, 10, 3), np.uint8)], tmp_path / "x.gif")
