@@ -4,6 +4,7 @@
 |-----------------------|-------------------------------|------------------------------------|
 | tianim/ArmReach-v0    | :class:`envs.arm_reach.ArmReachEnv`   | :class:`envs.arm_reach.ArmReachVectorEnv`   |
 | tianim/RopeSwing-v0   | :class:`envs.rope_swing.RopeSwingEnv` | :class:`envs.rope_swing.RopeSwingVectorEnv` |
+| tianim/ClothFold-v0   | :class:`envs.cloth_fold.ClothFoldEnv` | :class:`envs.cloth_fold.ClothFoldVectorEnv` |
 
 ``gym.make("tianim/ArmReach-v0")`` after ``import envs``, or
 ``gym.make("envs:tianim/ArmReach-v0")`` without it (gymnasium imports ``envs``).
@@ -20,6 +21,7 @@ os.environ.setdefault("TIANIM_ARCH", "cpu")
 _ENVS = {
     "ArmReach-v0": ("arm_reach", "ArmReachEnv", "ArmReachVectorEnv", 100),
     "RopeSwing-v0": ("rope_swing", "RopeSwingEnv", "RopeSwingVectorEnv", 200),
+    "ClothFold-v0": ("cloth_fold", "ClothFoldEnv", "ClothFoldVectorEnv", 100),
 }
 
 ENV_IDS = tuple(f"tianim/{name}" for name in _ENVS)

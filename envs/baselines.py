@@ -66,6 +66,50 @@ class RopeSwingDamped:
         return np.clip(v, -1.0, 1.0).astype(np.float32)
 
 
+class ClothFoldPickPlace:
+    """ClothFold: pick-lift-place, read from the observation alone (no hidden phase).
+
+    Picker 0 takes the corner keypoint (row 0, column 0), picker 1 the corner (row 9,
+    column 0). Not holding: fly to the corner at ``approach`` height, descend and grab
+    within ``grab_at``; holding: wait until both pickers hold, then carry the corner along a lifted path (height
+    ``lift`` times the remaining horizontal distance, at most ``max_lift``) to the
+    opposite corner keypoint (column 9), lower it and release it there; a picker that
+    is open within ``done_at`` of its destination has finished: it rises and stays open. Moves
+    correct the fraction ``gain`` of the position error per step."""
+
+    CORNERS = ((0, 3), (8, 11))  # (source, destination) keypoint indices per picker
+
+    def __init__(self, approach=0.04, grab_at=0.015, lift=0.5, max_lift=0.08, done_at=0.04, gain=0.4, move=0.02):
+        self.approach, self.grab_at, self.lift, self.max_lift = approach, grab_at, lift, max_lift
+        self.done_at, self.gain, self.move = done_at, gain, move  # move: picker travel per unit action [m]
+
+    def __call__(self, obs):
+        obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
+        keys = obs[:, 8:].reshape(len(obs), -1, 3)
+        holding_both = (obs[:, 6] > 0.5) & (obs[:, 7] > 0.5)
+        act = np.zeros((len(obs), 8))
+        for p, (src, dst) in enumerate(self.CORNERS):
+            pick, holding = obs[:, 3 * p:3 * p + 3], obs[:, 6 + p] > 0.5
+            corner, dest = keys[:, src], keys[:, dst]
+            flat = np.linalg.norm((corner - dest)[:, [0, 2]], axis=1)
+            above = np.linalg.norm((pick - corner)[:, [0, 2]], axis=1) < 1.5 * self.grab_at
+            goal = corner.copy()  # not holding: fly above the corner, then descend and grab
+            goal[:, 1] = np.where(above, corner[:, 1], corner[:, 1] + self.approach)
+            grab = np.where(np.linalg.norm(pick - corner, axis=1) < self.grab_at, 1.0, -1.0)
+            carry = dest.copy()  # holding: wait for the other picker, then carry along a lifted path
+            carry[:, 1] = dest[:, 1] + np.minimum(self.lift * flat, self.max_lift)
+            carry = np.where(holding_both[:, None], carry, pick)
+            goal = np.where(holding[:, None], carry, goal)
+            grab = np.where(holding, np.where((flat < 0.5 * self.done_at) & (corner[:, 1] < dest[:, 1] + 0.01),
+                                              -1.0, 1.0), grab)
+            finished = ~holding & (np.linalg.norm((pick - dest)[:, [0, 2]], axis=1) < self.done_at)
+            goal = np.where(finished[:, None], pick + np.array([0.0, 0.02, 0.0]), goal)
+            grab = np.where(finished, -1.0, grab)
+            act[:, 4 * p:4 * p + 3] = self.gain * (goal - pick) / self.move
+            act[:, 4 * p + 3] = grab
+        return np.clip(act, -1.0, 1.0).astype(np.float32)
+
+
 def make_baseline(env_id: str, env):
     """The scripted controller of ``env_id`` for the (single or vector) env ``env``."""
     base = env.unwrapped
@@ -73,7 +117,9 @@ def make_baseline(env_id: str, env):
         return ArmReachIKPD(base.arm)
     if env_id.endswith("RopeSwing-v0"):
         return RopeSwingDamped()
-    raise ValueError(f"env_id={env_id!r} has no scripted baseline; known: tianim/ArmReach-v0, tianim/RopeSwing-v0")
+    if env_id.endswith("ClothFold-v0"):
+        return ClothFoldPickPlace()
+    raise ValueError(f"env_id={env_id!r} has no scripted baseline; known: tianim/ArmReach-v0, RopeSwing-v0, ClothFold-v0")
 
 
 def evaluate(env, policy, episodes: int, seed: int = 0) -> np.ndarray:
@@ -94,4 +140,4 @@ def evaluate(env, policy, episodes: int, seed: int = 0) -> np.ndarray:
     return np.array(returns)
 
 
-__all__ = ["ArmReachIKPD", "RopeSwingDamped", "make_baseline", "evaluate"]
+__all__ = ["ArmReachIKPD", "RopeSwingDamped", "ClothFoldPickPlace", "make_baseline", "evaluate"]

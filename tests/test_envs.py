@@ -195,7 +195,7 @@ def test_make_close_cycles_compile_nothing_and_do_not_grow(env_id, monkeypatch):
     assert grown < 200_000, f"{grown} bytes held after {cycles} make/close cycles"
 
 
-@pytest.mark.parametrize("env_id,episodes", [("tianim/ArmReach-v0", 6), ("tianim/RopeSwing-v0", 2)])
+@pytest.mark.parametrize("env_id,episodes", [("tianim/ArmReach-v0", 6), ("tianim/RopeSwing-v0", 2), ("tianim/ClothFold-v0", 2)])
 def test_scripted_baseline_beats_random(env_id, episodes):
     env = gym.make(env_id)
     random_returns = evaluate(env, None, episodes, seed=100)

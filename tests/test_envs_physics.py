@@ -61,3 +61,65 @@ def test_rope_small_swing_period_matches_hanging_chain_theory():
 def test_rope_substeps_are_the_stepping_policy():
     assert (rope_swing.SUBSTEPS, rope_swing.DT / rope_swing.SUBSTEPS) == tp.substeps_for(
         rope_swing.make_model(), frame_dt=rope_swing.DT, safety=0.5)
+
+
+def _max_stretch(model, state):
+    lengths = tp.spring_lengths(model, state)
+    return float(((lengths - model.rest_length) / model.rest_length).max())
+
+
+def test_cloth_springs_stay_within_stretch_bound():
+    """Scripted folding, random actions, and the worst cases (both pickers pulling apart
+    at full speed; one picker dragging a corner across the table at full speed)."""
+    import gymnasium as gym
+
+    from envs import cloth_fold
+    from envs.baselines import ClothFoldPickPlace
+
+    env = gym.make("tianim/ClothFold-v0")
+    sim = lambda: env.unwrapped._sim  # noqa: E731
+    script = ClothFoldPickPlace()
+    rng = np.random.default_rng(0)
+
+    def apart(o):
+        a = script(o)[0]
+        if o[6] > 0.5 and o[7] > 0.5:
+            a = np.array([-1, 1, -1, 1, 1, 1, 1, 1], np.float32)
+        return a
+
+    def drag(o):
+        a = script(o)[0]
+        a[4:] = (0, 0, 0, -1)
+        if o[6] > 0.5:
+            a[:3] = 1.0
+        return a
+
+    policies = {"script": lambda o: script(o)[0], "random": lambda o: rng.uniform(-1, 1, 8).astype(np.float32),
+                "apart": apart, "drag": drag}
+    for name, policy in policies.items():
+        obs, _ = env.reset(seed=1)
+        worst = 0.0
+        for _ in range(70):
+            obs, *_ = env.step(policy(obs))
+            worst = max(worst, _max_stretch(sim().model, sim().state))
+        assert worst < cloth_fold.STRETCH_BOUND, (name, worst)
+
+
+def test_cloth_substeps_are_the_stepping_policy():
+    from envs import cloth_fold
+
+    assert (cloth_fold.SUBSTEPS, cloth_fold.DT / cloth_fold.SUBSTEPS) == tp.substeps_for(
+        cloth_fold.make_model(), frame_dt=cloth_fold.DT, safety=0.5)
+
+
+def test_cloth_rests_flat_on_the_table():
+    """With no action the cloth stays on the table (ground contact, no bounce, no drift)."""
+    import gymnasium as gym
+
+    env = gym.make("tianim/ClothFold-v0")
+    env.reset(seed=0)
+    x0 = env.unwrapped._sim.state.x[0].copy()
+    for _ in range(25):
+        env.step(np.zeros(8, np.float32))
+    x = env.unwrapped._sim.state.x[0]
+    assert np.abs(x - x0).max() < 1e-3 and x[:, 1].min() >= 0.0

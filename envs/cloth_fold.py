@@ -1,0 +1,289 @@
+"""ClothFold-v0: two pickers fold a square cloth in half on a table (SoftGym-style, on the CPU).
+
+## Description
+
+A square cloth of 10 x 10 particles (0.3 m wide, 50 g; structural, shear and
+bend springs of 200, 40 and 0.01 N/m (cloth bends easily) with light spring damping; ``tianim.physics.cloth``)
+lies on a table (a ground plane with friction 0.6 and no bounce). Two pickers
+move in 3D; each can grab the nearest particle within 3 cm and carry it (the
+particle becomes a kinematic pin that follows the picker) until it releases it.
+Goal: fold the cloth in half along its vertical midline, laying the left half
+(columns 0-4) onto the right half (columns 9-5), as SoftGym's ClothFold.
+
+## Action space
+
+``Box(-1, 1, (8,), float32)``: per picker ``(dx, dy, dz, grab)``; the move is
+``2 cm`` times (dx, dy, dz) per step (pickers stay in x, z in [-0.35, 0.35] m,
+y in [0, 0.3] m); ``grab > 0`` grabs (or keeps holding), ``grab <= 0`` releases.
+Finite actions outside [-1, 1] are clipped; NaN or infinite actions raise ``ValueError``.
+
+## Observation space
+
+``Box(float32, (44,))``, entries clipped to [-1, 1]:
+
+| index  | observation                                                            | unit |
+|--------|------------------------------------------------------------------------|------|
+| 0-5    | picker 0 and picker 1 positions                                        | m    |
+| 6-7    | holding flags of picker 0 and 1 (1 holding, 0 not)                      |      |
+| 8-43   | 12 keypoints: particles at rows (0, 4, 9) x columns (0, 4, 5, 9), row-major, x y z | m |
+
+## Rewards
+
+``r = -mean_{left i} |x_i - x_mirror(i)| - 0.5 mean_{right j} |x_j - x_j(0)|``:
+the mean distance between each left-half particle and its mirror image in the
+right half, plus a penalty for dragging the right half away from where it
+started. A perfect fold scores about 0 per step; the flat cloth about -0.17.
+
+## Starting state
+
+Cloth flat on the table, centred at (ox, 0, oz) with ox, oz uniform in
+[-0.03, 0.03] m; pickers at height 0.1 m above uniform (x, z) in [-0.15, 0.15] m,
+holding nothing. All from ``np_random``.
+
+## Episode end
+
+Never terminates; truncated after 100 steps (2 s).
+
+## Physics (fixed for version 0)
+
+Control step 0.02 s (``render_fps`` 50) = 40 substeps (``tianim.physics.substeps_for(model,
+frame_dt=0.02, safety=0.5)``), symplectic Euler, float32 state, ground contact with
+Coulomb friction each substep. No self-collision: a folded layer rests on the
+table through the layer under it (the reward measures positions, which this does
+not change). Springs stay within a 25% stretch bound under any picker motion
+(tested): the structural stiffness is chosen for it, and two pickers cannot pull
+their particles more than 5% beyond their rest distance apart. Single env and batch run the same code (``ClothFoldSim``).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+import tianim.physics as tp
+
+from ._batched import BatchedEnv, check_action
+
+NX = 10
+SIZE = 0.3
+TOTAL_MASS = 0.05
+STIFFNESS = (200.0, 40.0, 0.01)
+DAMPING = (0.02, 0.01, 0.0)
+FRICTION = 0.6
+DT = 0.02
+SUBSTEPS = 40
+MAX_EPISODE_STEPS = 100
+MOVE = 0.02
+GRAB_RADIUS = 0.03
+STRETCH_BOUND = 0.25
+STRETCH_GUARD = 0.05
+PICKER_LOW = np.array([-0.35, 0.0, -0.35], np.float32)
+PICKER_HIGH = np.array([0.35, 0.3, 0.35], np.float32)
+KEY_ROWS, KEY_COLS = (0, 4, 9), (0, 4, 5, 9)
+KEYPOINTS = np.array([r * NX + c for r in KEY_ROWS for c in KEY_COLS])
+_ROWS, _COLS = np.divmod(np.arange(NX * NX), NX)
+LEFT = np.flatnonzero(_COLS < NX // 2)
+MIRROR = _ROWS[LEFT] * NX + (NX - 1 - _COLS[LEFT])
+RIGHT = np.flatnonzero(_COLS >= NX // 2)
+OBS_DIM = 8 + 3 * len(KEYPOINTS)
+
+
+@lru_cache(maxsize=None)
+def make_model() -> tp.Model:
+    """The cloth of ClothFold-v0, flat on the table and centred at the origin (shared)."""
+    return tp.cloth(nx=NX, ny=NX, size=(SIZE, SIZE), total_mass=TOTAL_MASS, stiffness=STIFFNESS, damping=DAMPING,
+                    plane="xz", origin=(-SIZE / 2, 0.0, -SIZE / 2), pins="none",
+                    colliders=[tp.Ground(height=0.0, restitution=0.0, friction=FRICTION)])
+
+
+def sample_start(rng: np.random.Generator) -> np.ndarray:
+    """``[ox, oz, p0x, p0z, p1x, p1z]`` drawn with one call (single env and copies alike)."""
+    return rng.uniform([-0.03, -0.03, -0.15, -0.15, -0.15, -0.15], [0.03, 0.03, 0.15, 0.15, 0.15, 0.15])
+
+
+class ClothFoldSim:
+    """B copies of the task on batched state: the code both env classes run."""
+
+    def __init__(self, batch: int):
+        self.model = make_model()
+        self.state = self.model.state(batch=batch, dtype=np.float32)
+        self.pickers = np.zeros((batch, 2, 3), np.float32)
+        self.held = np.full((batch, 2), -1, np.int64)
+        self.start = np.zeros((batch, NX * NX, 3), np.float32)
+
+    def reset(self, k: int, rng: np.random.Generator) -> None:
+        ox, oz, p0x, p0z, p1x, p1z = sample_start(rng).tolist()
+        s = self.state
+        s.x[k] = self.model.positions + np.array([ox, 0.0, oz])
+        s.v[k] = 0.0
+        s.t[k] = 0.0
+        s.pinned[k] = False
+        self.start[k] = s.x[k]
+        self.pickers[k] = ((p0x, 0.1, p0z), (p1x, 0.1, p1z))
+        self.held[k] = -1
+
+    def step(self, actions: np.ndarray) -> np.ndarray:
+        """Apply picker actions (B, 8), advance the cloth; return the reward (B,) float64."""
+        s = self.state
+        rows = np.arange(s.batch)
+        old = self.pickers.copy()
+        a = actions.reshape(-1, 2, 4)
+        new = np.clip(old + a[:, :, :3] * np.float32(MOVE), PICKER_LOW, PICKER_HIGH)
+        self._guard_stretch(new)
+        for p in range(2):
+            want = a[:, p, 3] > 0
+            held = self.held[:, p]
+            drop = (held >= 0) & ~want
+            s.pinned[rows[drop], held[drop]] = False
+            held[drop] = -1
+            take = np.flatnonzero((held < 0) & want)
+            if take.size:
+                d = s.x[take] - old[take, p][:, None, :]
+                d2 = d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]
+                other = self.held[take, 1 - p]
+                d2[np.flatnonzero(other >= 0), other[other >= 0]] = np.inf
+                near = np.argmin(d2, axis=1)
+                ok = d2[np.arange(take.size), near] <= np.float32(GRAB_RADIUS * GRAB_RADIUS)
+                held[take[ok]] = near[ok]
+                s.pinned[take[ok], near[ok]] = True
+            on = np.flatnonzero(held >= 0)
+            s.x[on, held[on]] = old[on, p]
+            s.v[on, held[on]] = (new[on, p] - old[on, p]) / np.float32(DT)
+        self.pickers[:] = new
+        tp.step(self.model, s, DT / SUBSTEPS, SUBSTEPS, method="symplectic_euler")
+        return self.reward()
+
+    def _guard_stretch(self, new: np.ndarray) -> None:
+        """Two pickers holding particles i and j cannot pull them further apart than
+        ``(1 + STRETCH_GUARD)`` times their rest distance: both moves are pulled back
+        symmetrically (the cloth holds the pickers back instead of tearing)."""
+        both = np.flatnonzero((self.held[:, 0] >= 0) & (self.held[:, 1] >= 0))
+        if both.size == 0:
+            return
+        rest = self.model.positions[self.held[both, 0]] - self.model.positions[self.held[both, 1]]
+        limit = (1.0 + STRETCH_GUARD) * np.sqrt((rest * rest).sum(axis=1))
+        d = (new[both, 0] - new[both, 1]).astype(np.float64)
+        dist = np.sqrt((d * d).sum(axis=1))
+        over = dist > limit
+        if over.any():
+            rows = both[over]
+            mid = 0.5 * (new[rows, 0] + new[rows, 1])
+            half = (d[over] * (0.5 * limit[over] / dist[over])[:, None]).astype(np.float32)
+            new[rows, 0] = mid + half
+            new[rows, 1] = mid - half
+
+    def reward(self) -> np.ndarray:
+        x = self.state.x.astype(np.float64)
+        d = x[:, LEFT] - x[:, MIRROR]
+        fold = np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2]).mean(axis=1)
+        e = x[:, RIGHT] - self.start[:, RIGHT].astype(np.float64)
+        drift = np.sqrt(e[..., 0] * e[..., 0] + e[..., 1] * e[..., 1] + e[..., 2] * e[..., 2]).mean(axis=1)
+        return -fold - 0.5 * drift
+
+    def observe(self) -> np.ndarray:
+        b = self.state.batch
+        obs = np.concatenate([self.pickers.reshape(b, 6), (self.held >= 0).astype(np.float32),
+                              self.state.x[:, KEYPOINTS].reshape(b, -1)], axis=1)
+        return np.clip(obs, -1.0, 1.0)
+
+
+def _spaces():
+    return (spaces.Box(-1.0, 1.0, (8,), np.float32),
+            spaces.Box(-np.ones(OBS_DIM, np.float32), np.ones(OBS_DIM, np.float32), dtype=np.float32))
+
+
+def _frame(sim: ClothFoldSim, k: int) -> np.ndarray:
+    from ._render import particles_frame
+
+    x = sim.state.x[k]
+    s = sim.model.springs
+    structural = s[np.isclose(sim.model.rest_length, SIZE / (NX - 1))]
+    # An oblique view from the front: (x, y + 0.5 z) on the image plane.
+    view = np.stack([x[:, 0], x[:, 1] - 0.5 * x[:, 2], x[:, 2]], axis=1)
+    pick = [(np.array([p[0], p[1] - 0.5 * p[2], p[2]]), 0.012, (220, 60, 50) if h >= 0 else (240, 170, 40))
+            for p, h in zip(sim.pickers[k], sim.held[k])]
+    return particles_frame(view, structural, (-0.4, 0.4, -0.3, 0.5), pick, axes=(0, 1))
+
+
+class ClothFoldEnv(gym.Env):
+    """Single ClothFold-v0 environment (see the module docstring)."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / DT)}
+
+    def __init__(self, render_mode: str | None = None):
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode={render_mode!r}; choose 'rgb_array' or None")
+        self.render_mode = render_mode
+        self.action_space, self.observation_space = _spaces()
+        self._sim = None
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        if self._sim is None:
+            self._sim = ClothFoldSim(1)
+        self._sim.reset(0, self.np_random)
+        return self._sim.observe()[0], {}
+
+    def step(self, action):
+        if self._sim is None:
+            raise RuntimeError("call reset() before step()")
+        a = check_action(action, self.action_space.shape)
+        reward = self._sim.step(a[None])
+        return self._sim.observe()[0], float(reward[0]), False, False, {}
+
+    def render(self):
+        if self.render_mode == "rgb_array" and self._sim is not None:
+            return _frame(self._sim, 0)
+        return None
+
+    def close(self):
+        self._sim = None
+
+
+class ClothFoldVectorEnv(BatchedEnv):
+    """``num_envs`` ClothFold-v0 copies, all stepped in one physics launch per step."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / DT),
+                "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, max_episode_steps: int = MAX_EPISODE_STEPS,
+                 render_mode: str | None = None, autoreset_mode=AutoresetMode.NEXT_STEP):
+        if render_mode not in (None, "rgb_array"):
+            raise ValueError(f"render_mode={render_mode!r}; choose 'rgb_array' or None")
+        super().__init__(num_envs, max_episode_steps, autoreset_mode)
+        self.render_mode = render_mode
+        self.single_action_space, self.single_observation_space = _spaces()
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self._sim = ClothFoldSim(self.num_envs)
+
+    def _reset_copies(self, idx):
+        for k in idx.tolist():
+            self._sim.reset(k, self._rngs[k])
+
+    def _advance(self, actions, reset_mask):
+        sim = self._sim
+        saved = None
+        if reset_mask.any():  # keep the fresh state of copies reset in this step
+            s = sim.state
+            saved = (s.x[reset_mask].copy(), s.v[reset_mask].copy(), sim.pickers[reset_mask].copy())
+            actions = actions.copy()
+            actions[reset_mask] = 0.0  # a reset copy grabs nothing in this step
+        reward = sim.step(actions)
+        if saved is not None:
+            s.x[reset_mask], s.v[reset_mask], sim.pickers[reset_mask] = saved
+            s.t[reset_mask] = 0.0
+        return sim.observe(), reward, np.zeros(self.num_envs, bool)
+
+    def _observe_all(self):
+        return self._sim.observe()
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        return tuple(_frame(self._sim, k) for k in range(self.num_envs))
