@@ -1,0 +1,14 @@
+"""Demo 'spring1d': python demos/spring1d.py [spring1d.mp4]  (the same as: tianim demo spring1d --out spring1d.mp4)
+
+The scene itself lives in tianim/gallery/spring1d.py, which reads top to bottom.
+"""
+
+import sys
+
+from tianim.gallery import load
+from tianim.render import export
+
+out = sys.argv[1] if len(sys.argv) > 1 else "spring1d.mp4"
+demo = load("spring1d")
+result = export(demo.frames(640, 480, demo.FRAMES, 24.0), out, fps=24.0, total=demo.FRAMES)
+print(f"wrote {out}: {result.frames} frames, {result.bytes / 1e6:.2f} MB")
