@@ -1,0 +1,138 @@
+"""Backward Euler (Newton + CG) and XPBD: convergence order, dissipation, stability, stiff cloth, batching."""
+
+import numpy as np
+import pytest
+from scipy.optimize import fsolve
+
+import tianim.physics as tp
+from tianim.physics.analytic import spring1d_solution
+from tianim.physics.implicit import implicit_euler
+
+
+def spring_run(method, dt, t_end, rho=0.8, k=10.0):
+    model = tp.spring1d(mass=1.0, stiffness=k, medium_damping=rho, x0=1.5)
+    state = model.state(dtype=np.float64)
+    tp.step(model, state, dt, substeps=int(round(t_end / dt)), method=method)
+    return model, state
+
+
+@pytest.mark.parametrize("method", tp.STIFF_METHODS)
+def test_first_order_against_closed_form(method):
+    dts = [0.02, 0.01, 0.005, 0.0025]
+    errors = []
+    for dt in dts:
+        model, state = spring_run(method, dt, 2.0)
+        errors.append(abs(state.x[0, 1, 0] - spring1d_solution(model, 2.0)[0]))
+    order = np.polyfit(np.log(dts), np.log(errors), 1)[0]
+    assert abs(order - 1.0) <= 0.1, (method, order, errors)
+
+
+def test_implicit_euler_dissipates_undamped_energy_as_theory_says():
+    # Undamped: |1/(1 + i w h)|^2 = 1/(1 + (w h)^2) per step on the oscillation energy.
+    model = tp.spring1d(mass=1.0, stiffness=10.0, x0=1.5)
+    state = model.state(dtype=np.float64)
+    h, w = 0.05, np.sqrt(10.0)
+    x_eq = 1.0 + 9.81 / 10.0
+    osc = lambda s: 0.5 * s.v[0, 1, 0] ** 2 + 0.5 * 10.0 * (s.x[0, 1, 0] - x_eq) ** 2  # noqa: E731
+    energies = [osc(state)]
+    for _ in range(40):
+        tp.step(model, state, h, method="implicit_euler")
+        energies.append(osc(state))
+    energies = np.array(energies)
+    assert np.all(np.diff(energies) < 0)
+    expected = energies[0] / (1 + (w * h) ** 2) ** 40
+    assert energies[-1] == pytest.approx(expected, rel=1e-6)
+
+
+@pytest.mark.parametrize("method", tp.STIFF_METHODS)
+def test_bounded_at_omega_dt_1e4(method):
+    k = 1e8  # w = 1e4 rad/s with m = 1 kg; dt = 1 s
+    model = tp.spring1d(mass=1.0, stiffness=k, x0=1.0 + 9.81 / k + 0.01)
+    state = model.state(dtype=np.float64)
+    tp.step(model, state, 1.0, substeps=50, method=method)
+    assert abs(state.x[0, 1, 0] - (1.0 + 9.81 / k)) < 0.01 / 1e3  # decays, never grows
+    assert np.isfinite(state.v).all()
+
+
+def test_implicit_step_solves_backward_euler_equations():
+    # Independent check: scipy's fsolve on M (v+ - v) = h f(x + h v+, v+) for a damped 2D rope.
+    model = tp.rope(n=6, dim=2, damping=0.05, medium_damping=0.01)
+    state = model.state(dtype=np.float64)
+    rng = np.random.default_rng(0)
+    state.v[0, 1:] = rng.normal(0, 0.3, (5, 2))
+    x0, v0 = state.x[0].copy(), state.v[0].copy()
+    h = 0.02
+    from tianim.physics.reference import NumpyModel
+
+    ref = NumpyModel(model)
+    free = ~state.pinned[0]
+
+    def g(vflat):
+        vn = v0.copy()
+        vn[free] = vflat.reshape(-1, 2)
+        a = ref.accel((x0 + h * vn)[None], vn[None], state.pinned)[0]
+        return ((vn - v0) - h * a)[free].ravel()
+
+    sol = fsolve(g, v0[free].ravel(), xtol=1e-13)
+    stats = implicit_euler(model, state, h, 1)
+    assert stats["newton_iterations"][0] >= 2  # a nonlinear solve, not one linearised step
+    np.testing.assert_allclose(state.v[0][free].ravel(), sol, atol=1e-9)
+    np.testing.assert_allclose(state.x[0], x0 + h * state.v[0], atol=1e-15)
+
+
+def stiff_cloth():
+    return tp.cloth(12, 12, stiffness=(5e5, 2e5, 2e4))  # the default cloth's stiffness x 1000
+
+
+def test_stiff_cloth_symplectic_euler_diverges_at_frame_step():
+    model = stiff_cloth()
+    state = model.state()
+    with pytest.raises(tp.DivergenceError, match="symplectic_euler diverged"):
+        for _ in range(12):
+            tp.step(model, state, 1 / 240, substeps=10, method="symplectic_euler")
+
+
+@pytest.mark.parametrize("method,substeps,strain", [("implicit_euler", 1, 0.01), ("xpbd", 20, 0.1)])
+def test_stiff_cloth_runs_stably_with_stiff_solvers(method, substeps, strain):
+    model = stiff_cloth()
+    state = model.state()
+    e0 = tp.energy(model, state)["total"][0]
+    drop = 0.2 * 9.81 * 2.5  # kg * m/s^2 * m: more than the cloth (0.2 kg, 1 m, pinned at a top edge) can release
+    for _ in range(24):  # one second at 24 frames/s
+        tp.step(model, state, (1 / 24) / substeps, substeps=substeps, method=method)
+        assert tp.energy(model, state)["kinetic"][0] < drop
+        assert tp.max_strain(model, state)[0] < strain  # stiff springs stay near rest length
+    assert np.isfinite(state.x).all()
+    if method == "implicit_euler":  # converged solves: energy only dissipates
+        assert tp.energy(model, state)["total"][0] <= e0 + 1e-3
+    assert state.x[0, :, 1].min() < 0.5  # and it did fall under gravity (pinned at height 1)
+
+
+@pytest.mark.parametrize("method", tp.STIFF_METHODS)
+def test_batch_equals_separate_runs_bit_for_bit(method):
+    model = tp.rope(n=10, damping=0.01)
+    batch = model.state(batch=3)
+    batch.v[:, 1:] = np.random.default_rng(1).normal(0, 0.2, batch.v[:, 1:].shape)
+    singles = []
+    for b in range(3):
+        s = model.state()
+        s.v[...] = batch.v[b]
+        singles.append(s)
+    tp.step(model, batch, 1e-3, substeps=30, method=method)
+    for b, s in enumerate(singles):
+        tp.step(model, s, 1e-3, substeps=30, method=method)
+        assert np.array_equal(s.x[0], batch.x[b]) and np.array_equal(s.v[0], batch.v[b])
+
+
+@pytest.mark.parametrize("method", tp.STIFF_METHODS)
+def test_pins_hold_and_colliders_are_refused(method):
+    model = tp.rope(n=8)
+    state = model.state()
+    tp.step(model, state, 1e-2, substeps=5, method=method)
+    assert np.array_equal(state.x[0, 0], model.positions[0].astype(np.float32))
+    with_ground = tp.rope(n=8, colliders=[tp.Ground()])
+    s2 = with_ground.state()
+    before = s2.snapshot()
+    with pytest.raises(ValueError, match="colliders"):
+        tp.step(with_ground, s2, 1e-2, method=method)
+    assert np.array_equal(s2.x, before["x"])
