@@ -98,14 +98,16 @@ def test_stiff_cloth_runs_stably_with_stiff_solvers(method, substeps, strain):
     state = model.state()
     e0 = tp.energy(model, state)["total"][0]
     drop = 0.2 * 9.81 * 2.5  # kg * m/s^2 * m: more than the cloth (0.2 kg, 1 m, pinned at a top edge) can release
+    lowest = 1.0
     for _ in range(24):  # one second at 24 frames/s
         tp.step(model, state, (1 / 24) / substeps, substeps=substeps, method=method)
+        lowest = min(lowest, float(state.x[0, :, 1].min()))
         assert tp.energy(model, state)["kinetic"][0] < drop
         assert tp.max_strain(model, state)[0] < strain  # stiff springs stay near rest length
     assert np.isfinite(state.x).all()
     if method == "implicit_euler":  # converged solves: energy only dissipates
         assert tp.energy(model, state)["total"][0] <= e0 + 1e-3
-    assert state.x[0, :, 1].min() < 0.5  # and it did fall under gravity (pinned at height 1)
+    assert lowest < 0.5  # and it swung down under gravity (pinned at height 1)
 
 
 @pytest.mark.parametrize("method", tp.STIFF_METHODS)
