@@ -198,16 +198,9 @@ def _spaces():
 
 
 def _frame(sim: ClothFoldSim, k: int) -> np.ndarray:
-    from ._render import particles_frame
+    from ._render import cloth_frame
 
-    x = sim.state.x[k]
-    s = sim.model.springs
-    structural = s[np.isclose(sim.model.rest_length, SIZE / (NX - 1))]
-    # An oblique view from the front: (x, y + 0.5 z) on the image plane.
-    view = np.stack([x[:, 0], x[:, 1] - 0.5 * x[:, 2], x[:, 2]], axis=1)
-    pick = [(np.array([p[0], p[1] - 0.5 * p[2], p[2]]), 0.012, (220, 60, 50) if h >= 0 else (240, 170, 40))
-            for p, h in zip(sim.pickers[k], sim.held[k])]
-    return particles_frame(view, structural, (-0.4, 0.4, -0.3, 0.5), pick, axes=(0, 1))
+    return cloth_frame(sim.state.x[k], NX, sim.pickers[k], sim.held[k] >= 0)
 
 
 class ClothFoldEnv(gym.Env):

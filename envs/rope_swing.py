@@ -140,12 +140,9 @@ def _spaces():
 
 
 def _frame(sim: RopeSwingSim, k: int) -> np.ndarray:
-    from ._render import particles_frame
+    from ._render import rope_frame
 
-    x = sim.state.x[k]
-    edges = np.stack([np.arange(N_PARTICLES - 1), np.arange(1, N_PARTICLES)], 1)
-    markers = [(x[0], 0.02, (30, 30, 30)), (sim.target[k], 0.025, (220, 60, 50))]
-    return particles_frame(x, edges, (-0.7, 0.7, -0.1, 1.5), markers, axes=(0, 1))
+    return rope_frame(sim.state.x[k], (PIN_LOW, PIN_HIGH), sim.target[k])
 
 
 class RopeSwingEnv(gym.Env):
