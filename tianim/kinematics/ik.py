@@ -22,7 +22,11 @@ Methods (``method=``):
            ``dq = J^T (J J^T + lam^2 I)^-1 e``; lam shrinks after a step that lowers
            the error and grows after one that does not (Wampler 1986; Nakamura and
            Hanafusa 1986; Buss, "Introduction to inverse kinematics with Jacobian
-           transpose, pseudoinverse and damped least squares methods", 2004).
+           transpose, pseudoinverse and damped least squares methods", 2004). It stops
+           as soon as the residual meets ``tol``; a redundant chain's answer is then
+           polished to the exact rest-pose optimum by Newton steps that keep the task
+           (:mod:`tianim.kinematics.dls`). One target on a planar chain takes a
+           plain-float fast path; batches are vectorised over targets.
 ``"jt"``   Jacobian transpose ``dq = mu a J^T e`` with Buss's step
            ``a = <e, J J^T e> / |J J^T e|^2`` (Buss 2004, eq. 7), and a multiplier
            mu that doubles after a step that lowers the error and drops below 1 after one
@@ -39,6 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tianim.kinematics._validate import float_array, joint_vector
+from tianim.kinematics.dls import dls_batch, dls_planar_single, polish_null_space, polish_planar_single
 from tianim.kinematics.planar import PlanarChain
 
 METHODS = ("dls", "jt", "ccd", "fabrik")
@@ -125,14 +130,17 @@ def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max
         Success threshold on the residual |target - end effector| (m).
     max_iter : int, optional
         Iterations per attempt (defaults: dls 200, jt 20000, ccd/fabrik 3000).
-    rest : array_like, shape (n,) or (B, n), or "q0", optional
+    rest : array_like, shape (n,) or (B, n), "q0", False or None, optional
         DLS only: secondary objective for redundant chains, minimise |q - rest|
-        in the null space (``"q0"``: least motion from ``q0``). Default: none,
-        unless the chain is redundant, where it is ``q0`` (least motion).
+        over the poses that reach the target (``"q0"``: least motion from ``q0``;
+        ``False``: none, the first pose found within ``tol``). Default (None):
+        ``"q0"`` for a redundant chain, none otherwise.
     restarts : int
         Targets not reached are retried from random poses inside the limits
         (generator seeded with ``seed``, so results are reproducible); the
-        attempt with the smallest residual is returned.
+        attempt with the smallest residual is returned. A planar chain without
+        limits skips the retries of a target whose residual already equals its
+        distance to the reachable annulus (the proven closest point).
     seed : int
 
     Returns
@@ -160,10 +168,15 @@ def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max
         except ValueError as exc:
             raise ValueError(f"q0 has shape {np.shape(q0)}; pass ({n},) or ({B}, {n})") from exc
         q_init = np.clip(q_init, chain.lower, chain.upper)
-    if isinstance(rest, str) and rest == "q0":
+    if rest is False:
+        rest_arr = None
+    elif isinstance(rest, str) and rest == "q0":
         rest_arr = q_init.copy()
     elif rest is not None:
-        rest_arr = np.broadcast_to(joint_vector("rest", rest, n), (B, n)).copy()
+        rest_arr = joint_vector("rest", rest, n)
+        if rest_arr.ndim > 2 or (rest_arr.ndim == 2 and len(rest_arr) not in (1, B)):
+            raise ValueError(f"rest has shape {rest_arr.shape}; pass ({n},) or ({B}, {n}), 'q0' or False")
+        rest_arr = np.broadcast_to(rest_arr, (B, n)).copy()
     elif n > m and method == "dls":
         rest_arr = q_init.copy()
     else:
@@ -175,8 +188,9 @@ def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max
     rng = np.random.default_rng(seed)
     lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)
     hi = np.where(np.isfinite(chain.upper), chain.upper, np.pi)
+    floor = _residual_floor(chain, tgt) + 1e-9 * chain.reach
     for _ in range(restarts):
-        todo = np.nonzero(res > tol)[0]
+        todo = np.nonzero((res > tol) & (res > floor))[0]
         if todo.size == 0:
             break
         qr = rng.uniform(lo, hi, size=(todo.size, n))
@@ -188,6 +202,16 @@ def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max
     if single:
         return IKResult(q[0], res[0], bool(conv[0]), it[0])
     return IKResult(q, res, conv, it)
+
+
+def _residual_floor(chain, tgt: np.ndarray) -> np.ndarray:
+    """A lower bound (m) on every pose's residual, shape (B,): for a planar chain without limits the
+    distance of the target to the reachable annulus ``[max(0, 2 max(l) - sum(l)), sum(l)]``; else 0."""
+    if not isinstance(chain, PlanarChain) or np.any(np.isfinite(chain.lower)) or np.any(np.isfinite(chain.upper)):
+        return np.zeros(len(tgt))
+    d = np.linalg.norm(tgt - chain.base, axis=1)
+    inner = max(0.0, 2 * float(chain.lengths.max()) - chain.reach)
+    return np.maximum(0.0, np.maximum(d - chain.reach, inner - d))
 
 
 def _stalled(k: int, idx: np.ndarray, r: np.ndarray, r_check: np.ndarray, every: int = 100) -> np.ndarray:
@@ -206,45 +230,17 @@ def _residual(chain, q, tgt):
 
 
 def _dls(chain, tgt, q, tol, iters, rest):
-    B, n = q.shape
-    m = tgt.shape[1]
-    lo, hi = chain.lower, chain.upper
-    lam2 = np.full(B, 1e-2)
-    ns_gain = np.full(B, 0.5)
-    e, r, J = _residual(chain, q, tgt)
-    active = np.ones(B, dtype=bool)
-    it = np.zeros(B, dtype=np.int64)
-    eye = np.eye(m)
-    for k in range(iters):
-        idx = np.nonzero(active)[0]
-        if idx.size == 0:
-            break
-        Ji, ei = J[idx], e[idx]
-        A = Ji @ np.swapaxes(Ji, 1, 2) + lam2[idx, None, None] * eye
-        dq = np.einsum("bij,bi->bj", Ji, np.linalg.solve(A, ei[..., None])[..., 0])
-        if rest is not None:
-            JJt = Ji @ np.swapaxes(Ji, 1, 2) + 1e-12 * eye  # J^+ = J^T (J J^T)^-1 (full row rank)
-            N = np.eye(n) - np.swapaxes(Ji, 1, 2) @ np.linalg.solve(JJt, Ji)
-            dq = dq - ns_gain[idx, None] * np.einsum("bij,bj->bi", N, q[idx] - rest[idx])
-        qn = np.clip(q[idx] + dq, lo, hi)
-        en, rn, Jn = _residual(chain, qn, tgt[idx])
-        r_old = r[idx]
-        moved = np.linalg.norm(qn - q[idx], axis=1)
-        ok = (rn < r_old) | ((rn <= tol) & (rest is not None))
-        acc = idx[ok]
-        q[acc], e[acc], r[acc], J[acc] = qn[ok], en[ok], rn[ok], Jn[ok]
-        lam2[acc] = np.maximum(lam2[acc] * 0.25, 1e-12)
-        lam2[idx[~ok]] *= 16.0
-        ns_gain[acc] = np.minimum(ns_gain[acc] * 2, 0.5)
-        ns_gain[idx[~ok]] *= 0.25
-        it[idx] = k + 1
-        if rest is None:
-            done = r[idx] <= tol
-        else:
-            done = (r[idx] <= tol) & ok & (moved < 1e-8)
-        # unreachable: stationary (no progress) or damping blown up -> least-squares closest pose
-        stalled = (lam2[idx] > 1e12) | (ok & (r_old - rn <= 1e-15 * r_old) & (rn > tol))
-        active[idx[done | stalled]] = False
+    """Task phase (one target on a planar chain: plain-float fast path; else vectorised), then the
+    null-space polish when a secondary objective is set (see :mod:`tianim.kinematics.dls`)."""
+    polish = rest is not None and chain.n > chain.task_dim
+    if len(q) == 1 and isinstance(chain, PlanarChain):
+        q1, r1, k1 = dls_planar_single(chain, tgt[0], q[0], tol, iters)
+        if polish and r1 <= tol:
+            q1, r1 = polish_planar_single(chain, tgt[0], q1, rest[0], tol)
+        return np.array([q1]), np.array([r1]), np.array([k1], dtype=np.int64)
+    q, r, it = dls_batch(chain, tgt, q, tol, iters)
+    if polish:
+        q, r = polish_null_space(chain, tgt, q, rest, tol)
     return q, r, it
 
 
