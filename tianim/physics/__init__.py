@@ -15,11 +15,13 @@ from tianim.physics.integrators import (
 )
 from tianim.physics.model import Ground, GridTopology, Model, Sphere
 from tianim.physics.state import State
-from tianim.physics.stepping import substeps_for
+from tianim.physics.stepping import StepPlan, omega_max, plan_steps, substeps_for
+from tianim.physics.watchdog import Watchdog
 
 __all__ = [
     "Model", "State", "Ground", "Sphere", "GridTopology",
     "spring1d", "chain", "rope", "cloth", "lattice", "from_edges", "particles",
     "step", "accelerations", "stable_dt", "substeps_for", "choose_layout", "METHODS", "STABILITY_LIMIT", "DivergenceError",
+    "ALL_METHODS", "STIFF_METHODS", "plan_steps", "StepPlan", "omega_max", "Watchdog",
     "energy", "max_strain", "momentum", "spring_lengths",
 ]

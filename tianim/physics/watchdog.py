@@ -31,6 +31,7 @@ import math
 
 import numpy as np
 
+from tianim.physics.diagnostics import energy
 from tianim.physics.model import GRID_STENCIL
 from tianim.runtime import ensure_taichi
 
@@ -46,8 +47,8 @@ _FORWARD = tuple(o for o, (dc, dr, _) in enumerate(GRID_STENCIL) if dc > 0 or (d
 _cache: dict = {}
 
 
-def _energy_kernel(real_name: str, dim: int, grid: bool):
-    key = (real_name, dim, grid)
+def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool):
+    key = (real_name, dim, grid, serial)
     if key in _cache:
         return _cache[key]
     ti = ensure_taichi()
@@ -68,6 +69,7 @@ def _energy_kernel(real_name: str, dim: int, grid: bool):
                  off: int_arr, ends: int_arr, k: real_arr, rest: real_arr, g: vec, nx: ti.i32,
                  n_springs: ti.i32, out: out_arr):
         n = x.shape[1]
+        ti.loop_config(serialize=serial)  # one small copy: no thread-pool wake-up
         for b in range(x.shape[0]):
             kin = ti.cast(0, ti.f64)
             pot = ti.cast(0, ti.f64)
@@ -101,12 +103,17 @@ def fast_energy(model, state) -> np.ndarray:
 
     Same definitions as :func:`tianim.physics.energy` (pinned particles' kinetic and
     gravitational energy left out), summed in float64 in a fixed order per copy.
+    Small scenes (B * N <= 4096) use the NumPy diagnostics, whose call costs less than a
+    kernel launch with array arguments.
     """
+    if state.batch * model.n_particles <= 4096:
+        e = energy(model, state)
+        return np.stack([e["kinetic"], e["spring"], e["gravity"]], axis=1)
     data = model.kernel_data(state.dtype)
     edges = model.grid is None and model.n_springs > 0
     ends = model.springs.ravel() if edges else np.zeros(2, np.int32)
     out = np.zeros((state.batch, 3), dtype=np.float64)
-    kernel = _energy_kernel(state.dtype.name, model.dim, model.grid is not None)
+    kernel = _energy_kernel(state.dtype.name, model.dim, model.grid is not None, state.batch == 1)
     kernel(state.x, state.v, state.pinned.view(np.uint8), data["mass"], data["off"],
            np.ascontiguousarray(ends, dtype=np.int32), data["k"], data["rest"], model.gravity.astype(state.dtype),
            model.grid.nx if model.grid is not None else 1, model.n_springs if edges else 0, out)
