@@ -27,9 +27,11 @@ from __future__ import annotations
 
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
 
 
 def check_action(action, shape: tuple) -> np.ndarray:
@@ -136,3 +138,93 @@ class BatchedEnv(VectorEnv):
 
     def close_extras(self, **kwargs):
         self._needs_reset = True
+
+
+def _check_render_mode(render_mode):
+    if render_mode not in (None, "rgb_array"):
+        raise ValueError(f"render_mode={render_mode!r}; choose 'rgb_array' or None (no 'human': no display needed)")
+    return render_mode
+
+
+class SimEnv(gym.Env):
+    """A single environment over a task simulation of batch size 1.
+
+    ``sim_class`` (set by subclasses) is built as ``sim_class(batch)`` and provides
+    ``spaces()`` (static: single action and observation spaces), ``reset(k, rng)``,
+    ``step(actions (B, A)) -> reward (B,)``, ``observe() -> obs (B, O)``,
+    ``save(mask)``/``restore(mask, saved)`` (fresh state of some copies) and ``frame(k)``.
+    Single env and batch run the very same code, so copy k matches a single env bit
+    for bit."""
+
+    metadata = {"render_modes": ["rgb_array"]}
+    sim_class = None
+
+    def __init__(self, render_mode: str | None = None):
+        self.render_mode = _check_render_mode(render_mode)
+        self.action_space, self.observation_space = self.sim_class.spaces()
+        self._sim = None
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        if self._sim is None:
+            self._sim = self.sim_class(1)
+        self._sim.reset(0, self.np_random)
+        return self._sim.observe()[0], {}
+
+    def step(self, action):
+        if self._sim is None:
+            raise RuntimeError("call reset() before step()")
+        a = check_action(action, self.action_space.shape)
+        reward = self._sim.step(a[None])
+        return self._sim.observe()[0], float(reward[0]), False, False, {}
+
+    def render(self):
+        if self.render_mode == "rgb_array" and self._sim is not None:
+            return self._sim.frame(0)
+        return None
+
+    def close(self):
+        self._sim = None
+
+
+class SimVectorEnv(BatchedEnv):
+    """``num_envs`` copies of a task simulation (see :class:`SimEnv`), one physics launch per step."""
+
+    metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
+    sim_class = None
+    default_max_episode_steps = 1
+
+    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
+                 autoreset_mode=AutoresetMode.NEXT_STEP):
+        self.render_mode = _check_render_mode(render_mode)
+        steps = self.default_max_episode_steps if max_episode_steps is None else max_episode_steps
+        super().__init__(num_envs, steps, autoreset_mode)
+        self.single_action_space, self.single_observation_space = self.sim_class.spaces()
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self._sim = self.sim_class(self.num_envs)
+
+    def _reset_copies(self, idx):
+        for k in idx.tolist():
+            self._sim.reset(k, self._rngs[k])
+
+    def _advance(self, actions, reset_mask):
+        # The physics steps every copy in one launch: copies reset before this step keep
+        # their fresh state (saved, stepped with zero actions, restored).
+        saved = None
+        if reset_mask.any():
+            saved = self._sim.save(reset_mask)
+            actions = actions.copy()
+            actions[reset_mask] = 0.0
+        reward = self._sim.step(actions)
+        if saved is not None:
+            self._sim.restore(reset_mask, saved)
+        return self._sim.observe(), reward, np.zeros(self.num_envs, bool)
+
+    def _observe_all(self):
+        return self._sim.observe()
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        return tuple(self._sim.frame(k) for k in range(self.num_envs))

@@ -59,15 +59,13 @@ from __future__ import annotations
 
 from functools import lru_cache
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
-from gymnasium.vector.utils import batch_space
 
 import tianim.physics as tp
 
-from ._batched import BatchedEnv, check_action
+from ._batched import SimEnv, SimVectorEnv
 
 NX = 10
 SIZE = 0.3
@@ -185,6 +183,23 @@ class ClothFoldSim:
         drift = np.sqrt(e[..., 0] * e[..., 0] + e[..., 1] * e[..., 1] + e[..., 2] * e[..., 2]).mean(axis=1)
         return -fold - 0.5 * drift
 
+    @staticmethod
+    def spaces():
+        return (spaces.Box(-1.0, 1.0, (8,), np.float32),
+                spaces.Box(-np.ones(OBS_DIM, np.float32), np.ones(OBS_DIM, np.float32), dtype=np.float32))
+
+    def save(self, mask):
+        return self.state.x[mask].copy(), self.state.v[mask].copy(), self.pickers[mask].copy()
+
+    def restore(self, mask, saved):
+        self.state.x[mask], self.state.v[mask], self.pickers[mask] = saved
+        self.state.t[mask] = 0.0
+
+    def frame(self, k: int) -> np.ndarray:
+        from ._render import cloth_frame
+
+        return cloth_frame(self.state.x[k], NX, self.pickers[k], self.held[k] >= 0)
+
     def observe(self) -> np.ndarray:
         b = self.state.batch
         obs = np.concatenate([self.pickers.reshape(b, 6), (self.held >= 0).astype(np.float32),
@@ -192,91 +207,17 @@ class ClothFoldSim:
         return np.clip(obs, -1.0, 1.0)
 
 
-def _spaces():
-    return (spaces.Box(-1.0, 1.0, (8,), np.float32),
-            spaces.Box(-np.ones(OBS_DIM, np.float32), np.ones(OBS_DIM, np.float32), dtype=np.float32))
-
-
-def _frame(sim: ClothFoldSim, k: int) -> np.ndarray:
-    from ._render import cloth_frame
-
-    return cloth_frame(sim.state.x[k], NX, sim.pickers[k], sim.held[k] >= 0)
-
-
-class ClothFoldEnv(gym.Env):
+class ClothFoldEnv(SimEnv):
     """Single ClothFold-v0 environment (see the module docstring)."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / DT)}
-
-    def __init__(self, render_mode: str | None = None):
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode={render_mode!r}; choose 'rgb_array' or None")
-        self.render_mode = render_mode
-        self.action_space, self.observation_space = _spaces()
-        self._sim = None
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        if self._sim is None:
-            self._sim = ClothFoldSim(1)
-        self._sim.reset(0, self.np_random)
-        return self._sim.observe()[0], {}
-
-    def step(self, action):
-        if self._sim is None:
-            raise RuntimeError("call reset() before step()")
-        a = check_action(action, self.action_space.shape)
-        reward = self._sim.step(a[None])
-        return self._sim.observe()[0], float(reward[0]), False, False, {}
-
-    def render(self):
-        if self.render_mode == "rgb_array" and self._sim is not None:
-            return _frame(self._sim, 0)
-        return None
-
-    def close(self):
-        self._sim = None
+    sim_class = ClothFoldSim
 
 
-class ClothFoldVectorEnv(BatchedEnv):
+class ClothFoldVectorEnv(SimVectorEnv):
     """``num_envs`` ClothFold-v0 copies, all stepped in one physics launch per step."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / DT),
                 "autoreset_mode": AutoresetMode.NEXT_STEP}
-
-    def __init__(self, num_envs: int = 1, max_episode_steps: int = MAX_EPISODE_STEPS,
-                 render_mode: str | None = None, autoreset_mode=AutoresetMode.NEXT_STEP):
-        if render_mode not in (None, "rgb_array"):
-            raise ValueError(f"render_mode={render_mode!r}; choose 'rgb_array' or None")
-        super().__init__(num_envs, max_episode_steps, autoreset_mode)
-        self.render_mode = render_mode
-        self.single_action_space, self.single_observation_space = _spaces()
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self._sim = ClothFoldSim(self.num_envs)
-
-    def _reset_copies(self, idx):
-        for k in idx.tolist():
-            self._sim.reset(k, self._rngs[k])
-
-    def _advance(self, actions, reset_mask):
-        sim = self._sim
-        saved = None
-        if reset_mask.any():  # keep the fresh state of copies reset in this step
-            s = sim.state
-            saved = (s.x[reset_mask].copy(), s.v[reset_mask].copy(), sim.pickers[reset_mask].copy())
-            actions = actions.copy()
-            actions[reset_mask] = 0.0  # a reset copy grabs nothing in this step
-        reward = sim.step(actions)
-        if saved is not None:
-            s.x[reset_mask], s.v[reset_mask], sim.pickers[reset_mask] = saved
-            s.t[reset_mask] = 0.0
-        return sim.observe(), reward, np.zeros(self.num_envs, bool)
-
-    def _observe_all(self):
-        return self._sim.observe()
-
-    def render(self):
-        if self.render_mode != "rgb_array":
-            return None
-        return tuple(_frame(self._sim, k) for k in range(self.num_envs))
+    sim_class = ClothFoldSim
+    default_max_episode_steps = MAX_EPISODE_STEPS
