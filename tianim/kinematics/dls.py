@@ -1,4 +1,4 @@
-"""Damped least squares IK with adaptive damping, and a Newton null-space polish for redundant chains.
+"""Damped least squares IK with adaptive damping: the task phase (reach the target within tol).
 
 Task phase (Levenberg-Marquardt; Wampler 1986, Nakamura and Hanafusa 1986, Buss 2004 eq. 10):
 ``dq = J^T (J J^T + lam^2 I)^-1 e`` with ``e = target - end effector``. A step that
@@ -9,22 +9,7 @@ or m) per step, so the answer stays near the start pose (no wrapped angles). The
 ``|e| <= tol``, or at a stationary point of ``|e|^2`` (``|J^T e|`` negligible: the
 least-squares closest pose of an unreachable target), or when lam blows up.
 
-Null-space phase (only with a secondary objective, redundant chains): the unique
-answer is the constrained minimiser of ``1/2 |q - rest|^2`` subject to
-``f(q) = target`` (Liegeois 1977 uses its gradient in the null space). Starting from
-the task solution, sequential quadratic programming with the exact Hessian of the
-Lagrangian ``L = 1/2 |q - rest|^2 - mu . (f(q) - target)`` (Nocedal and Wright,
-*Numerical Optimization*, 2nd ed., eq. 18.9) solves per step
-
-    [ H   -J^T ] [dq ]   [ -(q - rest) ]
-    [ J    0   ] [mu+] = [  e          ],   H = I - sum_c mu_c d^2 f_c / dq^2,
-
-with least-squares multipliers ``mu = (J J^T)^-1 J (q - rest)``. It converges
-quadratically, so the task residual stays far below ``tol`` while the null-space
-optimality ``|N (q - rest)|`` (``N = I - J^+ J``) goes to zero. Where ``H`` is not
-positive along the step's tangential part (not a minimum) the step falls back to the
-Gauss-Newton projection ``dq = J^+ e - N (q - rest)``. The last pose that meets
-``tol`` is returned, so the polish never loses the task.
+The null-space phase for redundant chains is :mod:`tianim.kinematics.nullspace`.
 """
 
 from __future__ import annotations
@@ -37,8 +22,6 @@ _LAM0 = 1e-3  # initial lam^2, in units of reach^2
 _LAM_MIN = 1e-14
 _LAM_MAX = 1e8
 _GRAD_TOL = 1e-12  # |J^T e| <= _GRAD_TOL |J| |e|: stationary (closest pose of an unreachable target)
-_POLISH_ITERS = 30
-_POLISH_TOL = 1e-10  # |N (q - rest)| <= _POLISH_TOL (1 + |q - rest|), radians
 _MAX_STEP = 0.5  # largest joint change per step (rad, or m for a prismatic joint): a trust region
 
 
@@ -126,69 +109,6 @@ def dls_planar_single(chain, target, q0, tol: float, iters: int):
     return q, r2**0.5, k
 
 
-def polish_planar_single(chain, target, q, rest: np.ndarray, tol: float, iters: int = _POLISH_ITERS):
-    """:func:`polish_null_space` for one target on a PlanarChain with (n + 2) x (n + 2) NumPy solves.
-
-    ``q`` is a feasible pose (list of n floats); returns (q ndarray (n,), residual).
-    """
-    L = chain.lengths.tolist()
-    bx, by = float(chain.base[0]), float(chain.base[1])
-    lo, hi = chain.lower, chain.upper
-    tx, ty = float(target[0]), float(target[1])
-    n = len(q)
-    idx = np.maximum.outer(np.arange(n), np.arange(n))
-    K = np.zeros((n + 2, n + 2))
-    rhs = np.empty(n + 2)
-    eye = np.eye(n)
-    qa = np.array(q, dtype=np.float64)
-    best, best_r = qa, None
-    for _ in range(iters):
-        x, y, dx, dy = _planar_fk(L, bx, by, qa.tolist())
-        e0, e1 = tx - x, ty - y
-        r = (e0 * e0 + e1 * e1) ** 0.5
-        J = np.array([dy, dx])
-        J[0] *= -1.0  # rows: d x / dq = -dy, d y / dq = dx
-        a, b, c = J[0] @ J[0], J[0] @ J[1], J[1] @ J[1]
-        a += 1e-15 * (a + c)
-        c += 1e-15 * (a + c)
-        det = a * c - b * b
-        g = qa - rest
-        u0, u1 = J @ g
-        mu0, mu1 = (c * u0 - b * u1) / det, (a * u1 - b * u0) / det
-        pg = g - mu0 * J[0] - mu1 * J[1]  # N (q - rest)
-        pgn = float(np.sqrt(pg @ pg))
-        if r <= tol:
-            best, best_r = qa, r
-            if pgn <= _POLISH_TOL * (1.0 + float(np.sqrt(g @ g))):
-                break
-        # exact Lagrangian Hessian: H = I - sum_c mu_c d2 f_c = I + (mu0 dx + mu1 dy)[max(i, j)]
-        w = mu0 * J[1] - mu1 * J[0]
-        H = eye + w[idx]
-        K[:n, :n] = H
-        K[:n, n:] = -J.T
-        K[n:, :n] = J
-        rhs[:n] = -g
-        rhs[n], rhs[n + 1] = e0, e1
-        y0, y1 = (c * e0 - b * e1) / det, (a * e1 - b * e0) / det
-        gn = y0 * J[0] + y1 * J[1] - pg  # Gauss-Newton: J^+ e - N (q - rest)
-        try:
-            dq = np.linalg.solve(K, rhs)[:n]
-        except np.linalg.LinAlgError:
-            dq = gn
-        v0, v1 = J @ dq
-        dt = dq - ((c * v0 - b * v1) / det) * J[0] - ((a * v1 - b * v0) / det) * J[1]
-        if not (dt @ H @ dt >= 1e-3 * (dt @ dt)) or not np.all(np.isfinite(dq)):
-            dq = gn
-        big = float(np.abs(dq).max())
-        if big > _MAX_STEP:
-            dq = dq * (_MAX_STEP / big)
-        qa = np.clip(qa + dq, lo, hi)
-    if best_r is None:
-        x, y, _, _ = _planar_fk(L, bx, by, best.tolist())
-        best_r = ((tx - x) ** 2 + (ty - y) ** 2) ** 0.5
-    return best, best_r
-
-
 # -- batched task phase (vectorised over targets, any chain with _fk_jac) ----------------------------------------
 def _solve_small(A: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """Solve A x = rhs for (B, m, m), (B, m); closed form for m = 2."""
@@ -256,84 +176,3 @@ def dls_batch(chain, tgt: np.ndarray, q: np.ndarray, tol: float, iters: int):
         active &= (r2 > tol2) & (lam2 <= _LAM_MAX * s2)
     q[rows], r2_all[rows], it_all[rows] = qw, r2, itw
     return q, np.sqrt(r2_all), it_all
-
-
-# -- null-space polish ---------------------------------------------------------------------------------------------
-def _constraint_curvature(chain, q: np.ndarray, J: np.ndarray, mu: np.ndarray) -> np.ndarray:
-    """``sum_c mu_c d^2 f_c / dq^2``, shape (B, n, n).
-
-    Planar chain (exact): ``d^2 f / dq_i dq_j = -(dx, dy)[max(i, j)]`` (tail sums,
-    the Jacobian column being ``(-dy_i, dx_i)``). Other chains: central differences of
-    ``J^T mu`` (step 1e-6, error ~1e-12 relative), symmetrised.
-    """
-    B, n = q.shape
-    if hasattr(chain, "lengths") and chain.task_dim == 2:
-        w = mu[:, 0, None] * J[:, 1, :] - mu[:, 1, None] * J[:, 0, :]  # mu . (dx, dy)
-        idx = np.maximum.outer(np.arange(n), np.arange(n))
-        return -w[:, idx]
-    h = 1e-6
-    dq = h * np.eye(n)
-    qq = np.concatenate([(q[:, None, :] + dq).reshape(-1, n), (q[:, None, :] - dq).reshape(-1, n)])
-    _, Jq = chain._fk_jac(qq)
-    gq = np.einsum("kmi,km->ki", Jq, np.concatenate([np.repeat(mu, n, axis=0)] * 2))
-    gp, gm = gq[: B * n].reshape(B, n, n), gq[B * n:].reshape(B, n, n)
-    Hc = (gp - gm) / (2 * h)
-    return 0.5 * (Hc + np.swapaxes(Hc, 1, 2))
-
-
-def polish_null_space(chain, tgt: np.ndarray, q: np.ndarray, rest: np.ndarray, tol: float,
-                      iters: int = _POLISH_ITERS):
-    """Newton-SQP polish of feasible poses q (B, n) toward the minimiser of |q - rest| on f(q) = tgt.
-
-    Returns (q, residual): for every row, the last iterate with residual <= tol
-    (rows that start infeasible are returned unchanged).
-    """
-    B, n = q.shape
-    m = tgt.shape[1]
-    lo, hi = chain.lower, chain.upper
-    eye_n, eye_m = np.eye(n), np.eye(m)
-    out = q.copy()
-    end, _ = chain._fk_jac(q)
-    res = np.linalg.norm(tgt - end, axis=1)
-    todo = np.nonzero(res <= tol)[0]
-    qw = q[todo]
-    for _ in range(iters):
-        if todo.size == 0:
-            break
-        end, J = chain._fk_jac(qw)
-        e = tgt[todo] - end
-        r = np.sqrt(np.einsum("bi,bi->b", e, e))
-        g = qw - rest[todo]
-        Jt = np.swapaxes(J, 1, 2)
-        JJt = J @ Jt
-        JJt = JJt + (1e-15 * np.trace(JJt, axis1=1, axis2=2))[:, None, None] * eye_m
-        mu = np.linalg.solve(JJt, np.einsum("bij,bj->bi", J, g)[..., None])[..., 0]
-        pg = g - np.einsum("bij,bj->bi", Jt, mu)  # N (q - rest)
-        pgn = np.sqrt(np.einsum("bi,bi->b", pg, pg))
-        feas = r <= tol
-        out[todo[feas]], res[todo[feas]] = qw[feas], r[feas]
-        done = feas & (pgn <= _POLISH_TOL * (1.0 + np.sqrt(np.einsum("bi,bi->b", g, g))))
-        keep = ~done
-        if not keep.all():
-            todo, qw, J, Jt, JJt, e, g, mu, pg = (todo[keep], qw[keep], J[keep], Jt[keep], JJt[keep], e[keep],
-                                                  g[keep], mu[keep], pg[keep])
-            if todo.size == 0:
-                break
-        H = eye_n - _constraint_curvature(chain, qw, J, mu)
-        K = np.zeros((len(todo), n + m, n + m))
-        K[:, :n, :n], K[:, :n, n:], K[:, n:, :n] = H, -Jt, J
-        rhs = np.concatenate([-g, e], axis=1)
-        gn = np.einsum("bij,bj->bi", Jt, np.linalg.solve(JJt, e[..., None])[..., 0]) - pg  # Gauss-Newton step
-        try:
-            dq = np.linalg.solve(K, rhs[..., None])[:, :n, 0]
-        except np.linalg.LinAlgError:
-            dq = gn
-        # the Newton step must see positive curvature along its tangential part, else use Gauss-Newton
-        dt = dq - np.einsum("bij,bj->bi", Jt, np.linalg.solve(JJt, np.einsum("bij,bj->bi", J, dq)[..., None])[..., 0])
-        curv = np.einsum("bi,bij,bj->b", dt, H, dt)
-        bad = ~np.all(np.isfinite(dq), axis=1) | (curv < 1e-3 * np.einsum("bi,bi->b", dt, dt))
-        dq = np.where(bad[:, None], gn, dq)
-        big = np.abs(dq).max(axis=1)
-        dq *= np.minimum(1.0, _MAX_STEP / np.maximum(big, 1e-300))[:, None]
-        qw = np.clip(qw + dq, lo, hi)
-    return out, res

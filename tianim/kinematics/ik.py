@@ -25,7 +25,7 @@ Methods (``method=``):
            transpose, pseudoinverse and damped least squares methods", 2004). It stops
            as soon as the residual meets ``tol``; a redundant chain's answer is then
            polished to the exact rest-pose optimum by Newton steps that keep the task
-           (:mod:`tianim.kinematics.dls`). One target on a planar chain takes a
+           (:mod:`tianim.kinematics.nullspace`). One target on a planar chain takes a
            plain-float fast path; batches are vectorised over targets.
 ``"jt"``   Jacobian transpose ``dq = mu a J^T e`` with Buss's step
            ``a = <e, J J^T e> / |J J^T e|^2`` (Buss 2004, eq. 7), and a multiplier
@@ -43,7 +43,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from tianim.kinematics._validate import float_array, joint_vector
-from tianim.kinematics.dls import dls_batch, dls_planar_single, polish_null_space, polish_planar_single
+from tianim.kinematics.dls import dls_batch, dls_planar_single
+from tianim.kinematics.nullspace import polish
 from tianim.kinematics.planar import PlanarChain
 
 METHODS = ("dls", "jt", "ccd", "fabrik")
@@ -231,16 +232,15 @@ def _residual(chain, q, tgt):
 
 def _dls(chain, tgt, q, tol, iters, rest):
     """Task phase (one target on a planar chain: plain-float fast path; else vectorised), then the
-    null-space polish when a secondary objective is set (see :mod:`tianim.kinematics.dls`)."""
-    polish = rest is not None and chain.n > chain.task_dim
+    null-space polish when a secondary objective is set (:mod:`tianim.kinematics.nullspace`)."""
+    polishing = rest is not None and chain.n > chain.task_dim
     if len(q) == 1 and isinstance(chain, PlanarChain):
         q1, r1, k1 = dls_planar_single(chain, tgt[0], q[0], tol, iters)
-        if polish and r1 <= tol:
-            q1, r1 = polish_planar_single(chain, tgt[0], q1, rest[0], tol)
-        return np.array([q1]), np.array([r1]), np.array([k1], dtype=np.int64)
-    q, r, it = dls_batch(chain, tgt, q, tol, iters)
-    if polish:
-        q, r = polish_null_space(chain, tgt, q, rest, tol)
+        q, r, it = np.array([q1]), np.array([r1]), np.array([k1], dtype=np.int64)
+    else:
+        q, r, it = dls_batch(chain, tgt, q, tol, iters)
+    if polishing:
+        q, r = polish(chain, tgt, q, rest, tol)
     return q, r, it
 
 

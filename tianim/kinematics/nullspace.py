@@ -1,0 +1,241 @@
+"""Null-space polish for redundant chains: the pose nearest ``rest`` among those that reach the target.
+
+A redundant chain (more joints than task equations) reaches a target with a whole
+manifold of poses. The unique answer returned by :func:`tianim.kinematics.solve_ik`
+is the constrained minimiser of ``phi(q) = 1/2 |q - rest|^2`` subject to
+``f(q) = target`` (``rest = q0`` is least motion; Liegeois 1977 uses the gradient
+``N (q - rest)``, ``N = I - J^+ J``, in the null space). Its first-order condition
+is ``N (q - rest) = 0``.
+
+Starting from a pose that meets the task tolerance, each iteration takes the
+sequential-quadratic-programming step with the exact Hessian of the Lagrangian
+``L = phi - mu . (f(q) - target)`` (Nocedal and Wright, *Numerical Optimization*,
+2nd ed., eq. 18.9):
+
+    [ H   -J^T ] [dq ]   [ -(q - rest) ]
+    [ J    0   ] [mu+] = [  e          ],   H = I - sum_c mu_c d^2 f_c / dq^2,
+
+with least-squares multipliers ``mu = (J J^T)^-1 J (q - rest)``; where ``H`` is not
+positive along the step's tangential part (no local minimum there) the step is the
+projected gradient ``-N (q - rest)`` instead. The step is globalised on the solution
+manifold (a feasible-point method): the trial pose is projected back onto
+``f(q) = target`` by minimum-norm Gauss-Newton corrections ``dq = J^+ e`` and accepted
+only if it meets ``tol`` and lowers ``phi``; otherwise the step is cut by 4, up to 6
+times. Every iterate therefore reaches the target, ``phi`` decreases monotonically,
+and near the solution the full Newton step is taken (quadratic convergence).
+Joint limits are applied by clipping each trial pose.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from tianim.kinematics.dls import _MAX_STEP, _planar_fk
+
+ITERS = 40
+_PTOL = 1e-10  # stop when |N (q - rest)| <= _PTOL (1 + |q - rest|), radians
+_RESTORE = 4  # Gauss-Newton corrections per trial
+_RESTORE_TOL = 1e-3  # ... correct a trial pose while its residual exceeds _RESTORE_TOL * tol
+_BACKTRACK = 6
+
+
+def _curvature_planar(J: np.ndarray, mu: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """``sum_c mu_c d^2 f_c / dq^2`` of a planar chain, shape (..., n, n), from its Jacobian (..., 2, n).
+
+    With tail sums ``(dx_i, dy_i) = end - joint i`` (Jacobian column ``(-dy_i, dx_i)``):
+    ``d^2 f / dq_i dq_j = -(dx, dy)[max(i, j)]``.
+    """
+    w = mu[..., 0, None] * J[..., 1, :] - mu[..., 1, None] * J[..., 0, :]
+    return -w[..., idx]
+
+
+def _curvature_fd(chain, q: np.ndarray, mu: np.ndarray) -> np.ndarray:
+    """``sum_c mu_c d^2 f_c / dq^2``, (B, n, n), by central differences of ``J^T mu`` (step 1e-6), symmetrised."""
+    B, n = q.shape
+    h = 1e-6
+    d = h * np.eye(n)
+    qq = np.concatenate([(q[:, None, :] + d).reshape(-1, n), (q[:, None, :] - d).reshape(-1, n)])
+    _, Jq = chain._fk_jac(qq)
+    gq = np.einsum("kmi,km->ki", Jq, np.concatenate([np.repeat(mu, n, axis=0)] * 2))
+    Hc = (gq[: B * n] - gq[B * n:]).reshape(B, n, n) / (2 * h)
+    return 0.5 * (Hc + np.swapaxes(Hc, 1, 2))
+
+
+def _newton_step(J, JJt, g, e, H):
+    """SQP step (B, n) for (B, m, n) J; falls back to the projected gradient where H is not positive."""
+    B, m, n = J.shape
+    Jt = np.swapaxes(J, 1, 2)
+    mu = np.linalg.solve(JJt, np.einsum("bij,bj->bi", J, g)[..., None])[..., 0]
+    pg = g - np.einsum("bij,bj->bi", Jt, mu)
+    K = np.zeros((B, n + m, n + m))
+    K[:, :n, :n], K[:, :n, n:], K[:, n:, :n] = H(mu), -Jt, J
+    try:
+        dq = np.linalg.solve(K, np.concatenate([-g, e], axis=1)[..., None])[:, :n, 0]
+    except np.linalg.LinAlgError:
+        return -pg, pg
+    dt = dq - np.einsum("bij,bj->bi", Jt, np.linalg.solve(JJt, np.einsum("bij,bj->bi", J, dq)[..., None])[..., 0])
+    curv = np.einsum("bi,bij,bj->b", dt, K[:, :n, :n], dt)
+    bad = ~np.all(np.isfinite(dq), axis=1) | ~(curv >= 1e-3 * np.einsum("bi,bi->b", dt, dt))
+    return np.where(bad[:, None], -pg, dq), pg
+
+
+def _polish_planar_one(chain, target, q, rest, tol: float, iters: int):
+    """:func:`polish` for one pose of a PlanarChain: same algorithm with (n + 2)-square NumPy solves and
+    float 2 x 2 algebra, about 5x cheaper per iteration than the vectorised path at B = 1."""
+    L = chain.lengths.tolist()
+    bx, by = float(chain.base[0]), float(chain.base[1])
+    tx, ty = float(target[0]), float(target[1])
+    lo, hi = chain.lower, chain.upper
+    limited = bool(np.any(np.isfinite(lo)) or np.any(np.isfinite(hi)))
+    n = len(q)
+    idx = np.maximum.outer(np.arange(n), np.arange(n))
+    eye = np.eye(n)
+    K = np.zeros((n + 2, n + 2))
+    rhs = np.empty(n + 2)
+    rtol = _RESTORE_TOL * tol
+
+    def fkj(qa):
+        """(e0, e1, J (2, n), a, b, c) with J J^T = [[a, b], [b, c]] (regularised by 1e-15 of its trace)."""
+        x, y, dx, dy = _planar_fk(L, bx, by, qa.tolist())
+        J = np.array([dy, dx])
+        J[0] *= -1.0
+        a, b, c = float(J[0] @ J[0]), float(J[0] @ J[1]), float(J[1] @ J[1])
+        eps = 1e-15 * (a + c)
+        return tx - x, ty - y, J, a + eps, b, c + eps
+
+    def pinv(J, a, b, c, v0, v1):
+        """J^T (J J^T)^-1 v."""
+        det = a * c - b * b
+        return ((c * v0 - b * v1) / det) * J[0] + ((a * v1 - b * v0) / det) * J[1]
+
+    def clip(qa):
+        return np.minimum(np.maximum(qa, lo), hi) if limited else qa
+
+    qa = np.array(q, dtype=np.float64)
+    e0, e1, J, a, b, c = fkj(qa)
+    r = (e0 * e0 + e1 * e1) ** 0.5
+    if r > tol:
+        return qa, r
+    g = qa - rest
+    phi = 0.5 * float(g @ g)
+    for _ in range(iters):
+        u0, u1 = J @ g
+        det = a * c - b * b
+        mu0, mu1 = (c * u0 - b * u1) / det, (a * u1 - b * u0) / det
+        pg = g - mu0 * J[0] - mu1 * J[1]  # N (q - rest)
+        if float(pg @ pg) ** 0.5 <= _PTOL * (1.0 + (2 * phi) ** 0.5):
+            break
+        H = eye - _curvature_planar(J, np.array([mu0, mu1]), idx)
+        K[:n, :n], K[:n, n:], K[n:, :n] = H, -J.T, J
+        rhs[:n], rhs[n], rhs[n + 1] = -g, e0, e1
+        try:
+            dq = np.linalg.solve(K, rhs)[:n]
+            v0, v1 = J @ dq
+            dt = dq - pinv(J, a, b, c, v0, v1)
+            if not (float(dt @ H @ dt) >= 1e-3 * float(dt @ dt)) or not np.all(np.isfinite(dq)):
+                dq = -pg
+        except np.linalg.LinAlgError:
+            dq = -pg
+        big = float(np.abs(dq).max())
+        if big > _MAX_STEP:
+            dq = dq * (_MAX_STEP / big)
+        alpha, accepted = 1.0, False
+        for _ in range(_BACKTRACK):
+            qt = clip(qa + alpha * dq)
+            f0, f1, Jt, at, bt, ct = fkj(qt)
+            rt = (f0 * f0 + f1 * f1) ** 0.5
+            for _ in range(_RESTORE):
+                if rt <= rtol:
+                    break
+                qt = clip(qt + pinv(Jt, at, bt, ct, f0, f1))
+                f0, f1, Jt, at, bt, ct = fkj(qt)
+                rt = (f0 * f0 + f1 * f1) ** 0.5
+            gt = qt - rest
+            phit = 0.5 * float(gt @ gt)
+            if rt <= tol and phit < phi:
+                qa, g, phi, r, e0, e1, J, a, b, c = qt, gt, phit, rt, f0, f1, Jt, at, bt, ct
+                accepted = True
+                break
+            alpha *= 0.25
+        if not accepted:
+            break
+    return qa, r
+
+
+def polish(chain, tgt: np.ndarray, q: np.ndarray, rest: np.ndarray, tol: float, iters: int = ITERS):
+    """Polish poses q (B, n) that meet ``tol`` toward ``argmin |q - rest|`` on ``f(q) = tgt`` (B, m).
+
+    Returns (q (B, n), residual (B,)). Rows that start with a residual above ``tol``
+    are returned unchanged. Works for any chain; vectorised over rows (one target
+    on a planar chain costs about 40 us per iteration, 3-6 iterations typical).
+    """
+    B, n = q.shape
+    m = tgt.shape[1]
+    if B == 1 and hasattr(chain, "lengths") and m == 2:
+        q1, r1 = _polish_planar_one(chain, tgt[0], q[0], rest[0], tol, iters)
+        return q1[None], np.array([r1])
+    lo, hi = chain.lower, chain.upper
+    eye_n, eye_m = np.eye(n), np.eye(m)
+    planar = hasattr(chain, "lengths") and m == 2
+    idx = np.maximum.outer(np.arange(n), np.arange(n))
+
+    def fkj(qq, tt):
+        end, J = chain._fk_jac(qq)
+        e = tt - end
+        return e, J, np.sqrt(np.einsum("bi,bi->b", e, e))
+
+    def gram(J):
+        A = J @ np.swapaxes(J, 1, 2)
+        return A + (1e-15 * np.trace(A, axis1=1, axis2=2))[:, None, None] * eye_m
+
+    def restore(qq, tt):
+        e, J, r = fkj(qq, tt)
+        for _ in range(_RESTORE):
+            act = r > _RESTORE_TOL * tol
+            if not act.any():
+                break
+            dq = np.einsum("bij,bi->bj", J, np.linalg.solve(gram(J), e[..., None])[..., 0])
+            qq = np.where(act[:, None], np.clip(qq + dq, lo, hi), qq)
+            e, J, r = fkj(qq, tt)
+        return qq, e, J, r
+
+    out = q.copy()
+    e, J, res = fkj(q, tgt)
+    rows = np.nonzero(res <= tol)[0]
+    qw, ew, Jw, rw, tw, rw_rest = q[rows], e[rows], J[rows], res[rows], tgt[rows], rest[rows]
+    phi = 0.5 * np.einsum("bi,bi->b", qw - rw_rest, qw - rw_rest)
+    for _ in range(iters):
+        if rows.size == 0:
+            break
+        g = qw - rw_rest
+        JJt = gram(Jw)
+        if planar:
+            dq, pg = _newton_step(Jw, JJt, g, ew, lambda mu: eye_n - _curvature_planar(Jw, mu, idx))
+        else:
+            dq, pg = _newton_step(Jw, JJt, g, ew, lambda mu: eye_n - _curvature_fd(chain, qw, mu))
+        pgn = np.sqrt(np.einsum("bi,bi->b", pg, pg))
+        go = pgn > _PTOL * (1.0 + np.sqrt(2 * phi))
+        big = np.abs(dq).max(axis=1)
+        dq *= np.minimum(1.0, _MAX_STEP / np.maximum(big, 1e-300))[:, None]
+        alpha = np.ones(len(rows))
+        acc = np.zeros(len(rows), dtype=bool)
+        for _ in range(_BACKTRACK):
+            pend = np.nonzero(go & ~acc)[0]
+            if pend.size == 0:
+                break
+            qt, et, Jt, rt = restore(np.clip(qw[pend] + alpha[pend, None] * dq[pend], lo, hi), tw[pend])
+            d = qt - rw_rest[pend]
+            phit = 0.5 * np.einsum("bi,bi->b", d, d)
+            ok = (rt <= tol) & (phit < phi[pend])
+            sel = pend[ok]
+            qw[sel], ew[sel], Jw[sel], rw[sel], phi[sel] = qt[ok], et[ok], Jt[ok], rt[ok], phit[ok]
+            acc[sel] = True
+            alpha[pend] *= 0.25
+        fin = ~acc  # converged, or no acceptable step: done
+        if fin.any():
+            out[rows[fin]], res[rows[fin]] = qw[fin], rw[fin]
+            keep = acc
+            rows, qw, ew, Jw, rw, tw, rw_rest, phi = (rows[keep], qw[keep], ew[keep], Jw[keep], rw[keep], tw[keep],
+                                                      rw_rest[keep], phi[keep])
+    out[rows], res[rows] = qw, rw
+    return out, res
