@@ -186,19 +186,20 @@ def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max
     step = {"dls": _dls, "jt": _jt, "ccd": _ccd, "fabrik": _fabrik}[method]
 
     q, res, it = step(chain, tgt, q_init, tol, iters, rest_arr)
-    rng = np.random.default_rng(seed)
-    lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)
-    hi = np.where(np.isfinite(chain.upper), chain.upper, np.pi)
-    floor = _residual_floor(chain, tgt) + 1e-9 * chain.reach
-    for _ in range(restarts):
-        todo = np.nonzero((res > tol) & (res > floor))[0]
-        if todo.size == 0:
-            break
-        qr = rng.uniform(lo, hi, size=(todo.size, n))
-        rr = None if rest_arr is None else rest_arr[todo]
-        q2, res2, it2 = step(chain, tgt[todo], qr, tol, iters, rr)
-        better = res2 < res[todo]
-        q[todo[better]], res[todo[better]], it[todo[better]] = q2[better], res2[better], it2[better]
+    if restarts > 0 and np.any(res > tol):
+        rng = np.random.default_rng(seed)
+        lo = np.where(np.isfinite(chain.lower), chain.lower, -np.pi)
+        hi = np.where(np.isfinite(chain.upper), chain.upper, np.pi)
+        floor = _residual_floor(chain, tgt) + 1e-9 * chain.reach
+        for _ in range(restarts):
+            todo = np.nonzero((res > tol) & (res > floor))[0]
+            if todo.size == 0:
+                break
+            qr = rng.uniform(lo, hi, size=(todo.size, n))
+            rr = None if rest_arr is None else rest_arr[todo]
+            q2, res2, it2 = step(chain, tgt[todo], qr, tol, iters, rr)
+            better = res2 < res[todo]
+            q[todo[better]], res[todo[better]], it[todo[better]] = q2[better], res2[better], it2[better]
     conv = res <= tol
     if single:
         return IKResult(q[0], res[0], bool(conv[0]), it[0])

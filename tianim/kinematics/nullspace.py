@@ -20,9 +20,11 @@ positive along the step's tangential part (no local minimum there) the step is t
 projected gradient ``-N (q - rest)`` instead. The step is globalised on the solution
 manifold (a feasible-point method): the trial pose is projected back onto
 ``f(q) = target`` by minimum-norm Gauss-Newton corrections ``dq = J^+ e`` and accepted
-only if it meets ``tol`` and lowers ``phi``; otherwise the step is cut by 4, up to 6
-times. Every iterate therefore reaches the target, ``phi`` decreases monotonically,
-and near the solution the full Newton step is taken (quadratic convergence).
+only if it meets ``tol`` and lowers ``phi`` (within ``2 |mu| (r + r_trial)``, the
+uncertainty of ``phi`` off the manifold, it must lower the Lagrangian ``phi + mu . e``
+instead); otherwise the step is cut by 4, up to 6 times. Every iterate therefore
+reaches the target, ``phi`` decreases (up to that band), a saddle point is left along
+the projected gradient, and near the solution the full Newton step is taken (quadratic convergence).
 Joint limits are applied by clipping each trial pose.
 """
 
@@ -32,7 +34,7 @@ import numpy as np
 
 from tianim.kinematics.dls import _MAX_STEP, _planar_fk
 
-ITERS = 40
+ITERS = 100
 _PTOL = 1e-10  # stop when |N (q - rest)| <= _PTOL (1 + |q - rest|), radians
 _RESTORE = 4  # Gauss-Newton corrections per trial
 _RESTORE_TOL = 1e-3  # ... correct a trial pose while its residual exceeds _RESTORE_TOL * tol
@@ -152,7 +154,10 @@ def _polish_planar_one(chain, target, q, rest, tol: float, iters: int):
                 rt = (f0 * f0 + f1 * f1) ** 0.5
             gt = qt - rest
             phit = 0.5 * float(gt @ gt)
-            if rt <= tol and phit < phi:
+            # phi is only known to |mu| (r + rt) off the manifold: inside that band compare Lagrangians
+            noise = 2.0 * (mu0 * mu0 + mu1 * mu1) ** 0.5 * (r + rt)
+            if rt <= tol and (phit < phi - noise or (abs(phit - phi) <= noise
+                                                    and phit + mu0 * f0 + mu1 * f1 < phi + mu0 * e0 + mu1 * e1)):
                 qa, g, phi, r, e0, e1, J, a, b, c = qt, gt, phit, rt, f0, f1, Jt, at, bt, ct
                 accepted = True
                 break
@@ -213,6 +218,8 @@ def polish(chain, tgt: np.ndarray, q: np.ndarray, rest: np.ndarray, tol: float, 
             dq, pg = _newton_step(Jw, JJt, g, ew, lambda mu: eye_n - _curvature_planar(Jw, mu, idx))
         else:
             dq, pg = _newton_step(Jw, JJt, g, ew, lambda mu: eye_n - _curvature_fd(chain, qw, mu))
+        mu = np.linalg.solve(JJt, np.einsum("bij,bj->bi", Jw, g)[..., None])[..., 0]
+        lag = np.einsum("bi,bi->b", mu, ew)  # phi + mu . e is the merit (same mu for both poses)
         pgn = np.sqrt(np.einsum("bi,bi->b", pg, pg))
         go = pgn > _PTOL * (1.0 + np.sqrt(2 * phi))
         big = np.abs(dq).max(axis=1)
@@ -226,7 +233,10 @@ def polish(chain, tgt: np.ndarray, q: np.ndarray, rest: np.ndarray, tol: float, 
             qt, et, Jt, rt = restore(np.clip(qw[pend] + alpha[pend, None] * dq[pend], lo, hi), tw[pend])
             d = qt - rw_rest[pend]
             phit = 0.5 * np.einsum("bi,bi->b", d, d)
-            ok = (rt <= tol) & (phit < phi[pend])
+            noise = 2.0 * np.sqrt(np.einsum("bi,bi->b", mu[pend], mu[pend])) * (rw[pend] + rt)
+            dphi = phit - phi[pend]
+            ok = (rt <= tol) & ((dphi < -noise) | ((np.abs(dphi) <= noise)
+                                                   & (dphi + np.einsum("bi,bi->b", mu[pend], et) < lag[pend])))
             sel = pend[ok]
             qw[sel], ew[sel], Jw[sel], rw[sel], phi[sel] = qt[ok], et[ok], Jt[ok], rt[ok], phit[ok]
             acc[sel] = True
