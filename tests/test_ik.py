@@ -149,3 +149,60 @@ def test_bad_ik_input_raises_and_changes_nothing():
     with pytest.raises(TypeError, match="chain"):
         solve_ik("arm", [0.1, 0.1])
     assert np.array_equal(chain.lengths, lengths)
+
+
+def _null_residual(chain, q, rest):
+    """|N (q - rest)| per pose, N = I - J^+ J (first-order optimality of min |q - rest| on f(q) = target)."""
+    J = chain.jacobian(q)
+    N = np.eye(chain.n) - np.linalg.pinv(J) @ J
+    return np.linalg.norm(np.einsum("...ij,...j->...i", N, q - rest), axis=-1)
+
+
+def test_dls_reaches_nearly_stretched_targets():
+    # elbows bent by 1e-3 rad: the Jacobian is nearly singular; damping keeps DLS well-posed
+    # (CCD, FABRIK and JT converge sublinearly there, hence the 0.2 rad bend in _targets)
+    for n in (2, 3, 7):
+        chain = _chain(n)
+        q = np.random.default_rng(n).uniform(-LIMIT, LIMIT, size=(10, n))
+        q[:, 1:] = 1e-3 * np.sign(q[:, 1:])
+        targets = chain.end_effector(q)
+        res = solve_ik(chain, targets, method="dls", tol=1e-6)
+        assert res.converged.all(), res.residual.max()
+        np.testing.assert_allclose(chain.end_effector(res.q), targets, atol=1.01e-6)
+
+
+def test_default_redundant_answer_is_least_motion_single_and_batched_agree():
+    chain = _chain(7, limited=False)
+    targets = _targets(chain, 12, seed=21)
+    q0 = np.random.default_rng(2).uniform(-0.3, 0.3, 7)
+    batch = solve_ik(chain, targets, q0=q0, tol=1e-8)
+    single = np.array([solve_ik(chain, t, q0=q0, tol=1e-8).q for t in targets])
+    assert batch.converged.all()
+    np.testing.assert_allclose(chain.end_effector(single), targets, atol=1e-8)
+    assert _null_residual(chain, batch.q, q0).max() < 1e-6
+    assert _null_residual(chain, single, q0).max() < 1e-6
+    np.testing.assert_allclose(single, batch.q, atol=1e-6)
+    # the first pose found (rest=False) reaches the target too, but moves more
+    first = solve_ik(chain, targets, q0=q0, tol=1e-8, rest=False)
+    assert first.converged.all()
+    moved = lambda q: np.linalg.norm(q - q0, axis=1)  # noqa: E731
+    assert np.all(moved(batch.q) <= moved(first.q) + 1e-9)
+
+
+def test_3d_redundant_chain_rest_pose_optimum():
+    # 7 joints (one prismatic) for 3 task equations; the null-space Hessian is by finite differences here
+    chain = _serial7()
+    rng = np.random.default_rng(4)
+    targets = chain.end_effector(rng.uniform(-1.0, 1.0, size=(6, 7)))
+    rest = np.full(7, 0.1)
+    res = solve_ik(chain, targets, rest=rest, tol=1e-8)
+    assert res.converged.all()
+    inside = np.all((res.q > chain.lower + 1e-6) & (res.q < chain.upper - 1e-6), axis=1)
+    assert inside.sum() >= 4  # optimality is only first-order where no limit is active
+    assert _null_residual(chain, res.q[inside], rest).max() < 1e-6
+
+
+def test_bad_rest_shape_raises():
+    chain = _chain(7)
+    with pytest.raises(ValueError, match="rest"):
+        solve_ik(chain, np.zeros((3, 2)) + 0.3, rest=np.zeros((2, 7)))
