@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from tianim.physics.kernels import PHASES, SCRATCH, frame_kernel
+from tianim.physics.kernels import PHASES, WORK, frame_kernel
 from tianim.physics.validation import check_finite_scalar, check_positive_int
 from tianim.physics.watchdog import DivergenceError, Watchdog
 
@@ -131,15 +131,10 @@ def _launch(model, state, dt, substeps, method, layout):
         spring_damping=model.has_spring_damping,
         medium_damping=model.medium_damping > 0,
     )
-    need = SCRATCH[method]
-    dummy = state.scratch("acc")
-    buf = {name: state.scratch(name) if name in need else dummy for name in ("acc", "xs", "vs", "kx", "kv")}
     real = state.dtype.type
     args = (
-        state.x, state.v, buf["acc"], buf["xs"], buf["vs"], buf["kx"], buf["kv"],
-        state.pinned.view(np.uint8), data["mass"], data["inv_mass"], data["off"], data["spr"], data["oth"],
-        data["k"], data["rest"], data["damp"], data["coll"],
-        model.gravity.astype(state.dtype), real(model.medium_damping), real(dt),
+        state.x, state.v, state.work(WORK[method]), state.pinned.view(np.uint8), data["params"], data["topo"],
+        data["coll"], real(dt),
         model.grid.nx if model.grid is not None else 1,
     )
     if pre is not None:
@@ -160,7 +155,7 @@ def accelerations(model, state) -> np.ndarray:
         raise ValueError("state does not belong to this model; create it with model.state(batch=...)")
     state.check_arrays()
     _launch(model, state, 1.0, 1, "accelerations", "auto")
-    return state.scratch("acc").copy()
+    return state.work(1)[0].copy()
 
 
 #: Largest stable omega*dt of each integrator on an undamped oscillator
@@ -176,22 +171,33 @@ STABILITY_LIMIT = {
 
 
 def stable_dt(model, method: str = "symplectic_euler") -> float:
-    """Estimated largest stable step [s] for ``method`` on ``model``.
+    """Estimated largest stable step [s] for ``method`` on ``model``, damping included.
 
-    ``limit / omega_max`` with ``omega_max`` the Gershgorin bound of
-    :meth:`Model.omega_max` and ``limit`` from :data:`STABILITY_LIMIT`.
-    For explicit Euler, whose undamped limit is zero, the damped-spring limit
-    ``2 zeta / omega`` is used with the damping ratio of the stiffest spring.
-    Returns ``inf`` for a model without springs.
+    Uses the Gershgorin bounds ``w = omega_max`` (stiffness, :meth:`Model.omega_max`)
+    and ``g = gamma_max`` (damping rate, :meth:`Model.gamma_max`) as if one mode had
+    both, which is conservative. On ``x'' + g x' + w^2 x = 0``:
+
+    * symplectic Euler and velocity Verlet: the step matrix has determinant ``1 - h g``
+      and trace ``2 - h^2 w^2 - h g``; Jury's criterion gives ``h^2 w^2 + 2 h g < 4``,
+      so ``h = (-g + sqrt(g^2 + 4 w^2)) / w^2`` (= 2/w without damping);
+    * RK4: ``h = min(2 sqrt 2 / w, 2.78 / g)`` (its region reaches 2.83 on the imaginary
+      axis and 2.78 on the negative real axis);
+    * explicit Euler: ``|1 + h lambda| <= 1`` for ``lambda = -g/2 +- i sqrt(w^2 - g^2/4)``
+      gives ``h <= g / w^2``: zero without damping (unstable at every dt).
+
+    Returns ``inf`` for a model with neither springs nor damping.
     """
     if method not in STABILITY_LIMIT:
         raise ValueError(f"method={method!r} is not an integrator; choose one of {ALL_METHODS}")
-    w = model.omega_max()
-    if w == 0.0 or math.isinf(STABILITY_LIMIT[method]):
+    if math.isinf(STABILITY_LIMIT[method]):
+        return math.inf
+    w, g = model.omega_max(), model.gamma_max()
+    if w == 0.0 and g == 0.0:
         return math.inf
     if method == "explicit_euler":
-        # x'' + 2 zeta w x' + w^2 x = 0 under forward Euler: stable iff h < 2 zeta / w (for zeta < 1).
-        c_over_m = 2.0 * float(np.max(model.damping)) / float(np.min(model.mass)) + model.medium_damping / float(np.min(model.mass))
-        zeta = c_over_m / (2.0 * w)
-        return 2.0 * zeta / w if zeta > 0 else 0.0
-    return STABILITY_LIMIT[method] / w
+        return min(g / w**2 if w > 0 else math.inf, 2.0 / g if g > 0 else math.inf) if g > 0 else 0.0
+    if method == "rk4":
+        return min(STABILITY_LIMIT["rk4"] / w if w > 0 else math.inf, 2.78 / g if g > 0 else math.inf)
+    if w == 0.0:
+        return 2.0 / g
+    return (-g + math.sqrt(g * g + 4.0 * w * w)) / (w * w)

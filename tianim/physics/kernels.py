@@ -43,13 +43,14 @@ PHASES = {
     "accelerations": ((), ("acc_x_v",)),
 }
 
-#: Scratch buffers (B, N, D) each integrator needs.
-SCRATCH = {
-    "explicit_euler": ("acc",),
-    "symplectic_euler": ("acc",),
-    "verlet": ("acc", "vs", "kx"),
-    "rk4": ("acc", "xs", "vs", "kx", "kv"),
-    "accelerations": ("acc",),
+#: Work buffers (B, N, D) each integrator needs, as the leading length of the work
+#: array W: acc = W[0], xs = W[1], vs = W[2], kx = W[3], kv = W[4].
+WORK = {
+    "explicit_euler": 1,
+    "symplectic_euler": 1,
+    "verlet": 4,
+    "rk4": 5,
+    "accelerations": 1,
 }
 
 _cache: dict = {}
@@ -75,6 +76,7 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
     real_arr = ti.types.ndarray(dtype=real, ndim=1)
     int_arr = ti.types.ndarray(dtype=ti.i32, ndim=1)
     coll_arr = ti.types.ndarray(dtype=real, ndim=2)
+    work_arr = ti.types.ndarray(dtype=vec, ndim=3)
     mask_arr = ti.types.ndarray(dtype=ti.u8, ndim=2)
     pre_phases, step_phases = PHASES[method]
     n_stencil = len(GRID_STENCIL)
@@ -92,45 +94,74 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
             f -= damp * (vi - vj).dot(n) * n
         return f
 
+    # Packed arguments (fewer arguments = cheaper launches from Python):
+    #   P (params, real): gravity[D], rho, mass[N], inv_mass[N], k[S], rest[S], damp[S]
+    #   T (topology, i32): CSR offsets[N+1], spring ids[E], other ends[E]; for grids the
+    #     stencil offsets (d_col, d_row) of GRID_STENCIL, with S = 12 per-offset parameters
+    #   W (work, vec): acc, xs, vs, kx, kv = W[0..4]
     @ti.func
-    def accel(b, i, X: ti.template(), V: ti.template(), pinned: ti.template(), mass: ti.template(),
-              inv_mass: ti.template(), off: ti.template(), spr: ti.template(), oth: ti.template(),
-              k: ti.template(), rest: ti.template(), damp: ti.template(), g, rho, nx):
+    def load(sel: ti.template(), x: ti.template(), v: ti.template(), W: ti.template(), b, j):
+        """Position (sel "x"/"xs") or velocity (sel "v"/"vs") of particle j of copy b."""
+        r = ti.Vector.zero(real, dim)
+        if ti.static(sel == "x"):
+            r = x[b, j]
+        elif ti.static(sel == "v"):
+            r = v[b, j]
+        elif ti.static(sel == "xs"):
+            r = W[1, b, j]
+        else:
+            r = W[2, b, j]
+        return r
+
+    @ti.func
+    def accel(b, i, xsel: ti.template(), vsel: ti.template(), x: ti.template(), v: ti.template(), W: ti.template(),
+              pinned: ti.template(), P: ti.template(), T: ti.template(), nx):
         """Acceleration of particle i of copy b: (m g - rho v + sum of spring forces) / m; 0 if pinned."""
         a = ti.Vector.zero(real, dim)
+        n = x.shape[1]
+        h = dim + 1  # P[0:dim] = gravity, P[dim] = medium damping rho
+        ns = (P.shape[0] - h - 2 * n) // 3
         if pinned[b, i] == 0:
-            xi = X[b, i]
-            vi = V[b, i]
-            f = mass[i] * g
+            xi = load(xsel, x, v, W, b, i)
+            vi = load(vsel, x, v, W, b, i)
+            g = ti.Vector.zero(real, dim)
+            for a in ti.static(range(dim)):
+                g[a] = P[a]
+            f = P[h + i] * g
             if ti.static(medium_damping):
-                f -= rho * vi
+                f -= P[dim] * vi
             if ti.static(grid):
-                # Regular grid: off holds the stencil offsets (d_col, d_row) of GRID_STENCIL,
-                # k/rest/damp its per-offset parameters. A runtime loop (not unrolled) keeps
-                # compile time short; it costs little at run time.
+                # Regular grid: T holds the stencil offsets, P the per-offset k, rest, damp.
+                # A runtime loop (not unrolled) keeps compile time short.
                 row = i // nx
                 col = i - row * nx
-                ny = X.shape[1] // nx
+                ny = n // nx
                 for o in range(n_stencil):
-                    cc = col + off[2 * o]
-                    rr = row + off[2 * o + 1]
+                    cc = col + T[2 * o]
+                    rr = row + T[2 * o + 1]
                     if 0 <= cc < nx and 0 <= rr < ny:
                         j = rr * nx + cc
-                        f += pair_force(xi, X[b, j], vi, V[b, j], k[o], rest[o], damp[o])
+                        f += pair_force(xi, load(xsel, x, v, W, b, j), vi, load(vsel, x, v, W, b, j),
+                                        P[h + 2 * n + o], P[h + 2 * n + ns + o], P[h + 2 * n + 2 * ns + o])
             else:
-                for e in range(off[i], off[i + 1]):
-                    s = spr[e]
-                    j = oth[e]
-                    f += pair_force(xi, X[b, j], vi, V[b, j], k[s], rest[s], damp[s])
-            a = f * inv_mass[i]
+                ne = (T.shape[0] - n - 1) // 2
+                for e in range(T[i], T[i + 1]):
+                    s = T[n + 1 + e]
+                    j = T[n + 1 + ne + e]
+                    f += pair_force(xi, load(xsel, x, v, W, b, j), vi, load(vsel, x, v, W, b, j),
+                                    P[h + 2 * n + s], P[h + 2 * n + ns + s], P[h + 2 * n + 2 * ns + s])
+            a = f * P[h + n + i]
         return a
 
     @ti.func
-    def collide(b, i, x: ti.template(), v: ti.template(), coll: ti.template(), g, dt):
+    def collide(b, i, x: ti.template(), v: ti.template(), coll: ti.template(), P: ti.template(), dt):
         """Push particle i out of every collider; restitution and Coulomb friction on its velocity."""
         xi = x[b, i]
         vi = v[b, i]
-        v_rest = 2 * g.norm() * dt  # below this normal speed an impact is resting contact (e = 0)
+        g2 = ti.cast(0, real)
+        for a in ti.static(range(dim)):
+            g2 += P[a] * P[a]
+        v_rest = 2 * ti.sqrt(g2) * dt  # below this normal speed an impact is resting contact (e = 0)
         for c in range(coll.shape[0]):
             vec_c = ti.Vector.zero(real, dim)  # plane normal, or sphere centre
             for a in ti.static(range(dim)):
@@ -166,65 +197,61 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
         v[b, i] = vi
 
     @ti.func
-    def phase(p: ti.template(), b, i, x: ti.template(), v: ti.template(), acc: ti.template(), xs: ti.template(),
-              vs: ti.template(), kx: ti.template(), kv: ti.template(), pinned: ti.template(), mass: ti.template(),
-              inv_mass: ti.template(), off: ti.template(), spr: ti.template(), oth: ti.template(), k: ti.template(),
-              rest: ti.template(), damp: ti.template(), coll: ti.template(), g, rho, dt, nx):
+    def phase(p: ti.template(), b, i, x: ti.template(), v: ti.template(), W: ti.template(), pinned: ti.template(),
+              P: ti.template(), T: ti.template(), coll: ti.template(), dt, nx):
         half = dt / 2
         if ti.static(p == "acc_x_v"):
-            acc[b, i] = accel(b, i, x, v, pinned, mass, inv_mass, off, spr, oth, k, rest, damp, g, rho, nx)
+            W[0, b, i] = accel(b, i, "x", "v", x, v, W, pinned, P, T, nx)
         elif ti.static(p == "acc_x_vs"):
-            acc[b, i] = accel(b, i, x, vs, pinned, mass, inv_mass, off, spr, oth, k, rest, damp, g, rho, nx)
+            W[0, b, i] = accel(b, i, "x", "vs", x, v, W, pinned, P, T, nx)
         elif ti.static(p == "acc_xs_vs"):
-            acc[b, i] = accel(b, i, xs, vs, pinned, mass, inv_mass, off, spr, oth, k, rest, damp, g, rho, nx)
+            W[0, b, i] = accel(b, i, "xs", "vs", x, v, W, pinned, P, T, nx)
         elif ti.static(p == "euler_update"):
             x[b, i] += dt * v[b, i]
-            v[b, i] += dt * acc[b, i]
+            v[b, i] += dt * W[0, b, i]
         elif ti.static(p == "symplectic_update"):
-            v[b, i] += dt * acc[b, i]
+            v[b, i] += dt * W[0, b, i]
             x[b, i] += dt * v[b, i]
         elif ti.static(p == "verlet_drift"):
-            a0 = acc[b, i]
-            kx[b, i] = a0
+            a0 = W[0, b, i]
+            W[3, b, i] = a0
             x[b, i] += dt * v[b, i] + (half * dt) * a0
-            vs[b, i] = v[b, i] + dt * a0
+            W[2, b, i] = v[b, i] + dt * a0
         elif ti.static(p == "verlet_kick"):
-            v[b, i] += half * (kx[b, i] + acc[b, i])
+            v[b, i] += half * (W[3, b, i] + W[0, b, i])
         elif ti.static(p == "rk_stage1"):
             vi = v[b, i]
-            kx[b, i] = vi
-            kv[b, i] = acc[b, i]
-            xs[b, i] = x[b, i] + half * vi
-            vs[b, i] = vi + half * acc[b, i]
+            W[3, b, i] = vi
+            W[4, b, i] = W[0, b, i]
+            W[1, b, i] = x[b, i] + half * vi
+            W[2, b, i] = vi + half * W[0, b, i]
         elif ti.static(p == "rk_stage2"):
-            vsi = vs[b, i]
-            kx[b, i] += 2 * vsi
-            kv[b, i] += 2 * acc[b, i]
-            xs[b, i] = x[b, i] + half * vsi
-            vs[b, i] = v[b, i] + half * acc[b, i]
+            vsi = W[2, b, i]
+            W[3, b, i] += 2 * vsi
+            W[4, b, i] += 2 * W[0, b, i]
+            W[1, b, i] = x[b, i] + half * vsi
+            W[2, b, i] = v[b, i] + half * W[0, b, i]
         elif ti.static(p == "rk_stage3"):
-            vsi = vs[b, i]
-            kx[b, i] += 2 * vsi
-            kv[b, i] += 2 * acc[b, i]
-            xs[b, i] = x[b, i] + dt * vsi
-            vs[b, i] = v[b, i] + dt * acc[b, i]
+            vsi = W[2, b, i]
+            W[3, b, i] += 2 * vsi
+            W[4, b, i] += 2 * W[0, b, i]
+            W[1, b, i] = x[b, i] + dt * vsi
+            W[2, b, i] = v[b, i] + dt * W[0, b, i]
         elif ti.static(p == "rk_final"):
             sixth = dt / 6
-            x[b, i] += sixth * (kx[b, i] + vs[b, i])
-            v[b, i] += sixth * (kv[b, i] + acc[b, i])
+            x[b, i] += sixth * (W[3, b, i] + W[2, b, i])
+            v[b, i] += sixth * (W[4, b, i] + W[0, b, i])
         # Colliders act once per substep, after the last phase that moves particles.
         if ti.static(colliders and p in ("euler_update", "symplectic_update", "verlet_kick", "rk_final")):
             if pinned[b, i] == 0:
-                collide(b, i, x, v, coll, g, dt)
+                collide(b, i, x, v, coll, P, dt)
 
     def make(phases, serial_substeps):
         if layout in ("frame", "serial"):
 
             @ti.kernel
-            def kernel(x: vec_arr, v: vec_arr, acc: vec_arr, xs: vec_arr, vs: vec_arr, kx: vec_arr, kv: vec_arr,
-                       pinned: mask_arr, mass: real_arr, inv_mass: real_arr, off: int_arr, spr: int_arr,
-                       oth: int_arr, k: real_arr, rest: real_arr, damp: real_arr, coll: coll_arr,
-                       g: vec, rho: real, dt: real, nx: ti.i32, nsub: ti.i32):
+            def kernel(x: vec_arr, v: vec_arr, W: work_arr, pinned: mask_arr, P: real_arr, T: int_arr,
+                       coll: coll_arr, dt: real, nx: ti.i32, nsub: ti.i32):
                 n = x.shape[1]
                 # One loop over copies (parallel, or serial for the "serial" layout);
                 # substeps and particles run serially inside it.
@@ -233,21 +260,17 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
                     for _s in range(nsub if ti.static(serial_substeps) else 1):
                         for p in ti.static(phases):
                             for i in range(n):
-                                phase(p, b, i, x, v, acc, xs, vs, kx, kv, pinned, mass, inv_mass, off, spr,
-                                      oth, k, rest, damp, coll, g, rho, dt, nx)
+                                phase(p, b, i, x, v, W, pinned, P, T, coll, dt, nx)
 
             return kernel
 
         @ti.kernel
-        def kernel(x: vec_arr, v: vec_arr, acc: vec_arr, xs: vec_arr, vs: vec_arr, kx: vec_arr, kv: vec_arr,
-                   pinned: mask_arr, mass: real_arr, inv_mass: real_arr, off: int_arr, spr: int_arr,
-                   oth: int_arr, k: real_arr, rest: real_arr, damp: real_arr, coll: coll_arr,
-                   g: vec, rho: real, dt: real, nx: ti.i32, nsub: ti.i32):
+        def kernel(x: vec_arr, v: vec_arr, W: work_arr, pinned: mask_arr, P: real_arr, T: int_arr,
+                   coll: coll_arr, dt: real, nx: ti.i32, nsub: ti.i32):
             # One parallel loop over (copy, particle) per phase; one launch per substep.
             for p in ti.static(phases):
                 for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                    phase(p, b, i, x, v, acc, xs, vs, kx, kv, pinned, mass, inv_mass, off, spr,
-                          oth, k, rest, damp, coll, g, rho, dt, nx)
+                    phase(p, b, i, x, v, W, pinned, P, T, coll, dt, nx)
 
         return kernel
 

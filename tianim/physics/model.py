@@ -352,7 +352,12 @@ class Model:
                 k = rest = damp = np.zeros(1, dtype=dtype)
             inv_mass = (1.0 / self.mass).astype(dtype)
             coll = self.collider_table.astype(dtype) if len(self.colliders) else np.zeros((1, COLLIDER_ROW), dtype=dtype)
+            topo = off if self.grid is not None else np.concatenate([off, spr, oth]).astype(np.int32)
             self._kernel_data[dtype] = dict(
+                params=np.concatenate([self.gravity.astype(dtype), np.array([self.medium_damping], dtype=dtype),
+                                       self.mass.astype(dtype), inv_mass, k, rest, damp]),
+                topo=topo,
+                gravity=self.gravity.astype(dtype),
                 mass=self.mass.astype(dtype),
                 inv_mass=inv_mass,
                 off=off,
@@ -370,6 +375,19 @@ class Model:
         from tianim.physics.state import State
 
         return State(self, batch=batch, dtype=dtype)
+
+    def gamma_max(self) -> float:
+        """Upper bound on the largest damping rate of the free particles [1/s].
+
+        Gershgorin bound on the largest eigenvalue of M^-1 C, with C the damping
+        matrix of the spring dashpots plus medium damping:
+        ``gamma_max <= max_i (2 sum_s c_s + rho) / m_i``.
+        """
+        row = np.full(self.n_particles, self.medium_damping)
+        if self.n_springs:
+            np.add.at(row, self.springs[:, 0], 2.0 * self.damping)
+            np.add.at(row, self.springs[:, 1], 2.0 * self.damping)
+        return float(np.max(row / self.mass))
 
     def omega_max(self) -> float:
         """Upper bound on the largest angular frequency of the free particles [rad/s].

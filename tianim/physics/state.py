@@ -161,6 +161,14 @@ class State:
             self.restore({k: data[k] for k in ("x", "v", "t", "pinned")})
 
     # ------------------------------------------------------------------ scratch buffers
+    def work(self, n: int) -> np.ndarray:
+        """The integrators' work array, shape (>= n, B, N, D) (not part of the snapshot)."""
+        buf = self._scratch.get("_work")
+        if buf is None or buf.shape[0] < n or buf.shape[1:] != self.x.shape:
+            buf = np.zeros((n,) + self.x.shape, dtype=self.dtype)
+            self._scratch["_work"] = buf
+        return buf
+
     def scratch(self, name: str) -> np.ndarray:
         """A (B, N, D) work buffer for integrators (not part of the snapshot)."""
         buf = self._scratch.get(name)
