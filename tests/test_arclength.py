@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from tianim.keyframe import ArcLength, PathMotion, catmull_rom
+from tianim.keyframe import ArcLength, PathMotion, catmull_rom, kochanek_bartels
 
 RNG = np.random.default_rng(0)
 POINTS = RNG.normal(size=(7, 2))
@@ -43,10 +43,29 @@ def test_constant_speed_within_requested_tolerance(tol, method):
     assert np.max(np.abs(speed - 1.0)) <= tol
 
 
-def test_auto_picks_table_for_loose_and_gauss_for_tight_tolerance():
+def test_auto_picks_linear_then_hermite_table_then_gauss():
     c = catmull_rom(POINTS)
     assert ArcLength(c, tol=1e-2).method == "table"
-    assert ArcLength(c, tol=1e-7).method == "gauss"
+    assert ArcLength(c, tol=1e-6).method == "hermite"  # the linear table would need millions of samples
+    assert ArcLength(c, tol=1e-6, max_table=100).method == "gauss"
+
+
+@pytest.mark.parametrize("tol", [1e-3, 1e-6])
+@pytest.mark.parametrize("curve", ["centripetal", "kb-c0"])
+def test_hermite_table_meets_tolerance(tol, curve):
+    # kb-c0: Kochanek-Bartels with continuity != 0 has tangent jumps at keys (one-sided node slopes)
+    c = catmull_rom(POINTS) if curve == "centripetal" else kochanek_bartels(POINTS, continuity=0.4)
+    al = ArcLength(c, tol=tol, method="hermite")
+    assert al.error_bound <= tol
+    L = al.length
+    s = np.linspace(0, L, 4001)[1:-1]
+    h = 1e-6 * L  # central differences: error ~1e-7 where they straddle a key (p'' jumps there)
+    speed = np.linalg.norm(c(al.u(s + h)) - c(al.u(s - h)), axis=1) / (2 * h)
+    assert np.max(np.abs(speed - 1.0)) <= tol
+    exact = ArcLength(c, method="gauss")
+    assert np.max(np.abs(exact.s(al.u(s)) - s)) <= tol * L
+    np.testing.assert_allclose(al.u([0.0, L]), c.domain, atol=1e-12)
+    np.testing.assert_allclose(al.s(al.u(s)), s, atol=tol * L)
 
 
 @pytest.mark.parametrize("method", ["table", "gauss"])

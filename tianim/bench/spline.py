@@ -7,7 +7,8 @@ the Gauss-Legendre + Newton method (``gauss_query_us``, ``gauss_max_rel_error``)
 and ``speedup_vs_splines``: the `splines` package's UnitSpeedAdapter (same
 points, centripetal, same run) per query divided by our Gauss method, whose error
 is equal or smaller (null when `splines` is missing); ``speedup_vs_splines_table``
-compares the table method (looser error).
+compares the table method (looser error); ``hermite_*``: the cubic Hermite table built
+for ``tol=1e-6`` (query time, max relative arc-length error, intervals, speedup).
 """
 
 from __future__ import annotations
@@ -49,16 +50,21 @@ def main(argv=None) -> int:
     nq = 10_000 if args.quick else 100_000
     table = ArcLength(curve, method="table", samples=1000)
     gauss = ArcLength(curve, method="gauss")
+    hermite = ArcLength(curve, tol=1e-6, method="hermite")
     s = rng.uniform(0, table.length, nq)
     t_table = median_time(lambda: curve(table.u(s)), repeats=repeats) / nq
     t_gauss = median_time(lambda: curve(gauss.u(s)), repeats=repeats) / nq
+    t_herm = median_time(lambda: curve(hermite.u(s)), repeats=repeats) / nq
     check = np.linspace(0, table.length, 20_001)
     err_table = float(np.max(np.abs(gauss.s(table.u(check)) - check)) / gauss.length)
     err_gauss = float(np.max(np.abs(gauss.s(gauss.u(check)) - check)) / gauss.length)
+    err_herm = float(np.max(np.abs(gauss.s(hermite.u(check)) - check)) / gauss.length)
     auto = ArcLength(curve, tol=1e-3)
     rows = [
         {"method": "table (1000 intervals)", "us_per_query": t_table * 1e6, "max_rel_error": err_table,
          "speed_bound": table.error_bound},
+        {"method": f"hermite table ({hermite.table_size} intervals, tol 1e-6)", "us_per_query": t_herm * 1e6,
+         "max_rel_error": err_herm, "speed_bound": hermite.error_bound},
         {"method": "gauss + newton", "us_per_query": t_gauss * 1e6, "max_rel_error": err_gauss, "speed_bound": ""},
     ]
     t_ref, err_ref = _splines_reference(points, s[: 5 if args.quick else 20] * 0.999)
@@ -76,6 +82,10 @@ def main(argv=None) -> int:
         "splines_max_rel_error": err_ref,
         "speedup_vs_splines": None if t_ref is None else t_ref / t_gauss,
         "speedup_vs_splines_table": None if t_ref is None else t_ref / t_table,
+        "hermite_query_us": t_herm * 1e6,
+        "hermite_max_rel_error": err_herm,
+        "hermite_intervals": hermite.table_size,
+        "speedup_vs_splines_hermite": None if t_ref is None else t_ref / t_herm,
         "auto_tol_1e-3_method": auto.method,
     }
     print(summary)
