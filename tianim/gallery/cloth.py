@@ -16,7 +16,7 @@ def frames(width: int, height: int, n_frames: int, fps: float, n: int = 40):
     """Yield (height, width, 3) uint8 frames of an n x n cloth falling on a sphere and the ground."""
     sphere = tp.Sphere(center=(0.0, 0.35, 0.0), radius=0.3, friction=0.6)
     model = tp.cloth(nx=n, ny=n, size=(1.2, 1.2), total_mass=0.3, stiffness=(800.0, 300.0, 20.0),
-                     damping=(0.4, 0.2, 0.05), medium_damping=2e-4, origin=(-0.6, 0.9, -0.6), pins="none",
+                     damping=(0.02, 0.01, 0.002), medium_damping=2e-4, origin=(-0.6, 0.9, -0.6), pins="none",
                      colliders=[tp.Ground(height=0.0, friction=0.5), sphere])
     state = model.state(batch=1, dtype=np.float32)
     sim = Simulation(model, state, fps=fps)
