@@ -283,11 +283,9 @@ def plan_steps(model, frame_dt: float = 1 / 24, accuracy: float | None = None, m
     w_acc = min(w, math.pi / frame_dt if resolve is None else resolve)
     candidates = []
     for m in methods:
-        c = STABILITY_LIMIT[m]
-        if m == "explicit_euler":
-            limit = stable_dt(model, m) * w / model.omega_max() if model.omega_max() > 0 else math.inf
-        else:
-            limit = math.inf if (w == 0.0 or math.isinf(c)) else c / w
+        # Damping-aware limit of :func:`stable_dt` (Gershgorin), rescaled by the power-iteration refinement.
+        refine = model.omega_max() / w if w > 0 else 1.0
+        limit = stable_dt(model, m) * refine if not math.isinf(STABILITY_LIMIT[m]) else math.inf
         if limit == 0.0:
             candidates.append({"method": m, "ok": False, "reason": "unstable at every dt (undamped)"})
             continue
