@@ -46,7 +46,7 @@ Never terminates; truncated after 100 steps (2 s).
 
 ## Physics (fixed for version 0)
 
-Control step 0.02 s (``render_fps`` 50) = 40 substeps (``tianim.physics.substeps_for(model,
+Control step 0.02 s (``render_fps`` 50) = 45 substeps (``tianim.physics.substeps_for(model,
 frame_dt=0.02, safety=0.5)``), symplectic Euler, float32 state, ground contact with
 Coulomb friction each substep. No self-collision: a folded layer rests on the
 table through the layer under it (the reward measures positions, which this does
@@ -74,7 +74,7 @@ STIFFNESS = (200.0, 40.0, 0.01)
 DAMPING = (0.02, 0.01, 0.0)
 FRICTION = 0.6
 DT = 0.02
-SUBSTEPS = 40
+SUBSTEPS = 45
 MAX_EPISODE_STEPS = 100
 MOVE = 0.02
 GRAB_RADIUS = 0.03
