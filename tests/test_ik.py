@@ -206,3 +206,24 @@ def test_bad_rest_shape_raises():
     chain = _chain(7)
     with pytest.raises(ValueError, match="rest"):
         solve_ik(chain, np.zeros((3, 2)) + 0.3, rest=np.zeros((2, 7)))
+
+
+@pytest.mark.parametrize("n", [2, 3, 7])
+def test_batched_kernel_path_matches_numpy_path(n, monkeypatch):
+    # batches of KERNEL_MIN_BATCH or more targets on a planar chain run in the Taichi kernel
+    import tianim.kinematics.ik as ik
+
+    chain = _chain(n)
+    targets = _targets(chain, max(40, ik.KERNEL_MIN_BATCH), seed=30 + n)
+    kern = solve_ik(chain, targets, tol=1e-8)
+    assert kern.converged.all(), kern.residual.max()
+    assert np.all(kern.q >= chain.lower) and np.all(kern.q <= chain.upper)
+    np.testing.assert_allclose(chain.end_effector(kern.q), targets, atol=1.01e-8)
+    assert np.array_equal(kern.q, solve_ik(chain, targets, tol=1e-8).q)  # deterministic
+    monkeypatch.setattr(ik, "KERNEL_MIN_BATCH", 10**9)
+    ref = solve_ik(chain, targets, tol=1e-8)
+    np.testing.assert_allclose(kern.q, ref.q, atol=1e-6)
+    if n > 2:  # least motion from q0 = 0 where no limit is active or nearly active (it can block the polish)
+        free = np.all(np.abs(kern.q) < LIMIT - 0.05, axis=1)
+        assert free.sum() >= len(free) // 2
+        assert _null_residual(chain, kern.q[free], 0.0).max() < 1e-6

@@ -51,12 +51,21 @@ def _planar_fk(L, bx, by, q):
     return x + bx, y + by, dx, dy
 
 
+def plain_constants(chain):
+    """(lengths, base x, base y, lower, upper, limited) of a PlanarChain as Python floats, cached on the
+    (immutable) chain so a single-target solve converts nothing."""
+    const = chain.__dict__.get("_plain_constants")
+    if const is None:
+        limited = bool(np.any(np.isfinite(chain.lower)) or np.any(np.isfinite(chain.upper)))
+        const = (chain.lengths.tolist(), float(chain.base[0]), float(chain.base[1]), chain.lower.tolist(),
+                 chain.upper.tolist(), limited)
+        chain.__dict__["_plain_constants"] = const
+    return const
+
+
 def dls_planar_single(chain, target, q0, tol: float, iters: int):
     """DLS task phase for one target on a PlanarChain; returns (q list, residual, iterations)."""
-    L = chain.lengths.tolist()
-    bx, by = float(chain.base[0]), float(chain.base[1])
-    lo, hi = chain.lower.tolist(), chain.upper.tolist()
-    limited = bool(np.any(np.isfinite(chain.lower)) or np.any(np.isfinite(chain.upper)))
+    L, bx, by, lo, hi, limited = plain_constants(chain)
     tx, ty = float(target[0]), float(target[1])
     s2 = _scale2(chain)
     lam2, lam_min, lam_max = _LAM0 * s2, _LAM_MIN * s2, _LAM_MAX * s2

@@ -26,7 +26,9 @@ Methods (``method=``):
            as soon as the residual meets ``tol``; a redundant chain's answer is then
            polished to the exact rest-pose optimum by Newton steps that keep the task
            (:mod:`tianim.kinematics.nullspace`). One target on a planar chain takes a
-           plain-float fast path; batches are vectorised over targets.
+           plain-float fast path; batches of ``KERNEL_MIN_BATCH`` or more targets on a
+           planar chain run in one Taichi kernel (one target per thread), other batches
+           are vectorised in NumPy.
 ``"jt"``   Jacobian transpose ``dq = mu a J^T e`` with Buss's step
            ``a = <e, J J^T e> / |J J^T e|^2`` (Buss 2004, eq. 7), and a multiplier
            mu that doubles after a step that lowers the error and drops below 1 after one
@@ -44,10 +46,12 @@ import numpy as np
 
 from tianim.kinematics._validate import float_array, joint_vector
 from tianim.kinematics.dls import dls_batch, dls_planar_single
-from tianim.kinematics.nullspace import polish
+from tianim.kinematics.nullspace import ITERS as POLISH_ITERS
+from tianim.kinematics.nullspace import KERNEL_CONSTANTS, polish
 from tianim.kinematics.planar import PlanarChain
 
 METHODS = ("dls", "jt", "ccd", "fabrik")
+KERNEL_MIN_BATCH = 32  # planar DLS batches from this size run in one Taichi kernel (ik_kernel.py)
 _DEFAULT_ITERS = {"dls": 200, "jt": 5000, "ccd": 1000, "fabrik": 1000}
 
 
@@ -238,6 +242,13 @@ def _dls(chain, tgt, q, tol, iters, rest):
     if len(q) == 1 and isinstance(chain, PlanarChain):
         q1, r1, k1 = dls_planar_single(chain, tgt[0], q[0], tol, iters)
         q, r, it = np.array([q1]), np.array([r1]), np.array([k1], dtype=np.int64)
+    elif len(q) >= KERNEL_MIN_BATCH and isinstance(chain, PlanarChain):
+        from tianim.kinematics.ik_kernel import solve_planar_batch
+        from tianim.runtime import ensure_taichi
+
+        ensure_taichi()
+        return solve_planar_batch(chain, tgt, q, rest if polishing else None, tol, iters, POLISH_ITERS,
+                                  KERNEL_CONSTANTS)
     else:
         q, r, it = dls_batch(chain, tgt, q, tol, iters)
     if polishing:

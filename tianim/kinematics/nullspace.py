@@ -32,13 +32,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim.kinematics.dls import _MAX_STEP, _planar_fk
+from tianim.kinematics import dls
+from tianim.kinematics.dls import _MAX_STEP, _planar_fk, plain_constants
 
 ITERS = 100
 _PTOL = 1e-10  # stop when |N (q - rest)| <= _PTOL (1 + |q - rest|), radians
 _RESTORE = 4  # Gauss-Newton corrections per trial
 _RESTORE_TOL = 1e-3  # ... correct a trial pose while its residual exceeds _RESTORE_TOL * tol
 _BACKTRACK = 6
+# every tuning constant of both phases, for the Taichi kernel (tianim.kinematics.ik_kernel)
+KERNEL_CONSTANTS = {"lam0": dls._LAM0, "lam_min": dls._LAM_MIN, "lam_max": dls._LAM_MAX, "grad_tol": dls._GRAD_TOL,
+                    "max_step": _MAX_STEP, "ptol": _PTOL, "restore_tol": _RESTORE_TOL, "backtrack": _BACKTRACK,
+                    "restore": _RESTORE}
 
 
 def _curvature_planar(J: np.ndarray, mu: np.ndarray, idx: np.ndarray) -> np.ndarray:
@@ -168,11 +173,8 @@ def _kkt_dense(J0, J1, g, e0, e1, w, pg, a, b, c) -> list:
 def _polish_planar_one(chain, target, q, rest, tol: float, iters: int):
     """:func:`polish` for one pose of a PlanarChain in plain floats: the SQP step by the O(n) structured
     solve of :func:`_factor_h` (dense fallback where H is indefinite); ~10x cheaper than the batched path."""
-    L = chain.lengths.tolist()
-    bx, by = float(chain.base[0]), float(chain.base[1])
+    L, bx, by, lo, hi, limited = plain_constants(chain)
     tx, ty = float(target[0]), float(target[1])
-    lo, hi = chain.lower.tolist(), chain.upper.tolist()
-    limited = bool(np.any(np.isfinite(chain.lower)) or np.any(np.isfinite(chain.upper)))
     rs = [float(v) for v in rest]
     n = len(rs)
     rtol = _RESTORE_TOL * tol

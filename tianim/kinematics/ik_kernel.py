@@ -1,0 +1,361 @@
+"""Taichi kernel: batched DLS IK on a planar chain, task phase plus null-space polish, one target per thread.
+
+The body follows :func:`tianim.kinematics.dls.dls_planar_single` (adaptive-damping
+DLS, trust region, stop at ``tol``) and
+:func:`tianim.kinematics.nullspace._polish_planar_one` (SQP step by the O(n)
+structured solve ``H = U (S S^T + D) U^T``, feasible-point backtracking with
+Gauss-Newton restoration, Lagrangian comparison inside the residual band), in
+float64 throughout. Where the structured solve is unavailable (a pivot ~0 or a
+singular Schur complement) or the step's tangential curvature is not positive,
+the step is the projected gradient ``-N (q - rest)`` (the NumPy path would use a
+dense KKT solve there; both are globalised, so only the iteration count differs).
+
+Chain-independent: joint loops run over the arrays' runtime length, so one
+compiled kernel serves every link count. Constants that are not exact in float32
+come in through ``prm`` (Taichi would round a float literal to float32). Per-target
+scratch lives in ``work`` (B, 16, n). No atomics: results do not depend on the
+thread count.
+"""
+
+
+import numpy as np
+import taichi as ti
+
+f64 = ti.f64
+# work rows
+_Q, _QT, _DX, _DY, _DXT, _DYT, _G, _W, _PIV, _HG, _H0, _H1, _DQ, _PG, _Z, _SUF = range(16)
+NROWS = 16
+
+
+@ti.func
+def _fk(L: ti.template(), bx, by, work: ti.template(), b, rq: ti.template(), rdx: ti.template(),
+        rdy: ti.template()):
+    """End effector of pose row rq; tail sums (end - joint i) into rows rdx, rdy."""
+    n = L.shape[0]
+    phi = ti.f64(0.0)
+    for i in range(n):
+        phi += work[b, rq, i]
+        work[b, rdx, i] = L[i] * ti.cos(phi)
+        work[b, rdy, i] = L[i] * ti.sin(phi)
+    x = ti.f64(0.0)
+    y = ti.f64(0.0)
+    for k in range(n):
+        i = n - 1 - k
+        x += work[b, rdx, i]
+        y += work[b, rdy, i]
+        work[b, rdx, i] = x
+        work[b, rdy, i] = y
+    return x + bx, y + by
+
+
+@ti.func
+def _gram(work: ti.template(), b, n, rdx: ti.template(), rdy: ti.template(), eps):
+    """J J^T = [[a, bb], [bb, c]] with J rows (-dy, dx), regularised by eps * trace."""
+    a = ti.f64(0.0)
+    bb = ti.f64(0.0)
+    c = ti.f64(0.0)
+    for i in range(n):
+        u = work[b, rdx, i]
+        v = work[b, rdy, i]
+        a += v * v
+        bb -= u * v
+        c += u * u
+    t = eps * (a + c)
+    return a + t, bb, c + t
+
+
+@ti.func
+def _solve_h(work: ti.template(), b, n, rv: ti.template(), sgn, rout: ti.template()):
+    """work[rout] = H^-1 (sgn * work[rv]) = S^T T^-1 S v (Thomas, pivots in row _PIV)."""
+    acc = ti.f64(0.0)
+    for k in range(n):
+        nxt = ti.f64(0.0)
+        if k < n - 1:
+            nxt = sgn * work[b, rv, k + 1]
+        prev = ti.f64(0.0)
+        if k > 0:
+            prev = acc / work[b, _PIV, k - 1]
+        acc = sgn * work[b, rv, k] - nxt + prev
+        work[b, _Z, k] = acc
+    x = ti.f64(0.0)
+    for kk in range(n):
+        k = n - 1 - kk
+        add = ti.f64(0.0)
+        if k < n - 1:
+            add = x
+        x = (work[b, _Z, k] + add) / work[b, _PIV, k]
+        work[b, _Z, k] = x
+    for k in range(n):
+        prev = ti.f64(0.0)
+        if k > 0:
+            prev = work[b, _Z, k - 1]
+        work[b, rout, k] = work[b, _Z, k] - prev
+
+
+@ti.func
+def _clamp_row(work: ti.template(), b, n, r: ti.template(), lo: ti.template(), hi: ti.template()):
+    for i in range(n):
+        work[b, r, i] = ti.min(ti.max(work[b, r, i], lo[i]), hi[i])
+
+
+@ti.kernel
+def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dtype=f64, ndim=1),
+               lo: ti.types.ndarray(dtype=f64, ndim=1), hi: ti.types.ndarray(dtype=f64, ndim=1),
+               tgt: ti.types.ndarray(dtype=f64, ndim=2), q: ti.types.ndarray(dtype=f64, ndim=2),
+               rest: ti.types.ndarray(dtype=f64, ndim=2), work: ti.types.ndarray(dtype=f64, ndim=3),
+               prm: ti.types.ndarray(dtype=f64, ndim=1), ipar: ti.types.ndarray(dtype=ti.i32, ndim=1),
+               res: ti.types.ndarray(dtype=f64, ndim=1), its: ti.types.ndarray(dtype=ti.i32, ndim=1)):
+    """Solve every row b of tgt (B, 2) from q (B, n) in place; residuals into res, task iterations into its.
+
+    prm: tol, lam0, lam_min, lam_max, grad_tol^2, max_step, ptol, restore_tol, gram_eps, piv_eps,
+    schur_eps, curv_min, 0.1; ipar: task iterations, polish iterations, polish (0/1), backtracks, restores.
+    """
+    n = L.shape[0]
+    bx = base[0]
+    by = base[1]
+    tol = prm[0]
+    tol2 = tol * tol
+    for b in range(tgt.shape[0]):
+        tx = tgt[b, 0]
+        ty = tgt[b, 1]
+        for i in range(n):
+            work[b, _Q, i] = q[b, i]
+        x, y = _fk(L, bx, by, work, b, _Q, _DX, _DY)
+        e0 = tx - x
+        e1 = ty - y
+        r2 = e0 * e0 + e1 * e1
+        lam2 = prm[1]
+        k = 0
+        stop = 0
+        # ---- task phase: adaptive-damping DLS ----
+        while k < ipar[0] and r2 > tol2 and stop == 0:
+            k += 1
+            a, bb, c = _gram(work, b, n, _DX, _DY, ti.f64(0.0))
+            gg = ti.f64(0.0)
+            for i in range(n):
+                gi = -work[b, _DY, i] * e0 + work[b, _DX, i] * e1
+                gg += gi * gi
+            if gg <= prm[4] * (a + c) * r2:
+                stop = 1
+            else:
+                a += lam2
+                c += lam2
+                det = a * c - bb * bb
+                g0 = (c * e0 - bb * e1) / det
+                g1 = (a * e1 - bb * e0) / det
+                big = ti.f64(0.0)
+                for i in range(n):
+                    d = -work[b, _DY, i] * g0 + work[b, _DX, i] * g1
+                    work[b, _DQ, i] = d
+                    big = ti.max(big, ti.abs(d))
+                f = ti.f64(1.0)
+                if big > prm[5]:
+                    f = prm[5] / big
+                for i in range(n):
+                    work[b, _QT, i] = work[b, _Q, i] + f * work[b, _DQ, i]
+                _clamp_row(work, b, n, _QT, lo, hi)
+                xn, yn = _fk(L, bx, by, work, b, _QT, _DXT, _DYT)
+                f0 = tx - xn
+                f1 = ty - yn
+                r2n = f0 * f0 + f1 * f1
+                if r2n < r2:
+                    for i in range(n):
+                        work[b, _Q, i] = work[b, _QT, i]
+                        work[b, _DX, i] = work[b, _DXT, i]
+                        work[b, _DY, i] = work[b, _DYT, i]
+                    e0 = f0
+                    e1 = f1
+                    r2 = r2n
+                    lam2 = ti.max(lam2 * prm[12], prm[2])
+                else:
+                    lam2 *= 10.0
+                    if lam2 > prm[3]:
+                        stop = 1
+        r = ti.sqrt(r2)
+        # ---- null-space polish: SQP with feasible-point backtracking ----
+        if ipar[2] != 0 and r <= tol:
+            phi = ti.f64(0.0)
+            for i in range(n):
+                gi = work[b, _Q, i] - rest[b, i]
+                work[b, _G, i] = gi
+                phi += gi * gi
+            phi *= 0.5
+            it2 = 0
+            go = 1
+            while it2 < ipar[1] and go == 1:
+                it2 += 1
+                a, bb, c = _gram(work, b, n, _DX, _DY, prm[8])
+                det = a * c - bb * bb
+                u0 = ti.f64(0.0)
+                u1 = ti.f64(0.0)
+                for i in range(n):
+                    u0 -= work[b, _DY, i] * work[b, _G, i]
+                    u1 += work[b, _DX, i] * work[b, _G, i]
+                mu0 = (c * u0 - bb * u1) / det
+                mu1 = (a * u1 - bb * u0) / det
+                pgn = ti.f64(0.0)
+                for i in range(n):
+                    p = work[b, _G, i] + mu0 * work[b, _DY, i] - mu1 * work[b, _DX, i]
+                    work[b, _PG, i] = p
+                    pgn += p * p
+                if ti.sqrt(pgn) <= prm[6] * (1.0 + ti.sqrt(2.0 * phi)):
+                    go = 0
+                else:
+                    # H = I + w[max(i, j)], w = mu0 dx + mu1 dy; T = S S^T + D, D = diag(w_k - w_k+1)
+                    for i in range(n):
+                        work[b, _W, i] = mu0 * work[b, _DX, i] + mu1 * work[b, _DY, i]
+                    ok = 1
+                    minpiv = ti.f64(1.0)
+                    prevp = ti.f64(0.0)
+                    for kk in range(n):
+                        t = 1.0 + work[b, _W, kk]
+                        if kk < n - 1:
+                            t += 1.0 - work[b, _W, kk + 1]
+                        if kk > 0:
+                            t -= 1.0 / prevp
+                        if ti.abs(t) <= prm[9]:
+                            ok = 0
+                            t = ti.f64(1.0)
+                        work[b, _PIV, kk] = t
+                        prevp = t
+                        minpiv = ti.min(minpiv, t)
+                    use_pg = 1
+                    if ok == 1:
+                        _solve_h(work, b, n, _G, ti.f64(1.0), _HG)
+                        _solve_h(work, b, n, _DY, ti.f64(-1.0), _H0)
+                        _solve_h(work, b, n, _DX, ti.f64(1.0), _H1)
+                        A00 = ti.f64(0.0)
+                        A01 = ti.f64(0.0)
+                        A11 = ti.f64(0.0)
+                        r0 = e0
+                        r1 = e1
+                        for i in range(n):
+                            j0 = -work[b, _DY, i]
+                            j1 = work[b, _DX, i]
+                            A00 += j0 * work[b, _H0, i]
+                            A01 += j0 * work[b, _H1, i]
+                            A11 += j1 * work[b, _H1, i]
+                            r0 += j0 * work[b, _HG, i]
+                            r1 += j1 * work[b, _HG, i]
+                        dA = A00 * A11 - A01 * A01
+                        if ti.abs(dA) > prm[10] * (A00 * A00 + A11 * A11):
+                            l0 = (A11 * r0 - A01 * r1) / dA
+                            l1 = (A00 * r1 - A01 * r0) / dA
+                            for i in range(n):
+                                work[b, _DQ, i] = l0 * work[b, _H0, i] + l1 * work[b, _H1, i] - work[b, _HG, i]
+                            use_pg = 0
+                            if minpiv <= 0.0:  # H indefinite: the tangential part must see positive curvature
+                                v0 = ti.f64(0.0)
+                                v1 = ti.f64(0.0)
+                                for i in range(n):
+                                    v0 -= work[b, _DY, i] * work[b, _DQ, i]
+                                    v1 += work[b, _DX, i] * work[b, _DQ, i]
+                                y0 = (c * v0 - bb * v1) / det
+                                y1 = (a * v1 - bb * v0) / det
+                                dd = ti.f64(0.0)
+                                for i in range(n):
+                                    dt = work[b, _DQ, i] + y0 * work[b, _DY, i] - y1 * work[b, _DX, i]
+                                    work[b, _Z, i] = dt
+                                    dd += dt * dt
+                                s = ti.f64(0.0)
+                                for kk in range(n):
+                                    i = n - 1 - kk
+                                    work[b, _SUF, i] = s
+                                    s += work[b, _W, i] * work[b, _Z, i]
+                                quad = ti.f64(0.0)
+                                pre = ti.f64(0.0)
+                                for i in range(n):
+                                    dt = work[b, _Z, i]
+                                    pre += dt
+                                    quad += dt * (dt + work[b, _W, i] * pre + work[b, _SUF, i])
+                                if not (quad >= prm[11] * dd):
+                                    use_pg = 1
+                    big = ti.f64(0.0)
+                    for i in range(n):
+                        if use_pg == 1:
+                            work[b, _DQ, i] = -work[b, _PG, i]
+                        big = ti.max(big, ti.abs(work[b, _DQ, i]))
+                    if not (big <= 1e30):  # NaN or inf: projected gradient
+                        big = ti.f64(0.0)
+                        for i in range(n):
+                            work[b, _DQ, i] = -work[b, _PG, i]
+                            big = ti.max(big, ti.abs(work[b, _DQ, i]))
+                    f = ti.f64(1.0)
+                    if big > prm[5]:
+                        f = prm[5] / big
+                    alpha = f
+                    acc = 0
+                    bt = 0
+                    noise_mu = 2.0 * ti.sqrt(mu0 * mu0 + mu1 * mu1)
+                    while bt < ipar[3] and acc == 0:
+                        bt += 1
+                        for i in range(n):
+                            work[b, _QT, i] = work[b, _Q, i] + alpha * work[b, _DQ, i]
+                        _clamp_row(work, b, n, _QT, lo, hi)
+                        xt, yt = _fk(L, bx, by, work, b, _QT, _DXT, _DYT)
+                        f0 = tx - xt
+                        f1 = ty - yt
+                        rt = ti.sqrt(f0 * f0 + f1 * f1)
+                        rs = 0
+                        while rs < ipar[4] and rt > prm[7] * tol:
+                            rs += 1
+                            at, bt2, ct = _gram(work, b, n, _DXT, _DYT, prm[8])
+                            dt2 = at * ct - bt2 * bt2
+                            y0 = (ct * f0 - bt2 * f1) / dt2
+                            y1 = (at * f1 - bt2 * f0) / dt2
+                            for i in range(n):
+                                work[b, _QT, i] += -y0 * work[b, _DYT, i] + y1 * work[b, _DXT, i]
+                            _clamp_row(work, b, n, _QT, lo, hi)
+                            xt, yt = _fk(L, bx, by, work, b, _QT, _DXT, _DYT)
+                            f0 = tx - xt
+                            f1 = ty - yt
+                            rt = ti.sqrt(f0 * f0 + f1 * f1)
+                        phit = ti.f64(0.0)
+                        for i in range(n):
+                            gt = work[b, _QT, i] - rest[b, i]
+                            phit += gt * gt
+                        phit *= 0.5
+                        noise = noise_mu * (r + rt)
+                        better = phit < phi - noise
+                        if ti.abs(phit - phi) <= noise and phit + mu0 * f0 + mu1 * f1 < phi + mu0 * e0 + mu1 * e1:
+                            better = True
+                        if rt <= tol and better:
+                            for i in range(n):
+                                work[b, _Q, i] = work[b, _QT, i]
+                                work[b, _DX, i] = work[b, _DXT, i]
+                                work[b, _DY, i] = work[b, _DYT, i]
+                                work[b, _G, i] = work[b, _QT, i] - rest[b, i]
+                            phi = phit
+                            r = rt
+                            e0 = f0
+                            e1 = f1
+                            acc = 1
+                        else:
+                            alpha *= 0.25
+                    if acc == 0:
+                        go = 0
+        for i in range(n):
+            q[b, i] = work[b, _Q, i]
+        res[b] = r
+        its[b] = k
+
+
+def solve_planar_batch(chain, tgt: np.ndarray, q: np.ndarray, rest: np.ndarray | None, tol: float, iters: int,
+                       polish_iters: int, consts: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Run :func:`planar_dls` on (B, 2) targets from (B, n) poses; returns (q, residual, iterations)."""
+    B, n = q.shape
+    q = np.ascontiguousarray(q, dtype=np.float64).copy()
+    s2 = max(float(chain.reach) ** 2, 1e-300)
+    prm = np.array([tol, consts["lam0"] * s2, consts["lam_min"] * s2, consts["lam_max"] * s2,
+                    consts["grad_tol"] ** 2, consts["max_step"], consts["ptol"], consts["restore_tol"], 1e-15,
+                    1e-9, 1e-12, 1e-3, 0.1], dtype=np.float64)
+    ipar = np.array([iters, polish_iters, 0 if rest is None else 1, consts["backtrack"], consts["restore"]],
+                    dtype=np.int32)
+    rest_arr = np.zeros((1, n)) if rest is None else np.ascontiguousarray(rest, dtype=np.float64)
+    res = np.empty(B)
+    its = np.empty(B, dtype=np.int32)
+    work = np.empty((B, NROWS, n))
+    planar_dls(np.ascontiguousarray(chain.lengths), np.ascontiguousarray(chain.base),
+               np.ascontiguousarray(chain.lower), np.ascontiguousarray(chain.upper),
+               np.ascontiguousarray(tgt, dtype=np.float64), q, rest_arr, work, prm, ipar, res, its)
+    return q, res, its.astype(np.int64)
