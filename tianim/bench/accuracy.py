@@ -137,6 +137,8 @@ def stiff_cloth_table(n=64, frames=2, frame_dt=1 / 24, repeats=1) -> list:
     for _ in range(frames):
         tp.step(model, ref, se.dt / 2, substeps=2 * se.substeps, method=se.method, check=False)
     x_ref = ref.x[0]
+    print(f"reference: {2 * se.substeps} substeps/frame of {se.method}, float64, max strain "
+          f"{float(tp.max_strain(model, ref)[0]):.3g}")
     rows = []
     for method, sub in ((se.method, se.substeps), ("implicit_euler", 1), ("implicit_euler", 4), ("xpbd", 20),
                         ("xpbd", 80)):
@@ -146,11 +148,13 @@ def stiff_cloth_table(n=64, frames=2, frame_dt=1 / 24, repeats=1) -> list:
             state.x[...] = model.positions
             state.v[...] = 0
             for _ in range(frames):
-                tp.step(model, state, frame_dt / sub, substeps=sub, method=method)
+                # no watchdog: XPBD's unconverged stiff constraints store energy that it would flag
+                tp.step(model, state, frame_dt / sub, substeps=sub, method=method, check=False)
 
         t = median_time(run, repeats=repeats, warmup=1) / frames
         rows.append({"method": method, "substeps_per_frame": sub, "frames_per_s": 1.0 / t,
-                     "rel_error": rel_error(state.x[0].astype(np.float64), x_ref, model.positions)})
+                     "rel_error": rel_error(state.x[0].astype(np.float64), x_ref, model.positions),
+                     "max_strain": float(tp.max_strain(model, state)[0])})
     return rows
 
 
