@@ -227,3 +227,28 @@ def test_batched_kernel_path_matches_numpy_path(n, monkeypatch):
         free = np.all(np.abs(kern.q) < LIMIT - 0.05, axis=1)
         assert free.sum() >= len(free) // 2
         assert _null_residual(chain, kern.q[free], 0.0).max() < 1e-6
+
+
+@pytest.mark.parametrize("path", ["single", "numpy", "kernel"])
+def test_unreachable_targets_converge_to_the_exact_closest_point(path, monkeypatch):
+    # large-residual least squares: DLS alone converges linearly (~2.5% per step) at the stretched pose;
+    # the full-Hessian LM it switches to converges quadratically
+    import tianim.kinematics.ik as ik
+
+    chain = PlanarChain(np.linspace(1.2, 0.8, 5) / 5, base=(0.3, -0.2))
+    rng = np.random.default_rng(8)
+    ang = rng.uniform(-np.pi, np.pi, 40)
+    direction = np.stack([np.cos(ang), np.sin(ang)], axis=1)
+    targets = chain.base + chain.reach * rng.uniform(1.05, 3.0, 40)[:, None] * direction
+    if path == "numpy":
+        monkeypatch.setattr(ik, "KERNEL_MIN_BATCH", 10**9)
+    if path == "single":
+        res = [solve_ik(chain, t, max_iter=100) for t in targets[:8]]
+        q, r = np.array([x.q for x in res]), np.array([x.residual for x in res])
+        targets, direction = targets[:8], direction[:8]
+    else:
+        out = solve_ik(chain, targets, max_iter=100)
+        q, r = out.q, out.residual
+    want = np.linalg.norm(targets - chain.base, axis=1) - chain.reach
+    np.testing.assert_allclose(r, want, atol=1e-9)
+    np.testing.assert_allclose(chain.end_effector(q), chain.base + chain.reach * direction, atol=1e-4)

@@ -22,6 +22,8 @@ _LAM0 = 1e-3  # initial lam^2, in units of reach^2
 _LAM_MIN = 1e-14
 _LAM_MAX = 1e8
 _GRAD_TOL = 1e-12  # |J^T e| <= _GRAD_TOL |J| |e|: stationary (closest pose of an unreachable target)
+_SLOW = 0.25  # _SLOW_STEPS accepted, unclamped steps in a row that each keep |e|^2 above _SLOW x its value ...
+_SLOW_STEPS = 4  # ... switch the task phase to the full Hessian (large residual: an unreachable target)
 _MAX_STEP = 0.5  # largest joint change per step (rad, or m for a prismatic joint): a trust region
 
 
@@ -76,6 +78,7 @@ def dls_planar_single(chain, target, q0, tol: float, iters: int):
     e0, e1 = tx - x, ty - y
     r2 = e0 * e0 + e1 * e1
     k = 0
+    newton, slow = False, 0
     while k < iters and r2 > tol2:
         k += 1
         a = b = c = 0.0
@@ -92,14 +95,23 @@ def dls_planar_single(chain, target, q0, tol: float, iters: int):
             gg += g * g
         if gg <= (_GRAD_TOL * _GRAD_TOL) * (a + c) * r2:
             break
-        a += lam2
-        c += lam2
-        det = a * c - b * b
-        g0 = (c * e0 - b * e1) / det
-        g1 = (a * e1 - b * e0) / det
-        qn = [-dy[i] * g0 + dx[i] * g1 for i in range(n)]
+        if newton:
+            qn = _newton_lm_step(dx, dy, e0, e1, lam2)
+            if qn is None:  # (J^T J + W + lam^2 I) is singular or gives no descent: damp more
+                lam2 *= 10.0
+                if lam2 > lam_max:
+                    break
+                continue
+        else:
+            a += lam2
+            c += lam2
+            det = a * c - b * b
+            g0 = (c * e0 - b * e1) / det
+            g1 = (a * e1 - b * e0) / det
+            qn = [-dy[i] * g0 + dx[i] * g1 for i in range(n)]
         big = max(max(qn), -min(qn))
-        if big > _MAX_STEP:
+        clamped = big > _MAX_STEP
+        if clamped:
             f = _MAX_STEP / big
             qn = [v * f for v in qn]
         qn = [q[i] + qn[i] for i in range(n)]
@@ -109,6 +121,8 @@ def dls_planar_single(chain, target, q0, tol: float, iters: int):
         f0, f1 = tx - xn, ty - yn
         r2n = f0 * f0 + f1 * f1
         if r2n < r2:
+            slow = slow + 1 if (r2n > _SLOW * r2 and not clamped) else 0
+            newton = newton or slow >= _SLOW_STEPS  # slow progress: a large residual, use its curvature too
             q, dx, dy, e0, e1, r2 = qn, dxn, dyn, f0, f1, r2n
             lam2 = max(lam2 * 0.1, lam_min)
         else:
@@ -116,6 +130,62 @@ def dls_planar_single(chain, target, q0, tol: float, iters: int):
             if lam2 > lam_max:
                 break
     return q, r2**0.5, k
+
+
+def _newton_lm_step(dx, dy, e0, e1, lam2):
+    """Levenberg-Marquardt step with the full Hessian of 1/2 |e|^2 for a planar chain, or None.
+
+    ``(J^T J + W + lam^2 I) dq = J^T e`` with ``W = -sum_c e_c d^2 f_c / dq^2``,
+    ``W[i, j] = v[max(i, j)]``, ``v = e0 dx + e1 dy``. ``A = lam^2 I + W =
+    U (lam^2 S S^T + D) U^T`` (``U`` upper-triangular ones, ``S = U^-1``,
+    ``D = diag(v_k - v_k+1)``) is solved in O(n) by the Thomas algorithm, and the
+    rank-2 term by Woodbury's identity: ``dq = A^-1 J^T (I + J A^-1 J^T)^-1 e``
+    (for ``W = 0`` this is exactly the DLS step). Returns None when a pivot vanishes
+    or the step is not a descent direction of ``|e|^2``.
+    """
+    n = len(dx)
+    v = [e0 * dx[i] + e1 * dy[i] for i in range(n)]
+    piv = [0.0] * n
+    prev = 1.0
+    for k in range(n):
+        t = lam2 * (2.0 if k < n - 1 else 1.0) + v[k] - (v[k + 1] if k < n - 1 else 0.0)
+        if k:
+            t -= lam2 * lam2 / prev
+        if not abs(t) > 1e-300:
+            return None
+        piv[k] = prev = t
+    hs = []
+    for rhs, sgn in ((dy, -1.0), (dx, 1.0)):  # A^-1 J0 (J0 = -dy), A^-1 J1 (J1 = dx)
+        z = [0.0] * n
+        acc = 0.0
+        for k in range(n):
+            acc = sgn * (rhs[k] - (rhs[k + 1] if k < n - 1 else 0.0)) + (lam2 * acc / piv[k - 1] if k else 0.0)
+            z[k] = acc
+        x = 0.0
+        for k in range(n - 1, -1, -1):
+            x = (z[k] + (lam2 * x if k < n - 1 else 0.0)) / piv[k]
+            z[k] = x
+        hs.append([z[k] - (z[k - 1] if k else 0.0) for k in range(n)])
+    h0, h1 = hs
+    c00 = c01 = c10 = c11 = 0.0
+    for i in range(n):
+        c00 -= dy[i] * h0[i]
+        c01 -= dy[i] * h1[i]
+        c10 += dx[i] * h0[i]
+        c11 += dx[i] * h1[i]
+    c00 += 1.0
+    c11 += 1.0
+    det = c00 * c11 - c01 * c10
+    if not abs(det) > 1e-300:
+        return None
+    w0, w1 = (c11 * e0 - c01 * e1) / det, (c00 * e1 - c10 * e0) / det
+    dq = [w0 * h0[i] + w1 * h1[i] for i in range(n)]
+    descent = 0.0
+    for i in range(n):
+        descent += dq[i] * (-dy[i] * e0 + dx[i] * e1)
+    if not descent > 0.0:
+        return None
+    return dq
 
 
 # -- batched task phase (vectorised over targets, any chain with _fk_jac) ----------------------------------------
@@ -130,6 +200,9 @@ def _solve_small(A: np.ndarray, rhs: np.ndarray) -> np.ndarray:
 
 def dls_batch(chain, tgt: np.ndarray, q: np.ndarray, tol: float, iters: int):
     """DLS task phase for (B, m) targets from (B, n) poses; returns (q, residual, iterations).
+
+    Planar chains switch a row to the full-Hessian LM step (:func:`_newton_lm_step`) after
+    slow progress, as the single-target path does; 3D chains keep the DLS step.
 
     Finished targets are dropped from the working set only when they are at least
     half of it, so the per-iteration cost is a few whole-array operations.
@@ -152,6 +225,9 @@ def dls_batch(chain, tgt: np.ndarray, q: np.ndarray, tol: float, iters: int):
     lam2 = np.full(B, _LAM0 * s2)
     itw = np.zeros(B, dtype=np.int64)
     active = r2 > tol2
+    planar = hasattr(chain, "lengths") and m == 2
+    slow = np.zeros(B, dtype=np.int64)
+    newton = np.zeros(B, dtype=bool)
     for _ in range(iters):
         n_act = int(np.count_nonzero(active))
         if n_act == 0:
@@ -159,8 +235,9 @@ def dls_batch(chain, tgt: np.ndarray, q: np.ndarray, tol: float, iters: int):
         if n_act <= len(rows) // 2:  # compact: write finished rows back, keep the active ones
             q[rows], r2_all[rows], it_all[rows] = qw, r2, itw
             keep = np.nonzero(active)[0]
-            rows, qw, tw, ew, r2, J, lam2, itw = (rows[keep], qw[keep], tw[keep], ew[keep], r2[keep], J[keep],
-                                                  lam2[keep], itw[keep])
+            rows, qw, tw, ew, r2, J, lam2, itw, slow, newton = (rows[keep], qw[keep], tw[keep], ew[keep], r2[keep],
+                                                                J[keep], lam2[keep], itw[keep], slow[keep],
+                                                                newton[keep])
             active = np.ones(len(rows), dtype=bool)
         JJt = J @ np.swapaxes(J, 1, 2)
         g = np.einsum("bij,bi->bj", J, ew)
@@ -168,14 +245,22 @@ def dls_batch(chain, tgt: np.ndarray, q: np.ndarray, tol: float, iters: int):
         stationary = np.einsum("bi,bi->b", g, g) <= (_GRAD_TOL * _GRAD_TOL) * trace * r2
         active &= ~stationary
         dq = np.einsum("bij,bi->bj", J, _solve_small(JJt + lam2[:, None, None] * eye, ew))
+        valid = np.ones(len(rows), dtype=bool)
+        if planar and newton.any():
+            dqn, okn = _newton_lm_batch(J, ew, lam2)
+            dq = np.where(newton[:, None], dqn, dq)
+            valid = ~newton | okn
         big = np.abs(dq).max(axis=1)
+        clamped = big > _MAX_STEP
         qn = qw + dq * np.minimum(1.0, _MAX_STEP / np.maximum(big, 1e-300))[:, None]
         if limited:
             qn = np.clip(qn, lo, hi)
         endn, Jn = chain._fk_jac(qn)
         en = tw - endn
         r2n = np.einsum("bi,bi->b", en, en)
-        ok = active & (r2n < r2)
+        ok = active & valid & (r2n < r2)
+        slow = np.where(ok, np.where((r2n > _SLOW * r2) & ~clamped, slow + 1, 0), slow)
+        newton |= slow >= _SLOW_STEPS
         qw = np.where(ok[:, None], qn, qw)
         ew = np.where(ok[:, None], en, ew)
         J = np.where(ok[:, None, None], Jn, J)
@@ -185,3 +270,46 @@ def dls_batch(chain, tgt: np.ndarray, q: np.ndarray, tol: float, iters: int):
         active &= (r2 > tol2) & (lam2 <= _LAM_MAX * s2)
     q[rows], r2_all[rows], it_all[rows] = qw, r2, itw
     return q, np.sqrt(r2_all), it_all
+
+
+def _newton_lm_batch(J: np.ndarray, e: np.ndarray, lam2: np.ndarray):
+    """:func:`_newton_lm_step` vectorised over rows: J (B, 2, n) of a planar chain, e (B, 2), lam2 (B,).
+
+    Returns (dq (B, n), ok (B,)); rows with ok False have a vanishing pivot or no descent.
+    """
+    B, _, n = J.shape
+    dx, dy = J[:, 1, :], -J[:, 0, :]
+    v = e[:, 0, None] * dx + e[:, 1, None] * dy
+    piv = np.empty((B, n))
+    ok = np.ones(B, dtype=bool)
+    prev = np.ones(B)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        for k in range(n):
+            t = lam2 * (2.0 if k < n - 1 else 1.0) + v[:, k] - (v[:, k + 1] if k < n - 1 else 0.0)
+            if k:
+                t = t - lam2 * lam2 / prev
+            bad = ~(np.abs(t) > 1e-300)
+            ok &= ~bad
+            piv[:, k] = prev = np.where(bad, 1.0, t)
+        hs = []
+        for rhs in (J[:, 0, :], J[:, 1, :]):  # A^-1 J0, A^-1 J1
+            z = np.empty((B, n))
+            acc = np.zeros(B)
+            for k in range(n):
+                sv = rhs[:, k] - (rhs[:, k + 1] if k < n - 1 else 0.0)
+                acc = sv + (lam2 * acc / piv[:, k - 1] if k else 0.0)
+                z[:, k] = acc
+            x = np.zeros(B)
+            for k in range(n - 1, -1, -1):
+                x = (z[:, k] + (lam2 * x if k < n - 1 else 0.0)) / piv[:, k]
+                z[:, k] = x
+            h = z.copy()
+            h[:, 1:] -= z[:, :-1]
+            hs.append(h)
+        H = np.stack(hs, axis=2)  # (B, n, 2)
+        C = np.eye(2) + J @ H
+        w = _solve_small(C, e)
+        dq = np.einsum("bij,bj->bi", H, w)
+        descent = np.einsum("bi,bi->b", dq, np.einsum("bij,bi->bj", J, e))
+    ok &= np.all(np.isfinite(dq), axis=1) & (descent > 0)
+    return np.where(ok[:, None], dq, 0.0), ok

@@ -1,7 +1,7 @@
 """Taichi kernel: batched DLS IK on a planar chain, task phase plus null-space polish, one target per thread.
 
 The body follows :func:`tianim.kinematics.dls.dls_planar_single` (adaptive-damping
-DLS, trust region, stop at ``tol``) and
+DLS, trust region, stop at ``tol``, full-Hessian LM after slow progress) and
 :func:`tianim.kinematics.nullspace._polish_planar_one` (SQP step by the O(n)
 structured solve ``H = U (S S^T + D) U^T``, feasible-point backtracking with
 Gauss-Newton restoration, Lagrangian comparison inside the residual band), in
@@ -65,8 +65,9 @@ def _gram(work: ti.template(), b, n, rdx: ti.template(), rdy: ti.template(), eps
 
 
 @ti.func
-def _solve_h(work: ti.template(), b, n, rv: ti.template(), sgn, rout: ti.template()):
-    """work[rout] = H^-1 (sgn * work[rv]) = S^T T^-1 S v (Thomas, pivots in row _PIV)."""
+def _solve_h(work: ti.template(), b, n, rv: ti.template(), sgn, rout: ti.template(), off):
+    """work[rout] = A^-1 (sgn * work[rv]) = S^T T^-1 S v, T tridiagonal with off-diagonal -off
+    (Thomas, pivots in row _PIV): A = H (off = 1) in the polish, lam^2 I + W (off = lam^2) in the task."""
     acc = ti.f64(0.0)
     for k in range(n):
         nxt = ti.f64(0.0)
@@ -74,7 +75,7 @@ def _solve_h(work: ti.template(), b, n, rv: ti.template(), sgn, rout: ti.templat
             nxt = sgn * work[b, rv, k + 1]
         prev = ti.f64(0.0)
         if k > 0:
-            prev = acc / work[b, _PIV, k - 1]
+            prev = off * acc / work[b, _PIV, k - 1]
         acc = sgn * work[b, rv, k] - nxt + prev
         work[b, _Z, k] = acc
     x = ti.f64(0.0)
@@ -82,7 +83,7 @@ def _solve_h(work: ti.template(), b, n, rv: ti.template(), sgn, rout: ti.templat
         k = n - 1 - kk
         add = ti.f64(0.0)
         if k < n - 1:
-            add = x
+            add = off * x
         x = (work[b, _Z, k] + add) / work[b, _PIV, k]
         work[b, _Z, k] = x
     for k in range(n):
@@ -108,7 +109,8 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
     """Solve every row b of tgt (B, 2) from q (B, n) in place; residuals into res, task iterations into its.
 
     prm: tol, lam0, lam_min, lam_max, grad_tol^2, max_step, ptol, restore_tol, gram_eps, piv_eps,
-    schur_eps, curv_min, 0.1; ipar: task iterations, polish iterations, polish (0/1), backtracks, restores.
+    schur_eps, curv_min, 0.1, 1e-300, slow ratio; ipar: task iterations, polish iterations, polish (0/1),
+    backtracks, restores, slow steps before the full-Hessian LM.
     """
     n = L.shape[0]
     bx = base[0]
@@ -127,7 +129,9 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
         lam2 = prm[1]
         k = 0
         stop = 0
-        # ---- task phase: adaptive-damping DLS ----
+        newton = 0
+        slow = 0
+        # ---- task phase: adaptive-damping DLS (full-Hessian LM after slow progress) ----
         while k < ipar[0] and r2 > tol2 and stop == 0:
             k += 1
             a, bb, c = _gram(work, b, n, _DX, _DY, ti.f64(0.0))
@@ -135,22 +139,71 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
             for i in range(n):
                 gi = -work[b, _DY, i] * e0 + work[b, _DX, i] * e1
                 gg += gi * gi
+            valid = 1
             if gg <= prm[4] * (a + c) * r2:
                 stop = 1
+                valid = 0
+            elif newton == 1:  # full-Hessian LM step (dls._newton_lm_step)
+                for i in range(n):
+                    work[b, _W, i] = e0 * work[b, _DX, i] + e1 * work[b, _DY, i]
+                prevp = ti.f64(1.0)
+                for kk in range(n):
+                    t = lam2 + work[b, _W, kk]
+                    if kk < n - 1:
+                        t += lam2 - work[b, _W, kk + 1]
+                    if kk > 0:
+                        t -= lam2 * lam2 / prevp
+                    if not (ti.abs(t) > prm[13]):
+                        valid = 0
+                        t = ti.f64(1.0)
+                    work[b, _PIV, kk] = t
+                    prevp = t
+                if valid == 1:
+                    _solve_h(work, b, n, _DY, ti.f64(-1.0), _H0, lam2)
+                    _solve_h(work, b, n, _DX, ti.f64(1.0), _H1, lam2)
+                    c00 = ti.f64(1.0)
+                    c01 = ti.f64(0.0)
+                    c10 = ti.f64(0.0)
+                    c11 = ti.f64(1.0)
+                    for i in range(n):
+                        c00 -= work[b, _DY, i] * work[b, _H0, i]
+                        c01 -= work[b, _DY, i] * work[b, _H1, i]
+                        c10 += work[b, _DX, i] * work[b, _H0, i]
+                        c11 += work[b, _DX, i] * work[b, _H1, i]
+                    dc = c00 * c11 - c01 * c10
+                    if not (ti.abs(dc) > prm[13]):
+                        valid = 0
+                    else:
+                        w0 = (c11 * e0 - c01 * e1) / dc
+                        w1 = (c00 * e1 - c10 * e0) / dc
+                        descent = ti.f64(0.0)
+                        for i in range(n):
+                            d = w0 * work[b, _H0, i] + w1 * work[b, _H1, i]
+                            work[b, _DQ, i] = d
+                            descent += d * (-work[b, _DY, i] * e0 + work[b, _DX, i] * e1)
+                        if not (descent > 0.0):
+                            valid = 0
+                if valid == 0:
+                    lam2 *= 10.0
+                    if lam2 > prm[3]:
+                        stop = 1
             else:
                 a += lam2
                 c += lam2
                 det = a * c - bb * bb
                 g0 = (c * e0 - bb * e1) / det
                 g1 = (a * e1 - bb * e0) / det
+                for i in range(n):
+                    work[b, _DQ, i] = -work[b, _DY, i] * g0 + work[b, _DX, i] * g1
+            if valid == 1:
                 big = ti.f64(0.0)
                 for i in range(n):
-                    d = -work[b, _DY, i] * g0 + work[b, _DX, i] * g1
-                    work[b, _DQ, i] = d
-                    big = ti.max(big, ti.abs(d))
+                    big = ti.max(big, ti.abs(work[b, _DQ, i]))
                 f = ti.f64(1.0)
+                clamped = 0
                 if big > prm[5]:
                     f = prm[5] / big
+                    clamped = 1
                 for i in range(n):
                     work[b, _QT, i] = work[b, _Q, i] + f * work[b, _DQ, i]
                 _clamp_row(work, b, n, _QT, lo, hi)
@@ -159,6 +212,12 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
                 f1 = ty - yn
                 r2n = f0 * f0 + f1 * f1
                 if r2n < r2:
+                    if r2n > prm[14] * r2 and clamped == 0:
+                        slow += 1
+                    else:
+                        slow = 0
+                    if slow >= ipar[5]:
+                        newton = 1
                     for i in range(n):
                         work[b, _Q, i] = work[b, _QT, i]
                         work[b, _DX, i] = work[b, _DXT, i]
@@ -221,9 +280,9 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
                         minpiv = ti.min(minpiv, t)
                     use_pg = 1
                     if ok == 1:
-                        _solve_h(work, b, n, _G, ti.f64(1.0), _HG)
-                        _solve_h(work, b, n, _DY, ti.f64(-1.0), _H0)
-                        _solve_h(work, b, n, _DX, ti.f64(1.0), _H1)
+                        _solve_h(work, b, n, _G, ti.f64(1.0), _HG, ti.f64(1.0))
+                        _solve_h(work, b, n, _DY, ti.f64(-1.0), _H0, ti.f64(1.0))
+                        _solve_h(work, b, n, _DX, ti.f64(1.0), _H1, ti.f64(1.0))
                         A00 = ti.f64(0.0)
                         A01 = ti.f64(0.0)
                         A11 = ti.f64(0.0)
@@ -348,9 +407,9 @@ def solve_planar_batch(chain, tgt: np.ndarray, q: np.ndarray, rest: np.ndarray |
     s2 = max(float(chain.reach) ** 2, 1e-300)
     prm = np.array([tol, consts["lam0"] * s2, consts["lam_min"] * s2, consts["lam_max"] * s2,
                     consts["grad_tol"] ** 2, consts["max_step"], consts["ptol"], consts["restore_tol"], 1e-15,
-                    1e-9, 1e-12, 1e-3, 0.1], dtype=np.float64)
-    ipar = np.array([iters, polish_iters, 0 if rest is None else 1, consts["backtrack"], consts["restore"]],
-                    dtype=np.int32)
+                    1e-9, 1e-12, 1e-3, 0.1, 1e-300, consts["slow"]], dtype=np.float64)
+    ipar = np.array([iters, polish_iters, 0 if rest is None else 1, consts["backtrack"], consts["restore"],
+                     consts["slow_steps"]], dtype=np.int32)
     rest_arr = np.zeros((1, n)) if rest is None else np.ascontiguousarray(rest, dtype=np.float64)
     res = np.empty(B)
     its = np.empty(B, dtype=np.int32)

@@ -43,7 +43,7 @@ _BACKTRACK = 6
 # every tuning constant of both phases, for the Taichi kernel (tianim.kinematics.ik_kernel)
 KERNEL_CONSTANTS = {"lam0": dls._LAM0, "lam_min": dls._LAM_MIN, "lam_max": dls._LAM_MAX, "grad_tol": dls._GRAD_TOL,
                     "max_step": _MAX_STEP, "ptol": _PTOL, "restore_tol": _RESTORE_TOL, "backtrack": _BACKTRACK,
-                    "restore": _RESTORE}
+                    "restore": _RESTORE, "slow": dls._SLOW, "slow_steps": dls._SLOW_STEPS}
 
 
 def _curvature_planar(J: np.ndarray, mu: np.ndarray, idx: np.ndarray) -> np.ndarray:
