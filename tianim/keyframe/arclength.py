@@ -59,6 +59,13 @@ def _speed_integral(curve: PiecewiseCubic, j: np.ndarray, s0: np.ndarray, s1: np
     return np.sum(speed * w, axis=-1) * half[..., 0] * curve.widths[j]
 
 
+def _split(counts: np.ndarray):
+    """Equal sub-intervals: ``counts[j]`` per segment j -> (segment, local start, local end), each (sum(counts),)."""
+    seg = np.repeat(np.arange(len(counts)), counts)
+    k = np.arange(seg.size) - (np.cumsum(counts) - counts)[seg]
+    return seg, k / counts[seg], (k + 1) / counts[seg]
+
+
 class ArcLength:
     """Arc-length parameterisation of a :class:`PiecewiseCubic` (see the module docstring).
 
@@ -129,10 +136,7 @@ class ArcLength:
     # -- table -----------------------------------------------------------------------------------------
     def _build_table(self, counts: np.ndarray) -> None:
         c = self.curve
-        seg = np.repeat(np.arange(len(counts)), counts)
-        start = np.cumsum(counts) - counts
-        k = np.arange(seg.size) - start[seg]
-        s0, s1 = k / counts[seg], (k + 1) / counts[seg]
+        seg, s0, s1 = _split(counts)
         ds = _speed_integral(c, seg, s0, s1, nodes=4)
         h = (s1 - s0) * c.widths[seg]
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -181,10 +185,7 @@ class ArcLength:
 
     def _build_hermite(self, counts: np.ndarray) -> None:
         c = self.curve
-        seg = np.repeat(np.arange(len(counts)), counts)
-        start = np.cumsum(counts) - counts
-        k = np.arange(seg.size) - start[seg]
-        s0, s1 = k / counts[seg], (k + 1) / counts[seg]
+        seg, s0, s1 = _split(counts)
         ds = _speed_integral(c, seg, s0, s1, nodes=16)
         v0 = np.linalg.norm(c.eval_local(seg, s0, 1), axis=-1)  # |dp/du| at the interval's ends (one-sided)
         v1 = np.linalg.norm(c.eval_local(seg, s1, 1), axis=-1)
@@ -232,10 +233,8 @@ class ArcLength:
             prev = cur
             if done.all():
                 break
-        seg = np.repeat(seg_all, m)
-        start = np.cumsum(m) - m
-        k = np.arange(seg.size) - start[seg]
-        self._gseg, self._gs0, self._gs1 = seg, k / m[seg], (k + 1) / m[seg]
+        seg, self._gs0, self._gs1 = _split(m)
+        self._gseg = seg
         ds = _speed_integral(c, seg, self._gs0, self._gs1)
         self._gcum = np.concatenate([[0.0], np.cumsum(ds)])
         self._gu0 = c.knots[seg] + self._gs0 * c.widths[seg]
@@ -244,10 +243,8 @@ class ArcLength:
         self.table_size = int(seg.size)
 
     def _composite(self, m: np.ndarray) -> np.ndarray:
-        seg = np.repeat(np.arange(len(m)), m)
-        start = np.cumsum(m) - m
-        k = np.arange(seg.size) - start[seg]
-        ds = _speed_integral(self.curve, seg, k / m[seg], (k + 1) / m[seg])
+        seg, s0, s1 = _split(m)
+        ds = _speed_integral(self.curve, seg, s0, s1)
         return np.bincount(seg, weights=ds, minlength=len(m))
 
     # -- public queries --------------------------------------------------------------------------------

@@ -94,9 +94,39 @@ def _solve_h(work: ti.template(), b, n, rv: ti.template(), sgn, rout: ti.templat
 
 
 @ti.func
+def _null_project(work: ti.template(), b, n, rsrc: ti.template(), rdst: ti.template(), a, bb, c):
+    """work[rdst] = N v = v - J^T (J J^T)^-1 J v for v = work[rsrc] (J rows (-dy, dx), J J^T = [[a, bb],
+    [bb, c]]); returns (|N v|^2, y0, y1) with y = (J J^T)^-1 J v (the multipliers when v = q - rest)."""
+    det = a * c - bb * bb
+    v0 = ti.f64(0.0)
+    v1 = ti.f64(0.0)
+    for i in range(n):
+        v0 -= work[b, _DY, i] * work[b, rsrc, i]
+        v1 += work[b, _DX, i] * work[b, rsrc, i]
+    y0 = (c * v0 - bb * v1) / det
+    y1 = (a * v1 - bb * v0) / det
+    nn = ti.f64(0.0)
+    for i in range(n):
+        p = work[b, rsrc, i] + y0 * work[b, _DY, i] - y1 * work[b, _DX, i]
+        work[b, rdst, i] = p
+        nn += p * p
+    return nn, y0, y1
+
+
+@ti.func
 def _clamp_row(work: ti.template(), b, n, r: ti.template(), lo: ti.template(), hi: ti.template()):
     for i in range(n):
         work[b, r, i] = ti.min(ti.max(work[b, r, i], lo[i]), hi[i])
+
+
+@ti.func
+def _trial(L: ti.template(), bx, by, lo: ti.template(), hi: ti.template(), work: ti.template(), b, n, f, tx, ty):
+    """Trial pose row _QT = clamp(q + f dq) with its tail sums; returns the residual vector target - end."""
+    for i in range(n):
+        work[b, _QT, i] = work[b, _Q, i] + f * work[b, _DQ, i]
+    _clamp_row(work, b, n, _QT, lo, hi)
+    x, y = _fk(L, bx, by, work, b, _QT, _DXT, _DYT)
+    return tx - x, ty - y
 
 
 @ti.kernel
@@ -204,12 +234,7 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
                 if big > prm[5]:
                     f = prm[5] / big
                     clamped = 1
-                for i in range(n):
-                    work[b, _QT, i] = work[b, _Q, i] + f * work[b, _DQ, i]
-                _clamp_row(work, b, n, _QT, lo, hi)
-                xn, yn = _fk(L, bx, by, work, b, _QT, _DXT, _DYT)
-                f0 = tx - xn
-                f1 = ty - yn
+                f0, f1 = _trial(L, bx, by, lo, hi, work, b, n, f, tx, ty)
                 r2n = f0 * f0 + f1 * f1
                 if r2n < r2:
                     if r2n > prm[14] * r2 and clamped == 0:
@@ -244,19 +269,7 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
             while it2 < ipar[1] and go == 1:
                 it2 += 1
                 a, bb, c = _gram(work, b, n, _DX, _DY, prm[8])
-                det = a * c - bb * bb
-                u0 = ti.f64(0.0)
-                u1 = ti.f64(0.0)
-                for i in range(n):
-                    u0 -= work[b, _DY, i] * work[b, _G, i]
-                    u1 += work[b, _DX, i] * work[b, _G, i]
-                mu0 = (c * u0 - bb * u1) / det
-                mu1 = (a * u1 - bb * u0) / det
-                pgn = ti.f64(0.0)
-                for i in range(n):
-                    p = work[b, _G, i] + mu0 * work[b, _DY, i] - mu1 * work[b, _DX, i]
-                    work[b, _PG, i] = p
-                    pgn += p * p
+                pgn, mu0, mu1 = _null_project(work, b, n, _G, _PG, a, bb, c)  # pg = N (q - rest)
                 if ti.sqrt(pgn) <= prm[6] * (1.0 + ti.sqrt(2.0 * phi)):
                     go = 0
                 else:
@@ -304,18 +317,7 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
                                 work[b, _DQ, i] = l0 * work[b, _H0, i] + l1 * work[b, _H1, i] - work[b, _HG, i]
                             use_pg = 0
                             if minpiv <= 0.0:  # H indefinite: the tangential part must see positive curvature
-                                v0 = ti.f64(0.0)
-                                v1 = ti.f64(0.0)
-                                for i in range(n):
-                                    v0 -= work[b, _DY, i] * work[b, _DQ, i]
-                                    v1 += work[b, _DX, i] * work[b, _DQ, i]
-                                y0 = (c * v0 - bb * v1) / det
-                                y1 = (a * v1 - bb * v0) / det
-                                dd = ti.f64(0.0)
-                                for i in range(n):
-                                    dt = work[b, _DQ, i] + y0 * work[b, _DY, i] - y1 * work[b, _DX, i]
-                                    work[b, _Z, i] = dt
-                                    dd += dt * dt
+                                dd, _y0, _y1 = _null_project(work, b, n, _DQ, _Z, a, bb, c)  # tangential part
                                 s = ti.f64(0.0)
                                 for kk in range(n):
                                     i = n - 1 - kk
@@ -348,12 +350,7 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
                     noise_mu = 2.0 * ti.sqrt(mu0 * mu0 + mu1 * mu1)
                     while bt < ipar[3] and acc == 0:
                         bt += 1
-                        for i in range(n):
-                            work[b, _QT, i] = work[b, _Q, i] + alpha * work[b, _DQ, i]
-                        _clamp_row(work, b, n, _QT, lo, hi)
-                        xt, yt = _fk(L, bx, by, work, b, _QT, _DXT, _DYT)
-                        f0 = tx - xt
-                        f1 = ty - yt
+                        f0, f1 = _trial(L, bx, by, lo, hi, work, b, n, alpha, tx, ty)
                         rt = ti.sqrt(f0 * f0 + f1 * f1)
                         rs = 0
                         while rs < ipar[4] and rt > prm[7] * tol:
