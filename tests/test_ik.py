@@ -209,7 +209,7 @@ def test_bad_rest_shape_raises():
 
 
 @pytest.mark.parametrize("n", [2, 3, 7])
-def test_batched_kernel_path_matches_numpy_path(n, monkeypatch):
+def test_batched_kernel_path_matches_loop_and_numpy_paths(n, monkeypatch):
     # batches of KERNEL_MIN_BATCH or more targets on a planar chain run in the Taichi kernel
     import tianim.kinematics.ik as ik
 
@@ -221,7 +221,10 @@ def test_batched_kernel_path_matches_numpy_path(n, monkeypatch):
     np.testing.assert_allclose(chain.end_effector(kern.q), targets, atol=1.01e-8)
     assert np.array_equal(kern.q, solve_ik(chain, targets, tol=1e-8).q)  # deterministic
     monkeypatch.setattr(ik, "KERNEL_MIN_BATCH", 10**9)
-    ref = solve_ik(chain, targets, tol=1e-8)
+    loop = solve_ik(chain, targets, tol=1e-8)  # target by target, plain floats
+    monkeypatch.setattr(ik, "LOOP_MAX_BATCH", 0)
+    ref = solve_ik(chain, targets, tol=1e-8)  # vectorised NumPy
+    np.testing.assert_allclose(kern.q, loop.q, atol=1e-6)
     np.testing.assert_allclose(kern.q, ref.q, atol=1e-6)
     if n > 2:  # least motion from q0 = 0 where no limit is active or nearly active (it can block the polish)
         free = np.all(np.abs(kern.q) < LIMIT - 0.05, axis=1)
@@ -242,6 +245,7 @@ def test_unreachable_targets_converge_to_the_exact_closest_point(path, monkeypat
     targets = chain.base + chain.reach * rng.uniform(1.05, 3.0, 40)[:, None] * direction
     if path == "numpy":
         monkeypatch.setattr(ik, "KERNEL_MIN_BATCH", 10**9)
+        monkeypatch.setattr(ik, "LOOP_MAX_BATCH", 0)
     if path == "single":
         res = [solve_ik(chain, t, max_iter=100) for t in targets[:8]]
         q, r = np.array([x.q for x in res]), np.array([x.residual for x in res])

@@ -26,8 +26,10 @@ Methods (``method=``):
            as soon as the residual meets ``tol``; a redundant chain's answer is then
            polished to the exact rest-pose optimum by Newton steps that keep the task
            (:mod:`tianim.kinematics.nullspace`). One target on a planar chain takes a
-           plain-float fast path; batches of ``KERNEL_MIN_BATCH`` or more targets on a
-           planar chain run in one Taichi kernel (one target per thread), other batches
+           plain-float fast path (so do batches of up to ``LOOP_MAX_BATCH``, one by
+           one); batches of ``KERNEL_MIN_BATCH`` or more targets on a planar chain run
+           in one Taichi kernel (one target per thread; its first use in a process
+           compiles or loads it: ~1.5 s cached, 5-8 s the very first time); 3D chains
            are vectorised in NumPy.
 ``"jt"``   Jacobian transpose ``dq = mu a J^T e`` with Buss's step
            ``a = <e, J J^T e> / |J J^T e|^2`` (Buss 2004, eq. 7), and a multiplier
@@ -51,7 +53,8 @@ from tianim.kinematics.nullspace import KERNEL_CONSTANTS, polish
 from tianim.kinematics.planar import PlanarChain
 
 METHODS = ("dls", "jt", "ccd", "fabrik")
-KERNEL_MIN_BATCH = 32  # planar DLS batches from this size run in one Taichi kernel (ik_kernel.py)
+KERNEL_MIN_BATCH = 32  # planar DLS batches from this size run in one Taichi kernel (ik_kernel.py) ...
+LOOP_MAX_BATCH = 31  # ... smaller ones target by target on the plain-float path (no kernel compile)
 _DEFAULT_ITERS = {"dls": 200, "jt": 5000, "ccd": 1000, "fabrik": 1000}
 
 
@@ -236,21 +239,29 @@ def _residual(chain, q, tgt):
 
 
 def _dls(chain, tgt, q, tol, iters, rest):
-    """Task phase (one target on a planar chain: plain-float fast path; else vectorised), then the
+    """Task phase (planar: plain floats per target, or the Taichi kernel; else vectorised), then the
     null-space polish when a secondary objective is set (:mod:`tianim.kinematics.nullspace`)."""
     polishing = rest is not None and chain.n > chain.task_dim
-    if len(q) == 1 and isinstance(chain, PlanarChain):
-        q1, r1, k1 = dls_planar_single(chain, tgt[0], q[0], tol, iters)
-        q, r, it = np.array([q1]), np.array([r1]), np.array([k1], dtype=np.int64)
-    elif len(q) >= KERNEL_MIN_BATCH and isinstance(chain, PlanarChain):
+    planar = isinstance(chain, PlanarChain)
+    if planar and (len(q) == 1 or len(q) <= LOOP_MAX_BATCH) and len(q) < KERNEL_MIN_BATCH:
+        qs, rs, its = [], [], []
+        for b in range(len(q)):
+            qb, rb, kb = dls_planar_single(chain, tgt[b], q[b], tol, iters)
+            if polishing and rb <= tol:
+                qb, rb = polish(chain, tgt[b:b + 1], np.array([qb]), rest[b:b + 1], tol)
+                qb, rb = qb[0], rb[0]
+            qs.append(qb)
+            rs.append(rb)
+            its.append(kb)
+        return np.array(qs, dtype=np.float64), np.array(rs, dtype=np.float64), np.array(its, dtype=np.int64)
+    if planar and len(q) >= KERNEL_MIN_BATCH:
         from tianim.kinematics.ik_kernel import solve_planar_batch
         from tianim.runtime import ensure_taichi
 
         ensure_taichi()
         return solve_planar_batch(chain, tgt, q, rest if polishing else None, tol, iters, POLISH_ITERS,
                                   KERNEL_CONSTANTS)
-    else:
-        q, r, it = dls_batch(chain, tgt, q, tol, iters)
+    q, r, it = dls_batch(chain, tgt, q, tol, iters)
     if polishing:
         q, r = polish(chain, tgt, q, rest, tol)
     return q, r, it
