@@ -31,7 +31,7 @@ import math
 
 import numpy as np
 
-from tianim.physics.kernels import PHASES, WORK, frame_kernel
+from tianim.physics.kernels import PHASES, SUBSTEPS_PER_LAUNCH, WORK, frame_kernel
 from tianim.physics.validation import check_finite_scalar, check_positive_int
 from tianim.physics.watchdog import DivergenceError, Watchdog
 
@@ -124,7 +124,7 @@ def _launch(model, state, dt, substeps, method, layout):
         layout = choose_layout(model, state.batch)
 
     data = model.kernel_data(state.dtype)
-    pre, kernel = frame_kernel(
+    pre, kernel, multi = frame_kernel(
         state.dtype, model.dim, method, layout,
         grid=model.grid is not None,
         colliders=len(model.colliders) > 0,
@@ -140,7 +140,9 @@ def _launch(model, state, dt, substeps, method, layout):
     if pre is not None:
         pre(*args, 1)
     if layout == "substep":
-        for _ in range(substeps):
+        for _ in range(substeps // SUBSTEPS_PER_LAUNCH):
+            multi(*args, SUBSTEPS_PER_LAUNCH)
+        for _ in range(substeps % SUBSTEPS_PER_LAUNCH):
             kernel(*args, 1)
     else:
         kernel(*args, substeps)

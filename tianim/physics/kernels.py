@@ -53,14 +53,18 @@ WORK = {
     "accelerations": 1,
 }
 
+#: Substeps per launch in the "substep" layout (each is a sequence of parallel loops).
+SUBSTEPS_PER_LAUNCH = 4
+
 _cache: dict = {}
 
 
 def frame_kernel(real_np, dim: int, method: str, layout: str, grid: bool, colliders: bool, spring_damping: bool, medium_damping: bool):
-    """Return ``(pre_kernel, step_kernel)`` for the given compile-time choices (cached).
+    """Return ``(pre_kernel, step_kernel, multi_step_kernel)`` for the given compile-time choices (cached).
 
-    Both kernels have the signature documented in :func:`_build`.
-    ``pre_kernel`` is None when the integrator has no pre-phase.
+    All kernels share one signature ``(x, v, W, pinned, P, T, coll, dt, nx, nsub)``.
+    ``pre_kernel`` is None when the integrator has no pre-phase; ``multi_step_kernel``
+    (substep layout only, else None) advances :data:`SUBSTEPS_PER_LAUNCH` substeps per launch.
     """
     key = (np.dtype(real_np).name, dim, method, layout, grid, colliders, spring_damping, medium_damping)
     if key not in _cache:
@@ -267,7 +271,9 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
         @ti.kernel
         def kernel(x: vec_arr, v: vec_arr, W: work_arr, pinned: mask_arr, P: real_arr, T: int_arr,
                    coll: coll_arr, dt: real, nx: ti.i32, nsub: ti.i32):
-            # One parallel loop over (copy, particle) per phase; one launch per substep.
+            # One parallel loop over (copy, particle) per phase. The phase list may hold
+            # several substeps: each top-level loop ends with a barrier, so one launch
+            # advances them all in order.
             for p in ti.static(phases):
                 for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                     phase(p, b, i, x, v, W, pinned, P, T, coll, dt, nx)
@@ -276,4 +282,7 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
 
     pre = make(pre_phases, False) if pre_phases else None
     step = make(step_phases, True)
-    return pre, step
+    if layout != "substep":
+        return pre, step, None
+    # Large scenes: one launch advances SUBSTEPS_PER_LAUNCH substeps (amortises the launch).
+    return pre, step, make(step_phases * SUBSTEPS_PER_LAUNCH, True)
