@@ -14,8 +14,9 @@ the correct ones.) The solvers here therefore
   residual and ``converged = False``, instead of oscillating,
 * respect joint limits by projection (clamping) after every update.
 
-All solvers are batched over targets: ``target`` has shape (task_dim,) or
-(B, task_dim) and every array operation runs on the whole batch.
+All solvers take one target, shape (task_dim,), or a batch, (B, task_dim): JT, CCD
+and FABRIK vectorise over the batch in NumPy; DLS picks the fastest path for the
+chain and batch size (see below).
 Methods (``method=``):
 
 ``"dls"``  damped least squares with adaptive (Levenberg-Marquardt) damping:
