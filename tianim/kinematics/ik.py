@@ -138,7 +138,8 @@ def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max
     tol : float
         Success threshold on the residual |target - end effector| (m).
     max_iter : int, optional
-        Iterations per attempt (defaults: dls 200, jt 20000, ccd/fabrik 3000).
+        Iterations per attempt (defaults: dls 200, jt 5000, ccd/fabrik 1000; the DLS null-space
+        polish adds at most 100 SQP steps).
     rest : array_like, shape (n,) or (B, n), "q0", False or None, optional
         DLS only: secondary objective for redundant chains, minimise |q - rest|
         over the poses that reach the target (``"q0"``: least motion from ``q0``;
