@@ -54,3 +54,17 @@ def test_fast_energy_matches_diagnostics():
 def test_bad_growth_is_refused():
     with pytest.raises(ValueError, match="growth"):
         tp.Watchdog(growth=-1.0)
+
+
+def test_small_scene_energy_matches_diagnostics():
+    import numpy as np
+
+    import tianim.physics as tp
+    from tianim.physics.watchdog import fast_energy
+
+    model = tp.rope(n=9, damping=0.01)
+    state = model.state(batch=3, dtype=np.float64)
+    state.v[...] = np.random.default_rng(0).normal(size=state.v.shape)
+    state.x += 0.01 * np.random.default_rng(1).normal(size=state.x.shape)
+    e = tp.energy(model, state)
+    np.testing.assert_allclose(fast_energy(model, state), np.stack([e["kinetic"], e["spring"], e["gravity"]], 1), rtol=1e-12)
