@@ -256,3 +256,26 @@ def test_unreachable_targets_converge_to_the_exact_closest_point(path, monkeypat
     want = np.linalg.norm(targets - chain.base, axis=1) - chain.reach
     np.testing.assert_allclose(r, want, atol=1e-9)
     np.testing.assert_allclose(chain.end_effector(q), chain.base + chain.reach * direction, atol=1e-4)
+
+
+def test_3d_paths_agree_and_curvature_matches_finite_differences(monkeypatch):
+    import tianim.kinematics.ik as ik
+    from tianim.kinematics.nullspace import _curvature_fd
+
+    chain = _serial7()
+    rng = np.random.default_rng(12)
+    q = rng.uniform(-1.5, 1.5, size=(3, 7))
+    mu = rng.normal(size=(3, 3))
+    np.testing.assert_allclose(chain._curvature(q, mu), _curvature_fd(chain, q, mu), atol=1e-8)
+    end, J = chain._fk_jac(q)
+    for b in range(3):
+        e1, J1 = chain._fk_jac_plain(q[b].tolist())
+        np.testing.assert_allclose(e1, end[b], atol=1e-14)
+        np.testing.assert_allclose(J1, J[b], atol=1e-14)
+    targets = chain.end_effector(rng.uniform(-1.0, 1.0, size=(6, 7)))
+    rest = np.full(7, -0.1)
+    loop = solve_ik(chain, targets, rest=rest, tol=1e-8)  # plain floats, target by target
+    monkeypatch.setattr(ik, "LOOP_MAX_BATCH", 0)
+    vec = solve_ik(chain, targets, rest=rest, tol=1e-8)  # vectorised NumPy
+    assert loop.converged.all() and vec.converged.all()
+    np.testing.assert_allclose(vec.q, loop.q, atol=1e-6)

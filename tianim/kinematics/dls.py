@@ -188,6 +188,68 @@ def _newton_lm_step(dx, dy, e0, e1, lam2):
     return dq
 
 
+def _solve_sym3(a00, a01, a02, a11, a12, a22, b0, b1, b2):
+    """Solve a symmetric 3 x 3 system by cofactors (Cramer's rule)."""
+    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+    return ((c00 * b0 + c01 * b1 + c02 * b2) / det, (c01 * b0 + c11 * b1 + c12 * b2) / det,
+            (c02 * b0 + c12 * b1 + c22 * b2) / det)
+
+
+def dls_serial_single(chain, target, q0, tol: float, iters: int):
+    """DLS task phase for one target on a SerialChain in plain floats; returns (q list, residual, iterations).
+
+    Same damping, trust region and stopping rules as :func:`dls_planar_single` (no
+    full-Hessian switch: an unreachable 3D target converges linearly).
+    """
+    lo, hi, limited = chain._plain()[5:]
+    t0, t1, t2 = (float(v) for v in target)
+    s2 = _scale2(chain)
+    lam2, lam_min, lam_max = _LAM0 * s2, _LAM_MIN * s2, _LAM_MAX * s2
+    tol2 = tol * tol
+    q = [float(v) for v in q0]
+    n = len(q)
+    (x, y, z), (J0, J1, J2) = chain._fk_jac_plain(q)
+    e0, e1, e2 = t0 - x, t1 - y, t2 - z
+    r2 = e0 * e0 + e1 * e1 + e2 * e2
+    k = 0
+    while k < iters and r2 > tol2:
+        k += 1
+        a00 = a01 = a02 = a11 = a12 = a22 = gg = 0.0
+        for i in range(n):
+            u, v, w = J0[i], J1[i], J2[i]
+            a00 += u * u
+            a01 += u * v
+            a02 += u * w
+            a11 += v * v
+            a12 += v * w
+            a22 += w * w
+            g = u * e0 + v * e1 + w * e2
+            gg += g * g
+        if gg <= (_GRAD_TOL * _GRAD_TOL) * (a00 + a11 + a22) * r2:
+            break
+        y0, y1, y2 = _solve_sym3(a00 + lam2, a01, a02, a11 + lam2, a12, a22 + lam2, e0, e1, e2)
+        dq = [J0[i] * y0 + J1[i] * y1 + J2[i] * y2 for i in range(n)]
+        big = max(max(dq), -min(dq))
+        if big > _MAX_STEP:
+            dq = [v * (_MAX_STEP / big) for v in dq]
+        qn = [q[i] + dq[i] for i in range(n)]
+        if limited:
+            qn = [min(max(v, lo[i]), hi[i]) for i, v in enumerate(qn)]
+        (x, y, z), Jn = chain._fk_jac_plain(qn)
+        f0, f1, f2 = t0 - x, t1 - y, t2 - z
+        r2n = f0 * f0 + f1 * f1 + f2 * f2
+        if r2n < r2:
+            q, (J0, J1, J2), e0, e1, e2, r2 = qn, Jn, f0, f1, f2, r2n
+            lam2 = max(lam2 * 0.1, lam_min)
+        else:
+            lam2 *= 10.0
+            if lam2 > lam_max:
+                break
+    return q, r2**0.5, k
+
+
 # -- batched task phase (vectorised over targets, any chain with _fk_jac) ----------------------------------------
 def _solve_small(A: np.ndarray, rhs: np.ndarray) -> np.ndarray:
     """Solve A x = rhs for (B, m, m), (B, m); closed form for m = 2."""

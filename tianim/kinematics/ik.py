@@ -30,8 +30,9 @@ Methods (``method=``):
            plain-float fast path (so do batches of up to ``LOOP_MAX_BATCH``, one by
            one); batches of ``KERNEL_MIN_BATCH`` or more targets on a planar chain run
            in one Taichi kernel (one target per thread; its first use in a process
-           compiles or loads it: ~1.5 s cached, 5-8 s the very first time); 3D chains
-           are vectorised in NumPy.
+           compiles or loads it: ~1.5 s cached, 5-8 s the very first time); a
+           SerialChain takes a plain-float path per target up to ``LOOP_MAX_BATCH``
+           targets and vectorised NumPy beyond.
 ``"jt"``   Jacobian transpose ``dq = mu a J^T e`` with Buss's step
            ``a = <e, J J^T e> / |J J^T e|^2`` (Buss 2004, eq. 7), and a multiplier
            mu that doubles after a step that lowers the error and drops below 1 after one
@@ -48,10 +49,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from tianim.kinematics._validate import float_array, joint_vector
-from tianim.kinematics.dls import dls_batch, dls_planar_single
+from tianim.kinematics.dls import dls_batch, dls_planar_single, dls_serial_single
 from tianim.kinematics.nullspace import ITERS as POLISH_ITERS
 from tianim.kinematics.nullspace import KERNEL_CONSTANTS, polish
 from tianim.kinematics.planar import PlanarChain
+from tianim.kinematics.tree import SerialChain
 
 METHODS = ("dls", "jt", "ccd", "fabrik")
 KERNEL_MIN_BATCH = 32  # planar DLS batches from this size run in one Taichi kernel (ik_kernel.py) ...
@@ -241,14 +243,17 @@ def _residual(chain, q, tgt):
 
 
 def _dls(chain, tgt, q, tol, iters, rest):
-    """Task phase (planar: plain floats per target, or the Taichi kernel; else vectorised), then the
+    """Task phase (plain floats per target for small batches, the Taichi kernel for large planar ones,
+    else vectorised NumPy), then the
     null-space polish when a secondary objective is set (:mod:`tianim.kinematics.nullspace`)."""
     polishing = rest is not None and chain.n > chain.task_dim
     planar = isinstance(chain, PlanarChain)
-    if planar and (len(q) == 1 or len(q) <= LOOP_MAX_BATCH) and len(q) < KERNEL_MIN_BATCH:
+    single = dls_planar_single if planar else dls_serial_single if isinstance(chain, SerialChain) else None
+    if single is not None and (len(q) == 1 or len(q) <= LOOP_MAX_BATCH) and (len(q) < KERNEL_MIN_BATCH
+                                                                              or not planar):
         qs, rs, its = [], [], []
         for b in range(len(q)):
-            qb, rb, kb = dls_planar_single(chain, tgt[b], q[b], tol, iters)
+            qb, rb, kb = single(chain, tgt[b], q[b], tol, iters)
             if polishing and rb <= tol:
                 qb, rb = polish(chain, tgt[b:b + 1], np.array([qb]), rest[b:b + 1], tol)
                 qb, rb = qb[0], rb[0]

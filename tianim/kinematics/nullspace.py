@@ -256,6 +256,74 @@ def _polish_planar_one(chain, target, q, rest, tol: float, iters: int):
     return np.array(qa), r
 
 
+def _polish_serial_one(chain, target, q, rest, tol: float, iters: int):
+    """:func:`polish` for one pose of a SerialChain: plain-float kinematics, the analytic constraint
+    curvature (:meth:`SerialChain._curvature`) and a dense (n + 3)-square KKT solve per step."""
+    lo, hi, limited = chain._plain()[5:]
+    t = np.asarray(target, dtype=np.float64)
+    n = len(q)
+    K = np.zeros((n + 3, n + 3))
+    eye = np.eye(n)
+    rtol = _RESTORE_TOL * tol
+
+    def fkj(qa):
+        end, J = chain._fk_jac_plain(qa.tolist())
+        J = np.array(J)
+        e = t - end
+        G = J @ J.T
+        G += 1e-15 * np.trace(G) * np.eye(3)
+        return e, J, G, float(np.sqrt(e @ e))
+
+    def clip(qa):
+        return np.minimum(np.maximum(qa, lo), hi) if limited else qa
+
+    qa = np.array(q, dtype=np.float64)
+    e, J, G, r = fkj(qa)
+    if r > tol:
+        return qa, r
+    g = qa - rest
+    phi = 0.5 * float(g @ g)
+    for _ in range(iters):
+        mu = np.linalg.solve(G, J @ g)
+        pg = g - J.T @ mu  # N (q - rest)
+        if float(np.sqrt(pg @ pg)) <= _PTOL * (1.0 + (2 * phi) ** 0.5):
+            break
+        H = eye - chain._curvature(qa[None], mu[None])[0]
+        K[:n, :n], K[:n, n:], K[n:, :n] = H, -J.T, J
+        try:
+            dq = np.linalg.solve(K, np.concatenate([-g, e]))[:n]
+            dt = dq - J.T @ np.linalg.solve(G, J @ dq)
+            if not (float(dt @ H @ dt) >= 1e-3 * float(dt @ dt)) or not np.all(np.isfinite(dq)):
+                dq = -pg
+        except np.linalg.LinAlgError:
+            dq = -pg
+        big = float(np.abs(dq).max())
+        if big > _MAX_STEP:
+            dq = dq * (_MAX_STEP / big)
+        alpha, accepted = 1.0, False
+        noise_mu = 2.0 * float(np.sqrt(mu @ mu))
+        for _ in range(_BACKTRACK):
+            qt = clip(qa + alpha * dq)
+            et, Jt, Gt, rt = fkj(qt)
+            for _ in range(_RESTORE):
+                if rt <= rtol:
+                    break
+                qt = clip(qt + Jt.T @ np.linalg.solve(Gt, et))
+                et, Jt, Gt, rt = fkj(qt)
+            gt = qt - rest
+            phit = 0.5 * float(gt @ gt)
+            noise = noise_mu * (r + rt)
+            if rt <= tol and (phit < phi - noise or (abs(phit - phi) <= noise
+                                                    and phit + float(mu @ et) < phi + float(mu @ e))):
+                qa, g, phi, r, e, J, G = qt, gt, phit, rt, et, Jt, Gt
+                accepted = True
+                break
+            alpha *= 0.25
+        if not accepted:
+            break
+    return qa, r
+
+
 def polish(chain, tgt: np.ndarray, q: np.ndarray, rest: np.ndarray, tol: float, iters: int = ITERS):
     """Polish poses q (B, n) that meet ``tol`` toward ``argmin |q - rest|`` on ``f(q) = tgt`` (B, m).
 
@@ -267,6 +335,9 @@ def polish(chain, tgt: np.ndarray, q: np.ndarray, rest: np.ndarray, tol: float, 
     m = tgt.shape[1]
     if B == 1 and hasattr(chain, "lengths") and m == 2:
         q1, r1 = _polish_planar_one(chain, tgt[0], q[0], rest[0], tol, iters)
+        return q1[None], np.array([r1])
+    if B == 1 and hasattr(chain, "_fk_jac_plain"):
+        q1, r1 = _polish_serial_one(chain, tgt[0], q[0], rest[0], tol, iters)
         return q1[None], np.array([r1])
     lo, hi = chain.lower, chain.upper
     eye_n, eye_m = np.eye(n), np.eye(m)
@@ -306,7 +377,8 @@ def polish(chain, tgt: np.ndarray, q: np.ndarray, rest: np.ndarray, tol: float, 
         if planar:
             dq, pg = _newton_step(Jw, JJt, g, ew, lambda mu: eye_n - _curvature_planar(Jw, mu, idx))
         else:
-            dq, pg = _newton_step(Jw, JJt, g, ew, lambda mu: eye_n - _curvature_fd(chain, qw, mu))
+            curv = chain._curvature if hasattr(chain, "_curvature") else (lambda qq, mu: _curvature_fd(chain, qq, mu))
+            dq, pg = _newton_step(Jw, JJt, g, ew, lambda mu: eye_n - curv(qw, mu))
         mu = np.linalg.solve(JJt, np.einsum("bij,bj->bi", Jw, g)[..., None])[..., 0]
         lag = np.einsum("bi,bi->b", mu, ew)  # phi + mu . e is the merit (same mu for both poses)
         pgn = np.sqrt(np.einsum("bi,bi->b", pg, pg))

@@ -17,6 +17,8 @@ Conventions
 
 from __future__ import annotations
 
+from math import cos, sin
+
 import numpy as np
 
 from tianim.kinematics._validate import float_array, joint_limits, joint_vector
@@ -164,3 +166,75 @@ class SerialChain(JointTree):
         pos, rot, ax = self.frames(q)
         end = pos[..., -1, :] + rot[..., -1, :, :] @ self.tip
         return pos, ax, end
+
+    # -- helpers used by the IK solvers (no validation) ---------------------------------------------------
+    def _plain(self):
+        """Per-joint constants as Python floats, cached on the (immutable) chain."""
+        const = self.__dict__.get("_plain_constants")
+        if const is None:
+            const = (self.offsets.tolist(), self.axes.tolist(), self.revolute.tolist(), self.tip.tolist(),
+                     self.base.tolist(), self.lower.tolist(), self.upper.tolist(),
+                     bool(np.any(np.isfinite(self.lower)) or np.any(np.isfinite(self.upper))))
+            self.__dict__["_plain_constants"] = const
+        return const
+
+    def _fk_jac_plain(self, q):
+        """End effector [x, y, z] and Jacobian rows (3 lists of n) for one pose (list of n floats), in plain
+        floats (the product of exponentials of the module docstring, Rodrigues' formula per joint)."""
+        offsets, axes, revolute, tip, base, _, _, _ = self._plain()
+        r00, r01, r02, r10, r11, r12, r20, r21, r22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+        px, py, pz = base
+        piv, wax = [], []
+        for i, (o, a) in enumerate(zip(offsets, axes)):
+            ax = (r00 * a[0] + r01 * a[1] + r02 * a[2], r10 * a[0] + r11 * a[1] + r12 * a[2],
+                  r20 * a[0] + r21 * a[1] + r22 * a[2])
+            px += r00 * o[0] + r01 * o[1] + r02 * o[2]
+            py += r10 * o[0] + r11 * o[1] + r12 * o[2]
+            pz += r20 * o[0] + r21 * o[1] + r22 * o[2]
+            if revolute[i]:
+                x, y, z = a
+                c, s = cos(q[i]), sin(q[i])
+                t = 1.0 - c
+                m00, m01, m02 = c + x * x * t, x * y * t - z * s, x * z * t + y * s
+                m10, m11, m12 = y * x * t + z * s, c + y * y * t, y * z * t - x * s
+                m20, m21, m22 = z * x * t - y * s, z * y * t + x * s, c + z * z * t
+                r00, r01, r02, r10, r11, r12, r20, r21, r22 = (
+                    r00 * m00 + r01 * m10 + r02 * m20, r00 * m01 + r01 * m11 + r02 * m21,
+                    r00 * m02 + r01 * m12 + r02 * m22, r10 * m00 + r11 * m10 + r12 * m20,
+                    r10 * m01 + r11 * m11 + r12 * m21, r10 * m02 + r11 * m12 + r12 * m22,
+                    r20 * m00 + r21 * m10 + r22 * m20, r20 * m01 + r21 * m11 + r22 * m21,
+                    r20 * m02 + r21 * m12 + r22 * m22)
+            else:
+                px, py, pz = px + ax[0] * q[i], py + ax[1] * q[i], pz + ax[2] * q[i]
+            piv.append((px, py, pz))
+            wax.append(ax)
+        ex = px + r00 * tip[0] + r01 * tip[1] + r02 * tip[2]
+        ey = py + r10 * tip[0] + r11 * tip[1] + r12 * tip[2]
+        ez = pz + r20 * tip[0] + r21 * tip[1] + r22 * tip[2]
+        jx, jy, jz = [], [], []
+        for (ax, ay, az), (qx, qy, qz), rev in zip(wax, piv, revolute):
+            if rev:
+                dx, dy, dz = ex - qx, ey - qy, ez - qz
+                jx.append(ay * dz - az * dy)
+                jy.append(az * dx - ax * dz)
+                jz.append(ax * dy - ay * dx)
+            else:
+                jx.append(ax)
+                jy.append(ay)
+                jz.append(az)
+        return [ex, ey, ez], [jx, jy, jz]
+
+    def _curvature(self, q: np.ndarray, mu: np.ndarray) -> np.ndarray:
+        """``sum_c mu_c d^2 x_c / dq_i dq_j`` of the end effector, shape (B, n, n), for q (B, n), mu (B, 3).
+
+        For ``i <= j`` the derivative of Jacobian column j along joint i is ``a_i x col_j``
+        for a revolute joint i (``a_i x (a_j x (x - p_j))`` or ``a_i x a_j``) and 0 for a
+        prismatic one (it moves neither ``a_j`` nor ``x - p_j``), so the contraction is
+        ``(mu x a_i) . col_j``, mirrored to ``i > j``.
+        """
+        pos, rot, ax = self.frames(q)
+        x = pos[..., -1, :] + rot[..., -1, :, :] @ self.tip
+        cols = np.where(self.revolute[:, None], np.cross(ax, x[..., None, :] - pos), ax)  # (B, n, 3)
+        P = np.einsum("bid,bjd->bij", np.cross(mu[:, None, :], ax) * self.revolute[:, None], cols)
+        upper = np.triu(np.ones((self.n, self.n), dtype=bool))
+        return np.where(upper, P, np.swapaxes(P, 1, 2))
