@@ -120,16 +120,20 @@ def dls_planar_single(chain, target, q0, tol: float, iters: int):
         xn, yn, dxn, dyn = _planar_fk(L, bx, by, qn)
         f0, f1 = tx - xn, ty - yn
         r2n = f0 * f0 + f1 * f1
-        if r2n < r2:
+        better = r2n < r2
+        if better:
             slow = slow + 1 if (r2n > _SLOW * r2 and not clamped) else 0
             newton = newton or slow >= _SLOW_STEPS  # slow progress: a large residual, use its curvature too
             q, dx, dy, e0, e1, r2 = qn, dxn, dyn, f0, f1, r2n
-            lam2 = max(lam2 * 0.1, lam_min)
-        else:
-            lam2 *= 10.0
-            if lam2 > lam_max:
-                break
+        lam2 = _adapt(lam2, better, lam_min)
+        if lam2 > lam_max:
+            break
     return q, r2**0.5, k
+
+
+def _adapt(lam2: float, accepted: bool, lam_min: float) -> float:
+    """Levenberg-Marquardt damping update: /10 after an accepted step (floored), x10 after a rejected one."""
+    return max(lam2 * 0.1, lam_min) if accepted else lam2 * 10.0
 
 
 def _newton_lm_step(dx, dy, e0, e1, lam2):
@@ -242,9 +246,9 @@ def dls_serial_single(chain, target, q0, tol: float, iters: int):
         r2n = f0 * f0 + f1 * f1 + f2 * f2
         if r2n < r2:
             q, (J0, J1, J2), e0, e1, e2, r2 = qn, Jn, f0, f1, f2, r2n
-            lam2 = max(lam2 * 0.1, lam_min)
+            lam2 = _adapt(lam2, True, lam_min)
         else:
-            lam2 *= 10.0
+            lam2 = _adapt(lam2, False, lam_min)
             if lam2 > lam_max:
                 break
     return q, r2**0.5, k
