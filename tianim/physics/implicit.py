@@ -37,7 +37,7 @@ size: it is stable at every dt and dissipates energy (more at larger omega h).
 import numpy as np
 
 from tianim.physics.model import GRID_STENCIL
-from tianim.runtime import ensure_taichi
+from tianim.physics.kernel_types import cached_variants, kernel_types
 
 #: Defaults of the nonlinear and linear solves, per float type:
 #: (relative Newton tolerance on |g|, relative CG tolerance, Newton iterations, CG iterations).
@@ -46,27 +46,13 @@ DEFAULTS = {
     "float64": dict(newton_tol=1e-10, cg_tol=1e-4, max_newton=12, max_cg=2000),
 }
 
-_cache: dict = {}
 
-
-def _kernel(real_name: str, dim: int, grid: bool, spring_damping: bool, medium_damping: bool):
-    key = (real_name, dim, grid, spring_damping, medium_damping)
-    if key not in _cache:
-        _cache[key] = _build(*key)
-    return _cache[key]
-
-
-def _build(real_name, dim, grid, spring_damping, medium_damping):
-    ti = ensure_taichi()
-    real = ti.f64 if real_name == "float64" else ti.f32
-    vec = ti.types.vector(dim, real)
-    mat = ti.types.matrix(dim, dim, real)
-    vec_arr = ti.types.ndarray(dtype=vec, ndim=2)
-    mat_arr = ti.types.ndarray(dtype=mat, ndim=2)
-    real_arr = ti.types.ndarray(dtype=real, ndim=1)
-    int_arr = ti.types.ndarray(dtype=ti.i32, ndim=1)
+@cached_variants
+def _kernel(real_name, dim, grid, spring_damping, medium_damping):
+    t = kernel_types(real_name, dim)
+    ti, real, vec, mat, vec_arr, mat_arr = t.ti, t.real, t.vec, t.mat, t.vec_arr, t.mat_arr
+    real_arr, int_arr, mask_arr = t.real_arr, t.int_arr, t.mask_arr
     stat_arr = ti.types.ndarray(dtype=ti.i32, ndim=2)
-    mask_arr = ti.types.ndarray(dtype=ti.u8, ndim=2)
     n_stencil = len(GRID_STENCIL)
     eps = float(np.finfo(np.float64 if real_name == "float64" else np.float32).eps)
     T = ti.template()

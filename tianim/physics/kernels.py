@@ -26,7 +26,7 @@ Integrators are written as sequences of *phases*; each phase is one loop over
 import numpy as np
 
 from tianim.physics.model import GRID_STENCIL, PLANE
-from tianim.runtime import ensure_taichi
+from tianim.physics.kernel_types import cached_variants, kernel_types
 
 #: Phases of each integrator: (``pre`` run once per call, ``step`` per substep).
 #: ``acc_X_V`` computes accelerations from positions X and velocities V.
@@ -56,8 +56,6 @@ WORK = {
 #: Substeps per launch in the "substep" layout (each is a sequence of parallel loops).
 SUBSTEPS_PER_LAUNCH = 4
 
-_cache: dict = {}
-
 
 def frame_kernel(real_np, dim: int, method: str, layout: str, grid: bool, colliders: bool, spring_damping: bool, medium_damping: bool):
     """Return ``(pre_kernel, step_kernel, multi_step_kernel)`` for the given compile-time choices (cached).
@@ -66,22 +64,14 @@ def frame_kernel(real_np, dim: int, method: str, layout: str, grid: bool, collid
     ``pre_kernel`` is None when the integrator has no pre-phase; ``multi_step_kernel``
     (substep layout only, else None) advances :data:`SUBSTEPS_PER_LAUNCH` substeps per launch.
     """
-    key = (np.dtype(real_np).name, dim, method, layout, grid, colliders, spring_damping, medium_damping)
-    if key not in _cache:
-        _cache[key] = _build(*key)
-    return _cache[key]
+    return _build(np.dtype(real_np).name, dim, method, layout, grid, colliders, spring_damping, medium_damping)
 
 
+@cached_variants
 def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medium_damping):
-    ti = ensure_taichi()
-    real = ti.f64 if real_name == "float64" else ti.f32
-    vec = ti.types.vector(dim, real)
-    vec_arr = ti.types.ndarray(dtype=vec, ndim=2)
-    real_arr = ti.types.ndarray(dtype=real, ndim=1)
-    int_arr = ti.types.ndarray(dtype=ti.i32, ndim=1)
-    coll_arr = ti.types.ndarray(dtype=real, ndim=2)
-    work_arr = ti.types.ndarray(dtype=vec, ndim=3)
-    mask_arr = ti.types.ndarray(dtype=ti.u8, ndim=2)
+    t = kernel_types(real_name, dim)
+    ti, real, vec_arr, work_arr = t.ti, t.real, t.vec_arr, t.work_arr
+    real_arr, int_arr, coll_arr, mask_arr = t.real_arr, t.int_arr, t.real2_arr, t.mask_arr
     pre_phases, step_phases = PHASES[method]
     n_stencil = len(GRID_STENCIL)
 

@@ -33,7 +33,7 @@ import weakref
 import numpy as np
 
 from tianim.physics.model import GRID_STENCIL
-from tianim.runtime import ensure_taichi
+from tianim.physics.kernel_types import cached_variants, kernel_types
 
 
 class DivergenceError(RuntimeError):
@@ -44,19 +44,10 @@ class DivergenceError(RuntimeError):
 DEFAULT_GROWTH = 10.0
 
 _FORWARD = tuple(o for o, (dc, dr, _) in enumerate(GRID_STENCIL) if dc > 0 or (dc == 0 and dr > 0))
-_cache: dict = {}
-
-
+@cached_variants
 def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool):
-    key = (real_name, dim, grid, serial)
-    if key in _cache:
-        return _cache[key]
-    ti = ensure_taichi()
-    real = ti.f64 if real_name == "float64" else ti.f32
-    vec = ti.types.vector(dim, real)
-    vec_arr = ti.types.ndarray(dtype=vec, ndim=2)
-    real_arr = ti.types.ndarray(dtype=real, ndim=1)
-    int_arr = ti.types.ndarray(dtype=ti.i32, ndim=1)
+    t = kernel_types(real_name, dim)
+    ti, vec, vec_arr, real_arr, int_arr = t.ti, t.vec, t.vec_arr, t.real_arr, t.int_arr
     out_arr = ti.types.ndarray(dtype=ti.f64, ndim=2)
 
     @ti.func
@@ -94,7 +85,6 @@ def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool):
             out[b, 1] = spr
             out[b, 2] = pot
 
-    _cache[key] = energies
     return energies
 
 

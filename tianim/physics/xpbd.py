@@ -35,29 +35,17 @@ It is first order in h; stiff springs behave as nearly rigid links when
 import numpy as np
 
 from tianim.physics.model import GRID_STENCIL
-from tianim.runtime import ensure_taichi
+from tianim.physics.kernel_types import cached_variants, kernel_types
 
 #: Stencil offsets each grid particle owns (the "forward" half: each spring once).
 FORWARD = tuple(o for o, (dc, dr, _) in enumerate(GRID_STENCIL) if dc > 0 or (dc == 0 and dr > 0))
 
-_cache: dict = {}
 
-
-def _kernel(real_name: str, dim: int, grid: bool, spring_damping: bool, medium_damping: bool):
-    key = (real_name, dim, grid, spring_damping, medium_damping)
-    if key not in _cache:
-        _cache[key] = _build(*key)
-    return _cache[key]
-
-
-def _build(real_name, dim, grid, spring_damping, medium_damping):
-    ti = ensure_taichi()
-    real = ti.f64 if real_name == "float64" else ti.f32
-    vec = ti.types.vector(dim, real)
-    vec_arr = ti.types.ndarray(dtype=vec, ndim=2)
-    real_arr = ti.types.ndarray(dtype=real, ndim=1)
-    int_arr = ti.types.ndarray(dtype=ti.i32, ndim=1)
-    mask_arr = ti.types.ndarray(dtype=ti.u8, ndim=2)
+@cached_variants
+def _kernel(real_name, dim, grid, spring_damping, medium_damping):
+    t = kernel_types(real_name, dim)
+    ti, real, vec, vec_arr = t.ti, t.real, t.vec, t.vec_arr
+    real_arr, int_arr, mask_arr = t.real_arr, t.int_arr, t.mask_arr
     T = ti.template()
 
     @ti.func
