@@ -15,6 +15,7 @@ DEMOS = {
     "cloth": "cloth",
     "keyframe": "keyframe",
     "arm-ik": "arm_ik",
+    "stiff": "stiff",
 }
 
 
