@@ -25,7 +25,8 @@ Integrators are written as sequences of *phases*; each phase is one loop over
 
 import numpy as np
 
-from tianim.physics.model import GRID_STENCIL, PLANE
+from tianim.physics.model import GRID_STENCIL
+from tianim.physics.contact import contact_response
 from tianim.physics.kernel_types import cached_variants, kernel_types
 
 #: Phases of each integrator: (``pre`` run once per call, ``step`` per substep).
@@ -147,48 +148,15 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
             a = f * P[h + n + i]
         return a
 
+    respond = contact_response(real_name, dim)
+
     @ti.func
     def collide(b, i, x: ti.template(), v: ti.template(), coll: ti.template(), P: ti.template(), dt):
-        """Push particle i out of every collider; restitution and Coulomb friction on its velocity."""
-        xi = x[b, i]
-        vi = v[b, i]
+        """Contact response of particle i (tianim.physics.contact); P[0:dim] holds gravity."""
         g2 = ti.cast(0, real)
         for a in ti.static(range(dim)):
             g2 += P[a] * P[a]
-        v_rest = 2 * ti.sqrt(g2) * dt  # below this normal speed an impact is resting contact (e = 0)
-        for c in range(coll.shape[0]):
-            vec_c = ti.Vector.zero(real, dim)  # plane normal, or sphere centre
-            for a in ti.static(range(dim)):
-                vec_c[a] = coll[c, 4 + a]
-            n = vec_c
-            phi = ti.cast(0, real)
-            if coll[c, 0] == PLANE:
-                phi = xi.dot(n) - coll[c, 3]
-            else:
-                d = xi - vec_c
-                dist = d.norm()
-                phi = dist - coll[c, 3]
-                n = ti.Vector.zero(real, dim)
-                if dist > 0:
-                    n = d / dist
-                else:
-                    n[dim - 1] = 1
-            if phi < 0:
-                xi -= phi * n
-                vn = vi.dot(n)
-                if vn < 0:
-                    e = coll[c, 1]
-                    if -vn <= v_rest:
-                        e = 0
-                    dvn = -(1 + e) * vn
-                    vt = vi - vn * n
-                    vt_norm = vt.norm()
-                    scale = ti.cast(0, real)
-                    if vt_norm > coll[c, 2] * dvn:
-                        scale = 1 - coll[c, 2] * dvn / vt_norm
-                    vi = scale * vt - e * vn * n
-        x[b, i] = xi
-        v[b, i] = vi
+        x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, ti.sqrt(g2), dt)
 
     @ti.func
     def phase(p: ti.template(), b, i, x: ti.template(), v: ti.template(), W: ti.template(), pinned: ti.template(),

@@ -1,0 +1,65 @@
+"""Contact response with ground planes and spheres, as a Taichi function shared by all solvers.
+
+For each collider row ``[kind, e, mu, offset_or_radius, n_or_center]`` of the
+model's collider table (:data:`tianim.physics.model.COLLIDER_ROW`), a particle
+at signed distance ``phi < 0`` (inside) is pushed back onto the surface along
+the normal ``n``, and if it moves inward (``v.n < 0``):
+
+* normal velocity ``v_n -> -e v_n`` (restitution; ``e = 0`` below the resting
+  speed ``2 |g| dt`` so that resting contact does not jitter);
+* tangential velocity reduced by at most ``mu`` times the normal velocity change
+  ``(1 + e) |v_n|`` (Coulomb friction as an impulse): a particle sliding on the
+  ground decelerates at ``mu g`` and stops after ``v0^2 / (2 mu g)``.
+"""
+
+from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.physics.model import PLANE
+
+
+@cached_variants
+def contact_response(real_name: str, dim: int):
+    """A ``ti.func respond(xi, vi, coll, g_norm, dt) -> (xi, vi)`` for one particle.
+
+    ``coll`` is the (C, 7) collider table as a Taichi ndarray, ``g_norm`` = |g| [m/s^2],
+    ``dt`` the step [s]; ``xi``, ``vi`` are the particle's position and velocity (dim vectors).
+    """
+    t = kernel_types(real_name, dim)
+    ti, real = t.ti, t.real
+
+    @ti.func
+    def respond(xi, vi, coll: ti.template(), g_norm, dt):
+        v_rest = 2 * g_norm * dt  # below this normal speed an impact is resting contact (e = 0)
+        for c in range(coll.shape[0]):
+            vec_c = ti.Vector.zero(real, dim)  # plane normal, or sphere centre
+            for a in ti.static(range(dim)):
+                vec_c[a] = coll[c, 4 + a]
+            n = vec_c
+            phi = ti.cast(0, real)
+            if coll[c, 0] == PLANE:
+                phi = xi.dot(n) - coll[c, 3]
+            else:
+                d = xi - vec_c
+                dist = d.norm()
+                phi = dist - coll[c, 3]
+                n = ti.Vector.zero(real, dim)
+                if dist > 0:
+                    n = d / dist
+                else:
+                    n[dim - 1] = 1
+            if phi < 0:
+                xi -= phi * n
+                vn = vi.dot(n)
+                if vn < 0:
+                    e = coll[c, 1]
+                    if -vn <= v_rest:
+                        e = 0
+                    dvn = -(1 + e) * vn
+                    vt = vi - vn * n
+                    vt_norm = vt.norm()
+                    scale = ti.cast(0, real)
+                    if vt_norm > coll[c, 2] * dvn:
+                        scale = 1 - coll[c, 2] * dvn / vt_norm
+                    vi = scale * vt - e * vn * n
+        return xi, vi
+
+    return respond
