@@ -48,13 +48,14 @@ PHASES = {
 #: array W: acc = W[0], xs = W[1], vs = W[2], kx = W[3], kv = W[4].
 WORK = {
     "explicit_euler": 1,
-    "symplectic_euler": 1,
+    "symplectic_euler": 3,  # W[1], W[2]: ping-pong buffers of the fused substep
     "verlet": 4,
     "rk4": 5,
     "accelerations": 1,
 }
 
 #: Substeps per launch in the "substep" layout (each is a sequence of parallel loops).
+#: Even, so that the fused symplectic Euler substeps end in (x, v).
 SUBSTEPS_PER_LAUNCH = 4
 
 
@@ -151,12 +152,29 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
     respond = contact_response(real_name, dim)
 
     @ti.func
-    def collide(b, i, x: ti.template(), v: ti.template(), coll: ti.template(), P: ti.template(), dt):
-        """Contact response of particle i (tianim.physics.contact); P[0:dim] holds gravity."""
+    def gravity_norm(P: ti.template()):
+        """|g| [m/s^2] from P[0:dim]."""
         g2 = ti.cast(0, real)
         for a in ti.static(range(dim)):
             g2 += P[a] * P[a]
-        x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, ti.sqrt(g2), dt)
+        return ti.sqrt(g2)
+
+    @ti.func
+    def collide(b, i, x: ti.template(), v: ti.template(), coll: ti.template(), P: ti.template(), dt):
+        """Contact response of particle i (tianim.physics.contact)."""
+        x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, gravity_norm(P), dt)
+
+    @ti.func
+    def fused_symplectic(b, i, xsel: ti.template(), vsel: ti.template(), x: ti.template(), v: ti.template(),
+                         W: ti.template(), pinned: ti.template(), P: ti.template(), T: ti.template(),
+                         coll: ti.template(), dt, nx):
+        """One symplectic Euler substep of particle i read from (xsel, vsel): returns (x', v')."""
+        vi = load(vsel, x, v, W, b, i) + dt * accel(b, i, xsel, vsel, x, v, W, pinned, P, T, nx)
+        xi = load(xsel, x, v, W, b, i) + dt * vi
+        if ti.static(colliders):
+            if pinned[b, i] == 0:
+                xi, vi = respond(xi, vi, coll, gravity_norm(P), dt)
+        return xi, vi
 
     @ti.func
     def phase(p: ti.template(), b, i, x: ti.template(), v: ti.template(), W: ti.template(), pinned: ti.template(),
@@ -171,6 +189,13 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
         elif ti.static(p == "euler_update"):
             x[b, i] += dt * v[b, i]
             v[b, i] += dt * W[0, b, i]
+        elif ti.static(p == "symplectic_fused_a"):
+            # A whole symplectic Euler substep in one loop, ping-ponging between (x, v) and
+            # (xs, vs) = (W[1], W[2]): a reads (x, v) and writes (xs, vs), b the reverse.
+            # Same arithmetic as acc_x_v + symplectic_update, one parallel loop fewer.
+            W[1, b, i], W[2, b, i] = fused_symplectic(b, i, "x", "v", x, v, W, pinned, P, T, coll, dt, nx)
+        elif ti.static(p == "symplectic_fused_b"):
+            x[b, i], v[b, i] = fused_symplectic(b, i, "xs", "vs", x, v, W, pinned, P, T, coll, dt, nx)
         elif ti.static(p == "symplectic_update"):
             v[b, i] += dt * W[0, b, i]
             x[b, i] += dt * v[b, i]
@@ -242,5 +267,10 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
     step = make(step_phases, True)
     if layout != "substep":
         return pre, step, None
-    # Large scenes: one launch advances SUBSTEPS_PER_LAUNCH substeps (amortises the launch).
-    return pre, step, make(step_phases * SUBSTEPS_PER_LAUNCH, True)
+    # Large scenes: one launch advances SUBSTEPS_PER_LAUNCH substeps (amortises the launch);
+    # symplectic Euler runs each of them as one fused loop (ping-pong buffers).
+    if method == "symplectic_euler":
+        multi_phases = ("symplectic_fused_a", "symplectic_fused_b") * (SUBSTEPS_PER_LAUNCH // 2)
+    else:
+        multi_phases = step_phases * SUBSTEPS_PER_LAUNCH
+    return pre, step, make(multi_phases, True)
