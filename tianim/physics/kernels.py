@@ -18,16 +18,21 @@ Integrators are written as sequences of *phases*; each phase is one loop over
   many copies of a small scene).
 * ``"serial"``: as ``"frame"`` with the loop over copies serial too (a
   single small scene: no thread-pool wake-up, the cheapest launch).
-* ``"substep"``: one parallel loop over (copy, particle) per phase, one launch
-  per substep (large scenes).
-"""
+* ``"substep"``: one parallel loop over (copy, particle) per phase (large
+  scenes); one launch runs :data:`SUBSTEPS_PER_LAUNCH` substeps, each top-level
+  loop ending in a barrier, and symplectic Euler fuses a whole substep into one
+  loop by ping-ponging between two position/velocity buffers.
 
+Kernel arguments are packed (fewer arguments, cheaper launches from Python):
+``P`` holds gravity, medium damping, masses and per-spring parameters; ``T`` the
+spring topology; ``W`` the work buffers (see :func:`_build`).
+"""
 
 import numpy as np
 
-from tianim.physics.model import GRID_STENCIL
 from tianim.physics.contact import contact_response
 from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.physics.model import GRID_STENCIL
 
 #: Phases of each integrator: (``pre`` run once per call, ``step`` per substep).
 #: ``acc_X_V`` computes accelerations from positions X and velocities V.
@@ -121,8 +126,8 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
             xi = load(xsel, x, v, W, b, i)
             vi = load(vsel, x, v, W, b, i)
             g = ti.Vector.zero(real, dim)
-            for a in ti.static(range(dim)):
-                g[a] = P[a]
+            for c in ti.static(range(dim)):
+                g[c] = P[c]
             f = P[h + i] * g
             if ti.static(medium_damping):
                 f -= P[dim] * vi
@@ -155,8 +160,8 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
     def gravity_norm(P: ti.template()):
         """|g| [m/s^2] from P[0:dim]."""
         g2 = ti.cast(0, real)
-        for a in ti.static(range(dim)):
-            g2 += P[a] * P[a]
+        for c in ti.static(range(dim)):
+            g2 += P[c] * P[c]
         return ti.sqrt(g2)
 
     @ti.func
