@@ -29,6 +29,9 @@ substeps, Newton and CG iterations with their convergence tests) runs
 serially inside it, one kernel launch per call. Reductions (dot products)
 run in a fixed order, so results are bit-identical for any thread count.
 
+Colliders (:mod:`tianim.physics.contact`) act after each step on the solved
+positions and velocities, as in the explicit integrators.
+
 Backward Euler is first order and L-stable: on an undamped oscillator its
 amplification factor is ``1 / (1 + i omega h)`` of modulus < 1 at every step
 size: it is stable at every dt and dissipates energy (more at larger omega h).
@@ -36,6 +39,7 @@ size: it is stable at every dt and dissipates energy (more at larger omega h).
 
 import numpy as np
 
+from tianim.physics.contact import contact_response
 from tianim.physics.model import GRID_STENCIL
 from tianim.physics.kernel_types import cached_variants, kernel_types
 
@@ -48,8 +52,9 @@ DEFAULTS = {
 
 
 @cached_variants
-def _kernel(real_name, dim, grid, spring_damping, medium_damping):
+def _kernel(real_name, dim, grid, spring_damping, medium_damping, colliders):
     t = kernel_types(real_name, dim)
+    respond = contact_response(real_name, dim)
     ti, real, vec, mat, vec_arr, mat_arr = t.ti, t.real, t.vec, t.mat, t.vec_arr, t.mat_arr
     real_arr, int_arr, mask_arr = t.real_arr, t.int_arr, t.mask_arr
     stat_arr = ti.types.ndarray(dtype=ti.i32, ndim=2)
@@ -158,8 +163,10 @@ def _kernel(real_name, dim, grid, spring_damping, medium_damping):
     def solve(x: vec_arr, v: vec_arr, vn: vec_arr, xs: vec_arr, r: vec_arr, p: vec_arr, ap: vec_arr, z: vec_arr,
               pre: mat_arr, pinned: mask_arr, mass: real_arr, off: int_arr, spr: int_arr, oth: int_arr,
               k: real_arr, rest: real_arr, damp: real_arr, g: vec, rho: real, h: real, nx: ti.i32, nsub: ti.i32,
-              newton_tol: real, cg_tol: real, max_newton: ti.i32, max_cg: ti.i32, stats: stat_arr):
+              newton_tol: real, cg_tol: real, max_newton: ti.i32, max_cg: ti.i32, stats: stat_arr,
+              coll: t.real2_arr):
         n = x.shape[1]
+        g_norm = g.norm()
         for b in range(x.shape[0]):
             for _sub in range(nsub):
                 for i in range(n):
@@ -227,6 +234,9 @@ def _kernel(real_name, dim, grid, spring_damping, medium_damping):
                 for i in range(n):
                     v[b, i] = vn[b, i]
                     x[b, i] += h * vn[b, i]
+                    if ti.static(colliders):
+                        if pinned[b, i] == 0:
+                            x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, g_norm, h)
 
     return solve
 
@@ -242,7 +252,8 @@ def implicit_euler(model, state, dt: float, substeps: int = 1, newton_tol: float
     Parameters
     ----------
     model : Model
-        Without colliders (contacts are not part of the implicit solve).
+        Colliders, if any, act after each step (contact response of
+        :mod:`tianim.physics.contact` on the solved x+, v+; contacts are not part of the Newton solve).
     state : State
         ``x``, ``v`` of shape (B, N, D) are updated.
     dt : float
@@ -262,18 +273,13 @@ def implicit_euler(model, state, dt: float, substeps: int = 1, newton_tol: float
         (Newton iterations count linear solves; a step whose first residual already meets the
         tolerance counts none).
     """
-    if len(model.colliders):
-        raise ValueError(
-            f"method='implicit_euler' does not handle colliders (model has {len(model.colliders)}); "
-            "use an explicit method (symplectic_euler, verlet, rk4) for scenes with contacts"
-        )
     opts = dict(DEFAULTS[state.dtype.name])
     for name, val in (("newton_tol", newton_tol), ("cg_tol", cg_tol), ("max_newton", max_newton), ("max_cg", max_cg)):
         if val is not None:
             opts[name] = val
     data = model.kernel_data(state.dtype)
     kernel = _kernel(state.dtype.name, model.dim, model.grid is not None, model.has_spring_damping,
-                     model.medium_damping > 0)
+                     model.medium_damping > 0, len(model.colliders) > 0)
     real = state.dtype.type
     b, n, d = state.x.shape
     pre = state._scratch.get("implicit_pre")
@@ -285,5 +291,5 @@ def implicit_euler(model, state, dt: float, substeps: int = 1, newton_tol: float
            pre, state.pinned.view(np.uint8), data["mass"], data["off"], data["spr"], data["oth"], data["k"],
            data["rest"], data["damp"], model.gravity.astype(state.dtype), real(model.medium_damping), real(dt),
            model.grid.nx if model.grid is not None else 1, int(substeps), real(opts["newton_tol"]),
-           real(opts["cg_tol"]), int(opts["max_newton"]), int(opts["max_cg"]), stats)
+           real(opts["cg_tol"]), int(opts["max_newton"]), int(opts["max_cg"]), stats, data["coll"])
     return {"newton_iterations": stats[:, 0].copy(), "cg_iterations": stats[:, 1].copy()}

@@ -95,11 +95,6 @@ def step(model, state, dt: float, substeps: int = 1, method: str = "symplectic_e
     if getattr(state, "model", None) is not model:
         raise ValueError("state does not belong to this model; create it with model.state(batch=...)")
     state.check_arrays()
-    if method in STIFF_METHODS and len(model.colliders):
-        raise ValueError(
-            f"method={method!r} does not handle colliders (model has {len(model.colliders)}); "
-            "use an explicit method (symplectic_euler, verlet, rk4) for scenes with contacts"
-        )
     watchdog = check if isinstance(check, Watchdog) else (_DEFAULT_WATCHDOG if check else None)
     token = watchdog.before(model, state) if watchdog is not None else None
     if method == "implicit_euler":
