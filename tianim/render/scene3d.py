@@ -17,6 +17,8 @@ no window, display or GPU. Kernels take arrays, so new scenes compile nothing.
 
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 from tianim.render import _kernels3d as K
@@ -26,6 +28,9 @@ from tianim.render.validate import check_size, points_array
 from tianim.runtime import ensure_taichi
 
 _GRID_FACES: dict = {}
+#: Samples of one pixel on the same side of one mesh share a shade when their depths differ by less than this
+#: fraction (a fold of the surface further back is shaded, and anti-aliased, separately).
+_GROUP_DEPTH_TOL = 0.01
 
 
 def grid_faces(ny: int, nx: int) -> np.ndarray:
@@ -64,9 +69,16 @@ class Scene3D:
     light : (3,) array_like
         Direction *towards* the light (world space; normalised).
     ssaa : int
-        Supersampling factor per axis (1 = none, 2 = 4 samples per pixel).
+        Visibility samples per pixel per axis (1 = none, 2 = 4 samples per pixel): edges
+        are anti-aliased by the fraction of samples each surface covers.
+    per_sample : bool
+        False (default): each surface seen in a pixel is shaded once, at its first
+        sample (multisampling, the cost of one shade per pixel except on edges).
+        True: every sample is shaded (supersampling, up to ``ssaa**2`` times slower;
+        also smooths shading detail smaller than a pixel).
     shadows : bool
-        Cast shadows with a shadow map of ``shadow_size`` x ``shadow_size`` texels.
+        Cast shadows with a shadow map of ``shadow_size`` x ``shadow_size`` texels
+        (bilinear percentage-closer filtering: shadow edges are about one texel soft).
     up : (3,) array_like
         World up (+y by default, the physics convention); the ground is normal to it.
     background : (top, bottom)
@@ -81,17 +93,20 @@ class Scene3D:
         light=(0.45, 1.0, 0.35),
         ssaa: int = 2,
         shadows: bool = True,
-        shadow_size: int = 1024,
+        shadow_size: int = 768,
         up=(0.0, 1.0, 0.0),
         background=("#c9d9ea", "#f4f6f8"),
         ambient: float = 0.35,
         specular: float = 0.2,
+        per_sample: bool = False,
     ):
         self.width, self.height = check_size(width, height)
         if camera is not None and not isinstance(camera, Camera):
             raise TypeError(f"camera={camera!r} must be a tianim.render.Camera or None (auto framing)")
         if int(ssaa) != ssaa or not 1 <= int(ssaa) <= 4:
             raise ValueError(f"ssaa={ssaa!r} must be an integer in 1..4 (samples per pixel per axis)")
+        if isinstance(shadow_size, bool) or int(shadow_size) != shadow_size or not 16 <= int(shadow_size) <= 8192:
+            raise ValueError(f"shadow_size={shadow_size!r} must be an integer in 16..8192 (texels per side)")
         if not 0.0 <= float(ambient) <= 1.0:
             raise ValueError(f"ambient={ambient!r} must be in [0, 1]")
         up = np.asarray(up, dtype=np.float64)
@@ -104,6 +119,7 @@ class Scene3D:
         self.camera = camera
         self.light = L / np.linalg.norm(L)
         self.ssaa = int(ssaa)
+        self.per_sample = bool(per_sample)
         self.shadows = bool(shadows)
         self.shadow_size = int(shadow_size)
         self.up = up
@@ -113,12 +129,18 @@ class Scene3D:
         self.specular = float(specular)
         self._buf = None
         self._smap = None
+        self._no_smap = np.full((1, 1), K.EMPTY, np.int64)
+        self._dummy_u32 = np.zeros((1, 1), np.uint32)
+        self._dummy_u8 = np.zeros((1, 1, 3), np.uint8)
+        self._no_ground = np.zeros((1, 1, K.GROUND_CHANNELS), np.float32)
+        self._gcache = None
+        self._ground_ref = None
         self.clear()
 
     # ------------------------------------------------------------------ primitives
     def clear(self) -> "Scene3D":
         """Remove all primitives (the camera and buffers stay)."""
-        self._meshes = []  # (vertices, faces, normals, vertex colours, back colour)
+        self._meshes = []  # (vertices, faces, normals or None, vertex colours, back colour, grid (ny, nx) or None)
         self._spheres = []  # (centres (P,3), radii (P,), colours (P,3))
         self._ground = None
         return self
@@ -136,18 +158,27 @@ class Scene3D:
         if f.size and (f.min() < 0 or f.max() >= len(v)):
             raise ValueError(f"faces index vertices in [{f.min()}, {f.max()}] but there are {len(v)} vertices")
         f = f.astype(np.int32)
+        n = vertex_normals(v, f) if normals is None else points_array(normals, "normals", dim=3)
+        if n.shape != v.shape:
+            raise ValueError(f"normals has shape {n.shape}; it must match vertices {v.shape}")
+        self._add_mesh(v, f, n, color, back_color)
+        return self
+
+    def _add_mesh(self, v, f, n, color, back_color, grid=None):
         vcol = rgb_array(color, len(v), "color")
         back = rgb(back_color, "back_color") if back_color is not None else 0.6 * vcol.mean(axis=0)
-        n = vertex_normals(v, f) if normals is None else points_array(normals, "normals", dim=3)
-        self._meshes.append((v, f, n, vcol, np.asarray(back, dtype=np.float32)))
-        return self
+        self._meshes.append((v, f, n, vcol, np.asarray(back, dtype=np.float32), grid))
 
     def surface(self, grid, color="blue", back_color=None) -> "Scene3D":
         """A regular surface grid (ny, nx, 3) [m] (cloth: ``x.reshape(ny, nx, 3)``)."""
         g = np.asarray(grid, dtype=np.float32)
         if g.ndim != 3 or g.shape[2] != 3 or g.shape[0] < 2 or g.shape[1] < 2:
             raise ValueError(f"grid has shape {g.shape}; it must be (ny, nx, 3) with ny, nx >= 2")
-        return self.mesh(g.reshape(-1, 3), grid_faces(g.shape[0], g.shape[1]), color, back_color)
+        if not np.all(np.isfinite(g)):
+            raise ValueError("grid contains NaN or infinite values; pass finite positions")
+        # normals come from central differences on the grid, computed in a kernel at render time
+        self._add_mesh(g.reshape(-1, 3), grid_faces(g.shape[0], g.shape[1]), None, color, back_color, g.shape[:2])
+        return self
 
     def particles(self, points, radius=0.01, color="orange") -> "Scene3D":
         """Particles as shaded spheres: points (N, 3) [m], radius [m] (scalar or (N,))."""
@@ -240,9 +271,39 @@ class Scene3D:
         if self._buf is None or self._buf.shape != ss:
             self._buf = np.empty(ss, dtype=np.int64)
             self._out = np.empty((self.height, self.width, 3), dtype=np.uint8)
+        self._buf.fill(K.EMPTY)
         if self.shadows and (self._smap is None or self._smap.shape[0] != self.shadow_size):
             self._smap = np.empty((self.shadow_size, self.shadow_size), dtype=np.int64)
         return self._buf, self._out
+
+    def _geometry(self):
+        """Concatenated meshes: vertices, faces, normals, colours (float32/int32), back colours, face materials."""
+        M = self._meshes
+        if not M:
+            z3 = np.zeros((0, 3), np.float32)
+            return z3, np.zeros((0, 3), np.int32), z3, z3, np.zeros((1, 3), np.float32), np.zeros(0, np.int32)
+        if len(M) == 1:
+            V, F, C = M[0][0], M[0][1], M[0][3]
+        else:
+            offsets = np.cumsum([0] + [len(m[0]) for m in M])
+            V = np.concatenate([m[0] for m in M])
+            F = np.concatenate([m[1] + o for m, o in zip(M, offsets)])
+            C = np.concatenate([m[3] for m in M])
+        V, F, C = (np.ascontiguousarray(a, dtype=t) for a, t in ((V, np.float32), (F, np.int32), (C, np.float32)))
+        N = np.empty_like(V)
+        o = 0
+        for v, f, n, *_, grid in M:
+            if grid is None:
+                N[o:o + len(v)] = n
+            else:
+                K.grid_normals(V, o, grid[0], grid[1], N)
+            o += len(v)
+        BK = np.stack([m[4] for m in M]).astype(np.float32)
+        if len(M) == 1:
+            FM = np.zeros(len(F), np.int32)
+        else:
+            FM = np.repeat(np.arange(len(M), dtype=np.int32), [len(m[1]) for m in M])
+        return V, F, N, C, BK, FM
 
     def render(self) -> np.ndarray:
         """Rasterise the scene; returns a new (height, width, 3) uint8 array."""
@@ -254,15 +315,7 @@ class Scene3D:
         b = self.bounds()
         lo, hi = b if b is not None else (np.zeros(3), np.zeros(3))
         extent = max(float(np.max(hi - lo)), 1e-3)
-        M = self._meshes
-        V = np.concatenate([m[0] for m in M]) if M else np.zeros((0, 3), np.float32)
-        offsets = np.cumsum([0] + [len(m[0]) for m in M])
-        F = np.concatenate([m[1] + o for m, o in zip(M, offsets)]) if M else np.zeros((0, 3), np.int32)
-        N = np.concatenate([m[2] for m in M]) if M else np.zeros((0, 3), np.float32)
-        C = np.concatenate([m[3] for m in M]) if M else np.zeros((0, 3), np.float32)
-        BK = np.stack([m[4] for m in M]) if M else np.zeros((1, 3), np.float32)
-        FM = np.concatenate([np.full(len(m[1]), i, np.int32) for i, m in enumerate(M)]) if M else np.zeros(0, np.int32)
-        V, F, N, C = V.astype(np.float32), F.astype(np.int32), N.astype(np.float32), C.astype(np.float32)
+        V, F, N, C, BK, FM = self._geometry()
         if self._spheres:
             SP = np.concatenate([s[0] for s in self._spheres]).astype(np.float64)
             SR = np.concatenate([s[1] for s in self._spheres]).astype(np.float32)
@@ -273,22 +326,55 @@ class Scene3D:
         W, H = self.width * self.ssaa, self.height * self.ssaa
         focal = camera.focal(H)
         near = 1e-4 * float(np.linalg.norm(np.subtract(camera.target, camera.eye)))
-        scr = camera.project(V, W, H).astype(np.float32)
-        sview = camera.to_view(SP).astype(np.float32)
-
-        buf.fill(K.EMPTY)
-        if len(F):
-            K.raster_triangles(scr, F, 0, 0, near, buf)
-        if len(SR):
-            K.raster_spheres(sview, SR, focal, 0, near, len(F), buf)
-
-        smap, lcam, lfocal, bias = self._shadow_pass(V, F, SP, SR, lo, hi)
-
         cam = np.concatenate([camera.basis, np.asarray(camera.eye)[None]]).astype(np.float32)
+        smap, lcam, lfocal, bias = self._light(lo, hi, len(F) + len(SR))
+        attr = np.empty((len(V), K.ATTR_COLS), np.float32)
+        if len(V):
+            prm = np.array([focal, W, H, lfocal, smap.shape[0], *self.light], np.float32)
+            K.vertices(V, N, C, cam, lcam, prm, attr)
+
+        if len(F) + len(SR) > K.MAX_PRIMITIVES:
+            raise ValueError(f"the scene has {len(F)} triangles and {len(SR)} spheres; at most "
+                             f"{K.MAX_PRIMITIVES} in all can be rendered at once (split it, or use coarser meshes)")
+        if len(F):
+            K.raster_triangles(attr, K.ATTR_SCREEN, F, FM, 0, near, buf)
+        if len(SR):
+            sview = camera.to_view(SP).astype(np.float32)
+            K.raster_spheres(sview, SR, focal, 0, near, len(F), buf)
+        else:
+            sview = np.zeros((0, 3), np.float32)
+        if smap.shape[0] > 1:
+            smap.fill(K.EMPTY)
+            if len(F):
+                K.raster_triangles(attr, K.ATTR_LIGHT, F, FM, 1, 0.0, smap)
+            if len(SR):
+                K.raster_spheres(((SP - lcam[3]) @ lcam[:3].T.astype(np.float64)).astype(np.float32), SR, lfocal,
+                                 1, 0.0, 0, smap)
+
+        params = self._params(focal, bias, lfocal, lo, hi)
+        K.resolve(buf, self.ssaa, int(self.per_sample), len(F), attr, F, FM, BK, sview, SC, cam,
+                  self.light.astype(np.float32), params, smap, lcam, self._ground_pixels(camera, params),
+                  *self._out_views(out))
+        return out.copy()
+
+    def _params(self, focal, bias, lfocal, lo, hi):
+        """The float32 parameter vector of the resolve kernel (layout in :func:`_kernels3d.resolve`).
+
+        The ground's default fade radius, checker cell and centre follow the scene's bounds when
+        the camera was set (by :meth:`frame` or the first render with a given camera), so that
+        they, and the cached ground shading, stay put while the scene moves.
+        """
         bg0, bg1 = self.background
         if self._ground is not None:
+            if self.camera is None:
+                ref = (lo, hi)
+            else:
+                if self._ground_ref is None or self._ground_ref[0] is not self.camera:
+                    self._ground_ref = (self.camera, lo.copy(), hi.copy())
+                ref = self._ground_ref[1:]
+            extent = max(float(np.max(ref[1] - ref[0])), 1e-3)
             h, size, c1, c2, cell = self._ground
-            centre = (lo + hi) / 2
+            centre = (ref[0] + ref[1]) / 2
             centre[self.up_axis] = h
             fade = 0.5 * float(size) if size is not None else 2.5 * extent
             cell = float(cell) if cell is not None else max(extent / 8.0, 1e-3)
@@ -296,18 +382,41 @@ class Scene3D:
         else:
             ground = [0.0] * 13
         axes = np.eye(3)[[self.up_axis, (self.up_axis + 1) % 3, (self.up_axis + 2) % 3]].ravel()
-        params = np.array([focal, self.ambient, self.specular, bias, self.up_axis, *bg0, *bg1, lfocal, *ground, *axes],
-                          dtype=np.float32)
-        K.resolve(buf, self.ssaa, len(F), scr, V, N, C, F, FM, BK, sview, SR, SC, cam,
-                  self.light.astype(np.float32), params, smap, lcam, out)
-        return out.copy()
+        return np.array([focal, self.ambient, self.specular, bias, _GROUP_DEPTH_TOL, *bg0, *bg1, lfocal, *ground,
+                         *axes], dtype=np.float32)
 
-    def _shadow_pass(self, V, F, SP, SR, lo, hi):
-        """Orthographic depth map seen from the light (Williams 1978)."""
-        dummy = (np.full((1, 1), K.EMPTY, np.int64), np.zeros((4, 3), np.float32), 1.0, 0.0)
-        if not self.shadows or (len(F) == 0 and len(SR) == 0):
-            return dummy
-        smap = self._smap
+    def _ground_pixels(self, camera, params):
+        """The ground's shading per pixel (per sample when ``per_sample``), recomputed only when the
+        camera, the image size or the ground's look change (:func:`_kernels3d.ground_cache`)."""
+        if params[12] < 0.5:
+            return self._no_ground
+        grid = self.ssaa if self.per_sample else 1
+        key = (camera, self.width, self.height, grid, self.ssaa, params[1:3].tobytes(), params[5:].tobytes(),
+               self.light.tobytes())
+        if self._gcache is None or self._gcache[0] != key:
+            cache = np.empty((self.height * grid, self.width * grid, K.GROUND_CHANNELS), np.float32)
+            p = params.copy()
+            p[0] = camera.focal(self.height * grid)
+            cam = np.concatenate([camera.basis, np.asarray(camera.eye)[None]]).astype(np.float32)
+            K.ground_cache(cam, self.light.astype(np.float32), p, float(self.ssaa // grid) / p[0], cache)
+            self._gcache = (key, cache)
+        return self._gcache[1]
+
+    def _out_views(self, out):
+        """(words, bytes) arguments of resolve: the image as (H, 3W/4) uint32 when W % 4 == 0 on a
+        little-endian machine (whole-word stores), else a dummy and the (H, W, 3) uint8 image."""
+        if self.width % 4 == 0 and sys.byteorder == "little":
+            return out.reshape(self.height, -1).view(np.uint32), self._dummy_u8
+        return self._dummy_u32, out
+
+    def _light(self, lo, hi, n_prims):
+        """Shadow map buffer, light basis (4, 3) float32 (rows right, up, forward, origin), focal [px/m], bias [m].
+
+        An orthographic view along the light direction that encloses the scene's bounding sphere
+        (Williams 1978); bias = 2.5 texels against self-shadowing ("acne").
+        """
+        if not self.shadows or n_prims == 0:
+            return self._no_smap, np.zeros((4, 3), np.float32), 1.0, 0.0
         centre = (lo + hi) / 2
         radius = max(0.5 * float(np.linalg.norm(hi - lo)), 1e-3) * 1.05
         fwd = -self.light
@@ -316,15 +425,6 @@ class Scene3D:
         r /= np.linalg.norm(r)
         u = np.cross(r, fwd)
         origin = centre - 2.0 * radius * fwd
-        basis = np.stack([r, u, fwd])
         lfocal = 0.5 * self.shadow_size / radius
-        lscr = (V - origin) @ basis.T
-        lscr = np.stack([0.5 * self.shadow_size + lfocal * lscr[:, 0],
-                         0.5 * self.shadow_size - lfocal * lscr[:, 1], lscr[:, 2]], 1).astype(np.float32)
-        smap.fill(K.EMPTY)
-        if len(F):
-            K.raster_triangles(lscr, F, 0, 1, 0.0, smap)
-        if len(SR):
-            K.raster_spheres(((SP - origin) @ basis.T).astype(np.float32), SR, lfocal, 1, 0.0, 0, smap)
-        lcam = np.concatenate([basis, origin[None]]).astype(np.float32)
-        return smap, lcam, float(lfocal), 2.5 / lfocal
+        lcam = np.stack([r, u, fwd, origin]).astype(np.float32)
+        return self._smap, lcam, float(lfocal), 2.5 / lfocal
