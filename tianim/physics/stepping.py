@@ -41,8 +41,9 @@ from tianim.physics.validation import check_finite_scalar
 #: Fraction of the estimated stability limit that :func:`plan_steps` uses.
 SAFETY = 0.8
 
-#: Force evaluations per substep of the explicit methods (Verlet carries one across substeps).
-EVALS = {"explicit_euler": 1, "symplectic_euler": 1, "verlet": 1, "rk4": 4, "xpbd": 1}
+#: Force evaluations per substep (Verlet carries one across substeps; an XPBD substep is one symmetric
+#: Gauss-Seidel sweep, which visits every spring twice).
+EVALS = {"explicit_euler": 1, "symplectic_euler": 1, "verlet": 1, "rk4": 4, "xpbd": 2}
 
 
 def substeps_for(model, method: str = "symplectic_euler", frame_dt: float = 1 / 24, safety: float = 0.5) -> tuple[int, float]:
