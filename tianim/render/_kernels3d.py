@@ -34,6 +34,8 @@ All kernels take NumPy arrays, so a new scene or size compiles nothing new.
 import taichi as ti
 
 EMPTY = 0x7FFFFFFFFFFFFFFF
+#: An empty texel of a shadow map (the bits of +inf: nothing blocks the light).
+EMPTY_DEPTH = 0x7F800000
 #: Primitive ids (triangles first, then spheres) fit in 24 bits of a key; the 8 bits above hold a tag.
 MAX_PRIMITIVES = (1 << 24) - 1
 _ID_MASK = 0xFFFFFF
@@ -63,6 +65,19 @@ def _key(depth: ti.f32, ident: ti.i32, tag: ti.i32) -> ti.i64:
 @ti.func
 def _depth(key: ti.i64) -> ti.f32:
     return ti.bit_cast(ti.cast(key >> 32, ti.i32), ti.f32)
+
+
+@ti.func
+def _write(buf: ti.template(), dmap: ti.template(), ortho: ti.template(), py, px, z, ident, tag):
+    """Keep the nearest: the key in ``buf`` (camera) or the depth bits in ``dmap`` (shadow map)."""
+    if ti.static(ortho):
+        d = ti.bit_cast(z, ti.i32)
+        if d < dmap[py, px]:  # a plain read first: most samples need no atomic
+            ti.atomic_min(dmap[py, px], d)
+    else:
+        k = _key(z, ident, tag)
+        if k < buf[py, px]:
+            ti.atomic_min(buf[py, px], k)
 
 
 @ti.func
@@ -151,17 +166,20 @@ def _clip_span(lo, hi, root, b):
 
 
 @ti.kernel
-def raster_triangles(attr: f32a2, col: ti.i32, faces: i32a2, fmat: i32a1, ortho: ti.i32, near: ti.f32,
-                     buf: i64a2):
-    """Write the nearest-triangle keys into ``buf`` (H, W).
+def raster_triangles(attr: f32a2, col: ti.i32, faces: i32a2, fmat: i32a1, ortho: ti.template(), near: ti.f32,
+                     buf: i64a2, dmap: i32a2):
+    """Write the nearest-triangle keys into ``buf`` (H, W), or (``ortho``) depths into ``dmap`` (H, W).
 
     attr: (V, C) with screen x, y [px] in columns ``col``, ``col+1`` and in ``col+2`` the inverse
-    depth 1/z (perspective, ``ortho=0``: interpolated linearly, so depth is perspective-correct;
-    a triangle with a vertex nearer than ``near`` [m] is skipped) or the depth (``ortho=1``).
+    depth 1/z (perspective, ``ortho=False``: interpolated linearly, so depth is perspective-correct;
+    a triangle with a vertex nearer than ``near`` [m] is skipped) or the depth (``ortho=True``,
+    shadow maps: positive depths, stored as their float bits with an integer atomic min).
     faces: (F, 3); fmat: (F,) mesh index of each face (for the tag of the key).
     A sample at (px + 0.5, py + 0.5) is covered when its three barycentrics are >= 0.
     """
     H, W = buf.shape[0], buf.shape[1]
+    if ti.static(ortho):
+        H, W = dmap.shape[0], dmap.shape[1]
     inear = 1.0 / near
     for f in range(faces.shape[0]):
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
@@ -169,7 +187,7 @@ def raster_triangles(attr: f32a2, col: ti.i32, faces: i32a2, fmat: i32a1, ortho:
         x1, y1, q1 = attr[b, col], attr[b, col + 1], attr[b, col + 2]
         x2, y2, q2 = attr[c, col], attr[c, col + 1], attr[c, col + 2]
         area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-        visible = ortho != 0 or (ti.min(q0, q1, q2) > 0.0 and ti.max(q0, q1, q2) < inear)
+        visible = ti.static(ortho) or (ti.min(q0, q1, q2) > 0.0 and ti.max(q0, q1, q2) < inear)
         if visible and ti.abs(area) > 1e-12:
             xmin = ti.max(ti.cast(ti.floor(ti.min(x0, x1, x2) - 0.5), ti.i32), 0)
             xmax = ti.min(ti.cast(ti.ceil(ti.max(x0, x1, x2) - 0.5), ti.i32), W - 1)
@@ -206,30 +224,31 @@ def raster_triangles(attr: f32a2, col: ti.i32, faces: i32a2, fmat: i32a1, ortho:
                     w2 = 1.0 - w0 - w1
                     if w0 >= 0.0 and w1 >= 0.0 and w2 >= 0.0:
                         z = w0 * q0 + w1 * q1 + w2 * q2
-                        if ortho == 0:
+                        if ti.static(not ortho):
                             z = 1.0 / z
-                        k = _key(z, f, tag)
-                        if k < buf[py, px]:  # a plain read first: most samples need no atomic
-                            ti.atomic_min(buf[py, px], k)
+                        _write(buf, dmap, ortho, py, px, z, f, tag)
 
 
 @ti.kernel
 def raster_spheres(
-    cen: f32a2, rad: f32a1, focal: ti.f32, ortho: ti.i32, near: ti.f32, id_offset: ti.i32, buf: i64a2
+    cen: f32a2, rad: f32a1, focal: ti.f32, ortho: ti.template(), near: ti.f32, id_offset: ti.i32, buf: i64a2,
+    dmap: i32a2,
 ):
-    """cen: (P, 3) view-space centres [m]; rad: (P,) radii [m]; buf: (H, W) keys.
+    """cen: (P, 3) view-space centres [m]; rad: (P,) radii [m]; buf: (H, W) keys, or (``ortho``) dmap: depths.
 
     Perspective: the ray through a pixel is t (dx, dy, 1), so t is the depth of the hit.
     Orthographic (shadow maps): pixel = focal * (x, y) + centre of the map, depth = z.
     """
     H, W = buf.shape[0], buf.shape[1]
+    if ti.static(ortho):
+        H, W = dmap.shape[0], dmap.shape[1]
     ox, oy = 0.5 * W, 0.5 * H
     ifocal = 1.0 / focal
     for p in range(cen.shape[0]):
         cx, cy, cz, r = cen[p, 0], cen[p, 1], cen[p, 2], rad[p]
-        if ortho != 0 or cz - r > near:
+        if ti.static(ortho) or cz - r > near:
             sx, sy, rp = 0.0, 0.0, 0.0
-            if ortho != 0:
+            if ti.static(ortho):
                 sx, sy, rp = ox + focal * cx, oy - focal * cy, focal * r
             else:
                 sx, sy = ox + focal * cx / cz, oy - focal * cy / cz
@@ -243,13 +262,11 @@ def raster_spheres(
                 dy = -(py + 0.5 - oy) * ifocal
                 for px in range(xmin, xmax + 1):
                     dx = (px + 0.5 - ox) * ifocal
-                    if ortho != 0:
+                    if ti.static(ortho):
                         ex, ey = dx - cx, dy - cy
                         h = r * r - ex * ex - ey * ey
                         if h >= 0.0:
-                            k = _key(cz - ti.sqrt(h), p + id_offset, 0)
-                            if k < buf[py, px]:
-                                ti.atomic_min(buf[py, px], k)
+                            _write(buf, dmap, ortho, py, px, cz - ti.sqrt(h), p + id_offset, 0)
                     else:
                         a = dx * dx + dy * dy + 1.0
                         b = dx * cx + dy * cy + cz
@@ -257,9 +274,7 @@ def raster_spheres(
                         if disc >= 0.0:
                             t = (b - ti.sqrt(disc)) / a
                             if t > near:
-                                k = _key(t, p + id_offset, 0)
-                                if k < buf[py, px]:
-                                    ti.atomic_min(buf[py, px], k)
+                                _write(buf, dmap, ortho, py, px, t, p + id_offset, 0)
 
 
 @ti.func
@@ -269,15 +284,19 @@ def _lin(c):
 
 
 @ti.func
-def _light_frame(smap: ti.template(), lcam: ti.template(), lfocal, bias):
-    """(3, 4) affine map from a world point to shadow-map texel coordinates x, y (texel centres at
-    integers) and the light depth minus ``bias``."""
+def _light_frame(smap: ti.template(), lcam: ti.template(), lfocal, bias, bbox: ti.template()):
+    """(3, 6): columns 0-3 the affine map from a world point to shadow-map texel coordinates x, y
+    (texel centres at integers) and the light depth minus ``bias``; columns 4-5 of rows 0-1 the
+    range of the lower-left texel index of a bilinear lookup that can meet a non-empty texel
+    (``bbox``: [x0, x1, y0, y1] of the texels primitives cover); outside it a point is lit."""
     Hs, Ws = smap.shape[0], smap.shape[1]
     o = _row3(lcam, 3, 0)
     r, u, f = _row3(lcam, 0, 0), _row3(lcam, 1, 0), _row3(lcam, 2, 0)
-    return ti.Matrix([[lfocal * r[0], lfocal * r[1], lfocal * r[2], 0.5 * Ws - 0.5 - lfocal * o.dot(r)],
-                      [-lfocal * u[0], -lfocal * u[1], -lfocal * u[2], 0.5 * Hs - 0.5 + lfocal * o.dot(u)],
-                      [f[0], f[1], f[2], -o.dot(f) - bias]])
+    return ti.Matrix([[lfocal * r[0], lfocal * r[1], lfocal * r[2], 0.5 * Ws - 0.5 - lfocal * o.dot(r),
+                       ti.max(bbox[0] - 1.0, 0.0), ti.min(bbox[1], Ws - 2.0)],
+                      [-lfocal * u[0], -lfocal * u[1], -lfocal * u[2], 0.5 * Hs - 0.5 + lfocal * o.dot(u),
+                       ti.max(bbox[2] - 1.0, 0.0), ti.min(bbox[3], Hs - 2.0)],
+                      [f[0], f[1], f[2], -o.dot(f) - bias, 0.0, 0.0]])
 
 
 @ti.func
@@ -286,7 +305,7 @@ def _light_coords(P, lsh):
 
 
 @ti.func
-def _shadow(l, smap: ti.template()):
+def _shadow(l, lsh, smap: ti.template()):
     """Fraction of light reaching a point with texel coordinates ``l`` (from :func:`_light_coords`):
     a bilinear percentage-closer filter of 2x2 texels (Reeves, Salesin & Cook 1987)."""
     lit = 1.0
@@ -295,11 +314,11 @@ def _shadow(l, smap: ti.template()):
         fx, fy, lz = l[0], l[1], l[2]
         ix, iy = ti.cast(ti.floor(fx), ti.i32), ti.cast(ti.floor(fy), ti.i32)
         tx, ty = fx - ix, fy - iy
-        if 0 <= ix < Ws - 1 and 0 <= iy < Hs - 1:
-            s00 = ti.select(_depth(smap[iy, ix]) < lz, 0.0, 1.0)
-            s10 = ti.select(_depth(smap[iy, ix + 1]) < lz, 0.0, 1.0)
-            s01 = ti.select(_depth(smap[iy + 1, ix]) < lz, 0.0, 1.0)
-            s11 = ti.select(_depth(smap[iy + 1, ix + 1]) < lz, 0.0, 1.0)
+        if lsh[0, 4] <= ix <= lsh[0, 5] and lsh[1, 4] <= iy <= lsh[1, 5]:  # texels with depths
+            s00 = ti.select(ti.bit_cast(smap[iy, ix], ti.f32) < lz, 0.0, 1.0)
+            s10 = ti.select(ti.bit_cast(smap[iy, ix + 1], ti.f32) < lz, 0.0, 1.0)
+            s01 = ti.select(ti.bit_cast(smap[iy + 1, ix], ti.f32) < lz, 0.0, 1.0)
+            s11 = ti.select(ti.bit_cast(smap[iy + 1, ix + 1], ti.f32) < lz, 0.0, 1.0)
             lit = (s00 + (s10 - s00) * tx) * (1.0 - ty) + (s01 + (s11 - s01) * tx) * ty
     return lit
 
@@ -308,7 +327,7 @@ def _shadow(l, smap: ti.template()):
 def _ground(gcache: ti.template(), gy, gx, smap: ti.template(), lfocal, lsh):
     """Colour of the ground at cache pixel (gy, gx): ambient + visibility x direct (linear RGB)."""
     P = ti.Vector([gcache[gy, gx, 6], gcache[gy, gx, 7], gcache[gy, gx, 8]])
-    lit = _shadow(_light_coords(P, lsh), smap)
+    lit = _shadow(_light_coords(P, lsh), lsh, smap)
     return ti.Vector([gcache[gy, gx, k] + lit * gcache[gy, gx, 3 + k] for k in ti.static(range(3))])
 
 
@@ -365,10 +384,8 @@ def _classify(key, d_up, ground_on, h):
 @ti.func
 def _pack(acc):
     """Linear RGB (gamma 2) -> 24-bit sRGB-ish bytes r | g << 8 | b << 16."""
-    r = ti.cast(ti.min(ti.sqrt(ti.max(acc[0], 0.0)), 1.0) * 255.0 + 0.5, ti.u64)
-    g = ti.cast(ti.min(ti.sqrt(ti.max(acc[1], 0.0)), 1.0) * 255.0 + 0.5, ti.u64)
-    b = ti.cast(ti.min(ti.sqrt(ti.max(acc[2], 0.0)), 1.0) * 255.0 + 0.5, ti.u64)
-    return r | (g << 8) | (b << 16)
+    c = ti.Vector([ti.cast(ti.min(ti.sqrt(ti.max(acc[k], 0.0)), 1.0) * 255.0 + 0.5, ti.i32) for k in ti.static(range(3))])
+    return ti.cast(c[0] | (c[1] << 8) | (c[2] << 16), ti.u64)
 
 
 @ti.kernel
@@ -448,7 +465,7 @@ def resolve(
     cam: f32a2,
     light: f32a1,
     params: f32a1,
-    smap: i64a2,
+    smap: i32a2,
     lcam: f32a2,
     gcache: f32a3,
     out_words: u32a2,
@@ -463,8 +480,9 @@ def resolve(
     [4] relative depth tolerance of a surface group, [5:8] sky top rgb, [8:11] sky bottom rgb,
     [11] shadow-map focal [px/m], [12] ground on, [13] ground height [m], [14:17] and [17:20] checker rgb,
     [20] checker cell [m], [21:24] ground centre, [24] ground fade radius [m], [25:28] up,
-    [28:31] and [31:34] ground axes; mats: (M, 3) back-side rgb per material;
-    lcam: (4, 3) light-space basis rows and origin; sph_view, sph_col: (P, 3) view-space centres [m]
+    [28:31] and [31:34] ground axes, [34:38] x0, x1, y0, y1: the shadow-map texels that primitives
+    cover; mats: (M, 3) back-side rgb per material; smap: the shadow map (depth bits per texel,
+    (1, 1) for none); lcam: (4, 3) light-space basis rows and origin; sph_view, sph_col: (P, 3) view-space centres [m]
     and colours of the spheres; gcache: the ground per pixel (per sample if ``per_sample``),
     see :func:`ground_cache`.
     The image goes to ``out_words`` (H, 3W/4) uint32, the bytes of an (H, W, 3) image, when it has
@@ -485,7 +503,7 @@ def resolve(
     h = eye.dot(upv) - params[13]  # eye height above the ground
     ground_on = params[12] > 0.5 and h > 0.0
     Rn, Un, Fn = R.dot(upv), U.dot(upv), Fw.dot(upv)
-    lsh = _light_frame(smap, lcam, lfocal, bias)
+    lsh = _light_frame(smap, lcam, lfocal, bias, ti.Vector([params[34], params[35], params[36], params[37]]))
     for y in range(Ho):  # parallel over rows, serial along a row (much faster than ndrange on CPU)
         tt = (y + 0.5) / Ho
         bg = ti.Vector([0.0, 0.0, 0.0])
@@ -554,7 +572,7 @@ def resolve(
                             q = ident - n_tri
                             hv = ti.Vector([dx * z - sph_view[q, 0], dy * z - sph_view[q, 1], z - sph_view[q, 2]])
                             N = (hv[0] * R + hv[1] * U + hv[2] * Fw).normalized(1e-12)
-                            lit = _shadow(_light_coords(P + N * bias, lsh), smap)
+                            lit = _shadow(_light_coords(P + N * bias, lsh), lsh, smap)
                             Hh = (L - D.normalized()).normalized()
                             col = _shade(N, upv, _lin(_row3(sph_col, q, 0)), Hh, L, ambient, spec, lit)
                         else:
@@ -576,7 +594,7 @@ def resolve(
                                 base = _lin(_row3(mats, fmat[ident], 0))
                             else:
                                 base = p0 * _row3(attr, a, 6) + p1 * _row3(attr, b, 6) + p2 * _row3(attr, cc, 6)
-                            lit = _shadow(_light_coords(P, lsh), smap)
+                            lit = _shadow(_light_coords(P, lsh), lsh, smap)
                             col = _shade(N, upv, base, Hh, L, ambient, spec, lit)
                     acc += n * col
             rgb = _pack(acc * (1.0 / NS))
