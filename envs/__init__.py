@@ -11,12 +11,7 @@
 ``envs.sb3.SB3VecEnv`` adapts a batched env to Stable-Baselines3;
 ``envs.baselines`` has a scripted controller per task.
 """
-import os
-
 from gymnasium.envs.registration import register, registry
-
-# Tests run on the CPU backend unless told otherwise, with Taichi's offline cache on.
-os.environ.setdefault("TIANIM_ARCH", "cpu")
 
 _ENVS = {
     "ArmReach-v0": ("arm_reach", "ArmReachEnv", "ArmReachVectorEnv", 100),
