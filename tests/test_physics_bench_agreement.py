@@ -2,7 +2,7 @@
 
 import tianim.physics as tp
 from tianim.bench.cloth import cloth_model
-from tianim.bench.physics_common import check_agreement
+from tianim.bench._physics import check_agreement
 from tianim.bench.rope import FRAME_DT, rope_model
 
 

@@ -13,7 +13,7 @@ import numpy as np
 
 import tianim.physics as tp
 from tianim.bench.common import parser, print_table, write_json
-from tianim.bench.physics_common import check_agreement, perturbed_state, time_numpy, time_tianim
+from tianim.bench._physics import check_agreement, perturbed_state, time_numpy, time_tianim
 
 
 def cloth_model(n: int):
