@@ -22,6 +22,7 @@ import sys
 import numpy as np
 
 from tianim.render import _kernels3d as K
+from tianim.render import _shade3d as S
 from tianim.render.camera import Camera
 from tianim.render.colors import rgb, rgb_array
 from tianim.render.validate import check_size, points_array
@@ -369,7 +370,7 @@ class Scene3D:
                     np.ceil(t[:, 1].max()) + 1]
 
         params = self._params(focal, bias, lfocal, lo, hi, bbox)
-        K.resolve(buf, self.ssaa, int(self.per_sample), len(F), attr, F, FM, BK, sview, SC, cam,
+        S.resolve(buf, self.ssaa, int(self.per_sample), len(F), attr, F, FM, BK, sview, SC, cam,
                   self.light.astype(np.float32), params, smap, lcam, self._ground_pixels(camera, params),
                   *self._out_views(out))
         return out.copy()
@@ -415,7 +416,7 @@ class Scene3D:
             p = params.copy()
             p[0] = camera.focal(self.height * grid)
             cam = np.concatenate([camera.basis, np.asarray(camera.eye)[None]]).astype(np.float32)
-            K.ground_cache(cam, self.light.astype(np.float32), p, float(self.ssaa // grid) / p[0], cache)
+            S.ground_cache(cam, self.light.astype(np.float32), p, float(self.ssaa // grid) / p[0], cache)
             self._gcache = (key, cache)
         return self._gcache[1]
 
