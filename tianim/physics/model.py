@@ -337,7 +337,13 @@ class Model:
         return self._csr
 
     def kernel_data(self, dtype) -> dict:
-        """Model arrays converted to ``dtype`` for kernels (cached per dtype)."""
+        """Model arrays converted to ``dtype`` for kernels (cached per dtype).
+
+        Keys: ``params`` and ``topo`` (the packed arguments of the explicit integrators, see
+        :mod:`tianim.physics.kernels`), ``coll`` (collider table), and the same data unpacked
+        (``mass``, ``inv_mass``, ``off``, ``spr``, ``oth``, ``k``, ``rest``, ``damp``,
+        ``gravity``) for the stiff solvers and the watchdog's energy kernel.
+        """
         dtype = np.dtype(dtype)
         if dtype not in self._kernel_data:
             off, spr, oth = self.incidence()
