@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from tianim.physics.model import GRID_STENCIL, GridTopology, Model
-from tianim.physics.validation import as_float_array, check_finite_scalar, check_positive_int
+from tianim._checks import as_float_array, check_finite_scalar, check_positive_int
 
 
 def spring1d(mass=1.0, stiffness=10.0, rest_length=1.0, medium_damping=0.0, damping=0.0, gravity=9.81, x0=None, name="spring1d"):

@@ -32,7 +32,7 @@ import math
 import numpy as np
 
 from tianim.physics.kernels import PHASES, SUBSTEPS_PER_LAUNCH, WORK, frame_kernel
-from tianim.physics.validation import check_finite_scalar, check_positive_int
+from tianim._checks import check_finite_scalar, check_positive_int
 from tianim.physics.watchdog import DivergenceError, Watchdog
 
 #: The explicit integrators (Taichi kernels of :mod:`tianim.physics.kernels`).

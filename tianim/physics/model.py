@@ -26,7 +26,7 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from tianim.physics.validation import as_float_array, as_index_array, check_finite_scalar
+from tianim._checks import as_float_array, as_index_array, check_finite_scalar
 
 
 # --------------------------------------------------------------------------- colliders

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim.physics.validation import as_float_array, as_index_array, check_positive_int
+from tianim._checks import as_float_array, as_index_array, check_positive_int
 
 _DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
 

@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tianim.physics.integrators import ALL_METHODS, STABILITY_LIMIT, stable_dt
-from tianim.physics.validation import check_finite_scalar
+from tianim._checks import check_finite_scalar
 
 #: Fraction of the estimated stability limit that :func:`plan_steps` uses.
 SAFETY = 0.8
