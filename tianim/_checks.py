@@ -12,9 +12,36 @@ import numbers
 import numpy as np
 
 
-def _short(value) -> str:
-    text = repr(value)
-    return text if len(text) <= 80 else text[:77] + "..."
+#: Largest count the kernels can hold: they index and loop with 32-bit signed integers (ti.i32).
+INT32_MAX = 2**31 - 1
+
+#: Longest text of a value quoted in a message before it is cut with "...".
+_MAX_SHOWN = 80
+
+
+def fmt(value) -> str:
+    """A short, plain text of ``value`` for an error message.
+
+    NumPy scalars show as the Python number they hold (``1.5``, not
+    ``np.float64(1.5)``), arrays and sequences as lists of such numbers.
+    """
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, np.ndarray):
+        with np.printoptions(threshold=8, edgeitems=2, precision=6):
+            text = np.array2string(value, separator=", ").replace("\n", "")
+    elif isinstance(value, (list, tuple)) and type(value) in (list, tuple):
+        inner = ", ".join(fmt(v) for v in value[:9]) + (", ..." if len(value) > 9 else "")
+        if isinstance(value, tuple):
+            text = f"({inner},)" if len(value) == 1 else f"({inner})"
+        else:
+            text = f"[{inner}]"
+    else:
+        text = repr(value)
+    return text if len(text) <= _MAX_SHOWN else text[: _MAX_SHOWN - 3] + "..."
+
+
+_short = fmt  # the name used before fmt existed
 
 
 def check_finite_scalar(name: str, value, lo: float | None = None, hi: float | None = None, lo_open: bool = False) -> float:
@@ -26,19 +53,53 @@ def check_finite_scalar(name: str, value, lo: float | None = None, hi: float | N
         raise ValueError(f"{name}={v!r} must be finite")
     if lo is not None and (v < lo or (lo_open and v == lo)):
         op = ">" if lo_open else ">="
-        raise ValueError(f"{name}={v!r} must be {op} {lo}")
+        raise ValueError(f"{name}={v!r} must be {op} {fmt(lo)}")
     if hi is not None and v > hi:
-        raise ValueError(f"{name}={v!r} must be <= {hi}")
+        raise ValueError(f"{name}={v!r} must be <= {fmt(hi)}")
     return v
 
 
-def check_positive_int(name: str, value, lo: int = 1) -> int:
-    """Return ``int(value)`` after checking it is an integer >= lo."""
-    if isinstance(value, bool) or not isinstance(value, (numbers.Integral, np.integer)):
-        raise TypeError(f"{name}={_short(value)} must be an integer, got {type(value).__name__}")
-    if int(value) < lo:
-        raise ValueError(f"{name}={int(value)} must be >= {lo}")
-    return int(value)
+def check_int(name: str, value, lo: int | None = None, hi: int | None = INT32_MAX) -> int:
+    """Return ``int(value)`` after checking it is an integer (Python or NumPy) in [lo, hi].
+
+    ``hi`` defaults to :data:`INT32_MAX`: counts go to kernels as 32-bit integers,
+    so a larger one would wrap around silently.
+    """
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (numbers.Integral, np.integer)):
+        raise TypeError(f"{name}={fmt(value)} must be an integer, got {type(value).__name__}")
+    v = int(value)
+    if lo is not None and v < lo:
+        raise ValueError(f"{name}={v} must be >= {lo}")
+    if hi is not None and v > hi:
+        if hi == INT32_MAX:
+            raise ValueError(f"{name}={v} is too large: kernels count in 32-bit integers, so it must be <= {hi}")
+        raise ValueError(f"{name}={v} must be <= {hi}")
+    return v
+
+
+def check_positive_int(name: str, value, lo: int = 1, hi: int | None = INT32_MAX) -> int:
+    """Return ``int(value)`` after checking it is an integer in [lo, hi] (hi: the int32 limit)."""
+    return check_int(name, value, lo=lo, hi=hi)
+
+
+def check_bool(name: str, value) -> bool:
+    """Return ``value`` as a bool; only ``True``/``False`` (or NumPy bools) are flags.
+
+    ``check="no"`` or ``check=0`` is a TypeError rather than a silent truth test.
+    """
+    if isinstance(value, (bool, np.bool_)):
+        return bool(value)
+    raise TypeError(f"{name}={fmt(value)} must be True or False, got {type(value).__name__}")
+
+
+def check_choice(name: str, value, choices) -> str:
+    """Return ``value`` after checking it is one of the strings in ``choices``."""
+    choices = tuple(choices)
+    if not isinstance(value, str) or value not in choices:
+        listed = ", ".join(repr(c) for c in choices)
+        kind = "" if isinstance(value, str) else f" ({type(value).__name__})"
+        raise ValueError(f"{name}={fmt(value)}{kind} is not an option; use one of {listed}")
+    return str(value)
 
 
 def as_float_array(name: str, value, shape: tuple | None = None, ndim: int | None = None) -> np.ndarray:
@@ -53,7 +114,7 @@ def as_float_array(name: str, value, shape: tuple | None = None, ndim: int | Non
         raise ValueError(f"{name} has shape {arr.shape}; expected {tuple(shape)}")
     if not np.all(np.isfinite(arr)):
         bad = np.argwhere(~np.isfinite(arr))[0]
-        raise ValueError(f"{name}{list(bad)} = {arr[tuple(bad)]!r} is not finite; give finite values")
+        raise ValueError(f"{name}{[int(i) for i in bad]} = {fmt(arr[tuple(bad)])} is not finite; give finite values")
     return arr
 
 
@@ -76,3 +137,113 @@ def as_index_array(name: str, value, n: int, ndim: int = 1) -> np.ndarray:
             f"indices must be in [0, {n - 1}]"
         )
     return arr.astype(np.int32)
+
+
+# --- joint-space checks (kinematics, keyframe) --------------------------------------------
+
+
+def float_array(name: str, value, shape_hint: str) -> np.ndarray:
+    """``value`` as a finite float64 array, or a ValueError/TypeError naming ``name``."""
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"{name}={fmt(value)} is not numeric; pass an array of floats {shape_hint}")
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name}={fmt(value)} is not numeric; pass an array of floats {shape_hint}") from exc
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{name} contains NaN or inf ({fmt(arr)}); pass finite values {shape_hint}")
+    return arr
+
+
+def per_joint(name: str, value, n: int, default: float) -> np.ndarray:
+    """A length-``n`` float64 vector from a scalar, a length-n sequence or None (-> default)."""
+    if value is None:
+        return np.full(n, float(default))
+    arr = float_array(name, value, f"(a scalar or {n} values, one per joint)")
+    if arr.ndim == 0:
+        return np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise ValueError(f"{name} has shape {arr.shape}; pass a scalar or {n} values, one per joint")
+    return arr
+
+
+def joint_limits(lower, upper, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Validated (lower, upper) joint limits of shape (n,); None or +-inf entries mean unlimited."""
+    out = []
+    for name, value, default in (("lower", lower, -np.inf), ("upper", upper, np.inf)):
+        if value is None:
+            out.append(np.full(n, default))
+            continue
+        if isinstance(value, (str, bytes)):
+            raise TypeError(f"{name}={fmt(value)} is not numeric; pass {n} floats (radians or metres)")
+        try:
+            arr = np.array(value, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise TypeError(f"{name}={fmt(value)} is not numeric; pass {n} floats (radians or metres)") from exc
+        if np.any(np.isnan(arr)):
+            raise ValueError(f"{name} contains NaN ({fmt(arr)}); use +-inf or None for an unlimited joint")
+        if arr.ndim == 0:
+            arr = np.full(n, float(arr))
+        if arr.shape != (n,):
+            raise ValueError(f"{name} has shape {arr.shape}; pass a scalar or {n} values, one per joint")
+        out.append(arr)
+    lo, hi = out
+    bad = np.nonzero(lo > hi)[0]
+    if bad.size:
+        i = int(bad[0])
+        raise ValueError(
+            f"joint limits have lower > upper at joint {i} (lower={fmt(lo[i])}, upper={fmt(hi[i])}); "
+            "swap them or widen the range"
+        )
+    return lo, hi
+
+
+def joint_vector(name: str, q, n: int) -> np.ndarray:
+    """Joint coordinates of shape (..., n) as float64."""
+    arr = float_array(name, q, f"of shape (..., {n})")
+    if arr.ndim == 0 or arr.shape[-1] != n:
+        raise ValueError(f"{name} has shape {arr.shape}; the chain has {n} joints, pass shape (..., {n})")
+    return arr
+
+
+# --- image and point checks (render, export) ----------------------------------------------
+
+#: Largest image side in pixels the renderers accept (8K; larger frames exhaust memory first).
+MAX_SIDE = 8192
+
+
+def check_size(width, height) -> tuple[int, int]:
+    """Validate an image size in pixels; returns (width, height) as ints."""
+    for name, v in (("width", width), ("height", height)):
+        if isinstance(v, (bool, np.bool_)) or not isinstance(v, (numbers.Integral, np.integer)) or not 1 <= int(v) <= MAX_SIDE:
+            raise ValueError(f"{name}={fmt(v)} must be an integer number of pixels in 1..{MAX_SIDE}")
+    return int(width), int(height)
+
+
+def parse_size(text) -> tuple[int, int]:
+    """Parse ``"WxH"`` (e.g. ``"640x480"``) or a (W, H) pair -> (width, height)."""
+    if isinstance(text, str):
+        parts = text.lower().replace("*", "x").split("x")
+        if len(parts) != 2 or not all(p.strip().isdigit() for p in parts):
+            raise ValueError(f"size={text!r} must look like WIDTHxHEIGHT, e.g. 640x480")
+        return check_size(int(parts[0]), int(parts[1]))
+    try:
+        w, h = text
+    except (TypeError, ValueError):
+        raise ValueError(f"size={fmt(text)} must be 'WxH' or a (width, height) pair") from None
+    return check_size(w, h)
+
+
+def points_array(points, name: str, dim: int) -> np.ndarray:
+    """(N, dim) finite float32 array, or a ValueError naming ``name``."""
+    try:
+        a = np.asarray(points, dtype=np.float32)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}={fmt(points)} is not numeric; pass (N, {dim}) positions") from None
+    if a.ndim == 1 and a.shape[0] == dim:
+        a = a[None]
+    if a.ndim != 2 or a.shape[1] != dim:
+        raise ValueError(f"{name} has shape {a.shape}; it must be (N, {dim})")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} contains NaN or infinite values; pass finite positions")
+    return a

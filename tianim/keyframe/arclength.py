@@ -40,7 +40,7 @@ from __future__ import annotations
 import numpy as np
 
 from tianim.keyframe.spline import PiecewiseCubic
-from tianim.kinematics._validate import float_array
+from tianim._checks import float_array
 
 _GL = {n: np.polynomial.legendre.leggauss(n) for n in (4, 16)}
 _METHODS = ("auto", "table", "hermite", "gauss")

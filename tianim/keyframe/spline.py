@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim.kinematics._validate import float_array
+from tianim._checks import float_array
 
 PARAMETERIZATIONS = {"uniform": 0.0, "centripetal": 0.5, "chordal": 1.0}
 

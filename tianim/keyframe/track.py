@@ -26,7 +26,7 @@ from tianim.keyframe.spline import (
     linear,
     monotone_cubic,
 )
-from tianim.kinematics._validate import float_array
+from tianim._checks import float_array
 
 INTERPOLATIONS = ("catmull-rom", "kochanek-bartels", "linear", "step")
 

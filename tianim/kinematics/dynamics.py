@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim.kinematics._validate import float_array, joint_vector
+from tianim._checks import float_array, joint_vector
 from tianim.kinematics.planar import PlanarChain
 
 DEFAULT_GRAVITY = (0.0, -9.81)

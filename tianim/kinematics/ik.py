@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tianim.kinematics._validate import float_array, joint_vector
+from tianim._checks import float_array, joint_vector
 from tianim.kinematics.dls import dls_batch, dls_planar_single, dls_serial_single
 from tianim.kinematics.nullspace import ITERS as POLISH_ITERS
 from tianim.kinematics.nullspace import KERNEL_CONSTANTS, polish

@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim.kinematics._validate import float_array, joint_limits, joint_vector, per_joint
+from tianim._checks import float_array, joint_limits, joint_vector, per_joint
 
 
 class PlanarChain:

@@ -21,7 +21,7 @@ from math import cos, sin
 
 import numpy as np
 
-from tianim.kinematics._validate import float_array, joint_limits, joint_vector
+from tianim._checks import float_array, joint_limits, joint_vector
 
 KINDS = ("revolute", "prismatic")
 

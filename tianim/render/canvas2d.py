@@ -23,7 +23,7 @@ import numpy as np
 
 from tianim.render import _kernels2d as K
 from tianim.render.colors import rgb, rgb_array, strain_colors
-from tianim.render.validate import check_size, points_array
+from tianim._checks import check_size, points_array
 from tianim.runtime import ensure_taichi
 
 

@@ -24,7 +24,7 @@ from typing import Iterable
 
 import numpy as np
 
-from tianim.render.validate import check_size
+from tianim._checks import check_size
 
 KINDS = {".mp4": "mp4", ".gif": "gif", ".png": "png"}
 PROGRESS_MIN_FRAMES = 48
@@ -87,7 +87,7 @@ def check_output(path, size=None, fps: float = 24.0) -> OutputSpec:
 
 
 def _parse(size: str):
-    from tianim.render.validate import parse_size
+    from tianim._checks import parse_size
 
     return parse_size(size)
 

@@ -25,7 +25,7 @@ from tianim.render import _kernels3d as K
 from tianim.render import _shade3d as S
 from tianim.render.camera import Camera
 from tianim.render.colors import rgb, rgb_array
-from tianim.render.validate import check_size, points_array
+from tianim._checks import check_size, points_array
 from tianim.runtime import ensure_taichi
 
 _GRID_FACES: dict = {}
