@@ -16,7 +16,9 @@ sphere = tp.Sphere(center=(0.0, 0.35, 0.0), radius=0.3, friction=0.6)
 model = tp.cloth(nx=n, ny=n, size=(1.2, 1.2), total_mass=0.3, stiffness=(800.0, 300.0, 20.0),
                  damping=(0.02, 0.01, 0.002), medium_damping=2e-4, origin=(-0.6, 0.9, -0.6), pins="none",
                  colliders=[tp.Ground(height=0.0, friction=0.5), sphere])
-sim = Simulation(model, model.state(batch=1, dtype=np.float32))   # substeps from the stiffest spring
+plan = tp.plan_steps(model, frame_dt=1 / 24)                      # solver and substeps from the stiffest spring
+print(plan.why)
+sim = Simulation(plan, model.state(batch=1, dtype=np.float32))
 
 scene = Scene3D(640, 480)
 

@@ -14,5 +14,6 @@ def test_cloth_bench_scene_agrees_with_numpy():
 
 def test_rope_bench_scene_agrees_with_numpy():
     model = rope_model()
-    sub, dt = tp.substeps_for(model, "symplectic_euler", FRAME_DT)
+    plan = tp.plan_steps(model, FRAME_DT, methods="symplectic_euler", safety=0.5)
+    sub, dt = plan.substeps, plan.dt
     assert check_agreement(model, dt, 3 * sub, batch=3) < 1e-4

@@ -45,7 +45,8 @@ def test_cloth_drapes_over_sphere_without_penetration():
     model = tp.cloth(16, 16, size=(1.2, 1.2), pins="none", damping=(0.02, 0.02, 0.002),
                      colliders=[sphere, tp.Ground(friction=0.5)])
     state = model.state()
-    sub, dt = tp.substeps_for(model, "symplectic_euler", 1 / 24)
+    plan = tp.plan_steps(model, 1 / 24, methods="symplectic_euler", safety=0.5)
+    sub, dt = plan.substeps, plan.dt
     for _ in range(48):
         tp.step(model, state, dt, substeps=sub)
     x = state.x[0].astype(np.float64)

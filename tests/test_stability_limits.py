@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from tianim.bench.stability import bisect_limit, measured_radius, one_step_matrix
-from tianim.physics.stepping import amplification
+from tianim.physics.theory import amplification
 
 THEORY = {"symplectic_euler": 2.0, "verlet": 2.0, "rk4": 2.0 * math.sqrt(2.0)}
 

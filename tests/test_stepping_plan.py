@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import tianim.physics as tp
-from tianim.physics.stepping import mode_error, omega_max
+from tianim.physics.planner import omega_max
+from tianim.physics.theory import mode_error, omega_bound
 
 SCENES = {
     "spring1d": lambda: tp.spring1d(),
@@ -33,7 +34,8 @@ def test_power_iteration_matches_dense_eigenvalues():
     w = np.repeat(1 / np.sqrt(model.mass), d)[keep]
     lam = np.linalg.eigvalsh(w[:, None] * K[np.ix_(keep, keep)] * w[None, :]).max()
     assert omega_max(model) == pytest.approx(math.sqrt(lam), rel=0.02)
-    assert omega_max(model) <= model.omega_max()
+    assert omega_max(model) <= omega_bound(model)
+    assert omega_bound(model) >= math.sqrt(lam) * (1 - 1e-12)  # a rigorous bound
 
 
 def largest_stable_dt(model, method, t_end=0.25):
@@ -60,7 +62,7 @@ def test_default_plan_never_diverges_and_is_within_2x_of_largest_stable_dt(name)
     assert plan.method in plan.why and f"{plan.substeps} substep" in plan.why
     state = model.state()
     for _ in range(6):
-        plan.step_frame(model, state)
+        plan.step_frame(state)
     assert np.isfinite(state.x).all()
     if math.isinf(plan.stable_dt) or plan.substeps == 1 and plan.dt < 0.5 * plan.stable_dt:
         return  # a soft scene: one substep per frame is far below the limit (spring1d)

@@ -30,13 +30,19 @@ def test_bad_timeline():
 
 def test_simulation_follows_closed_form_spring():
     m = tp.spring1d(mass=1.0, stiffness=10.0, rest_length=1.0, x0=1.5)
-    sim = Simulation(m, m.state(batch=1, dtype=np.float64), fps=24, substeps=40)
+    plan = tp.plan_steps(m, 1 / 24, methods="symplectic_euler", min_substeps=40)
+    assert plan.substeps == 40
+    sim = Simulation(plan, m.state(batch=1, dtype=np.float64))
     tl = Timeline(frames=24)
     xs = np.array([q[1, 0] for _, q in tl.sample(sim)])
     exact = spring1d_solution(m, tl.times)[0]
     assert np.max(np.abs(xs - exact)) < 1e-3
     with pytest.raises(ValueError, match="forward"):
         sim(0.0)
+    with pytest.raises(TypeError, match="plan"):
+        Simulation(m, m.state())
+    with pytest.raises(ValueError, match="model"):
+        Simulation(plan, tp.spring1d().state())
 
 
 def test_clip_interpolates():

@@ -37,7 +37,7 @@ def test_silent_on_stable_runs(name, model):
     plan = tp.plan_steps(model, 1 / 60)
     state = model.state()
     for _ in range(20):
-        plan.step_frame(model, state)  # default watchdog on
+        plan.step_frame(state)  # default watchdog on
     assert np.isfinite(state.x).all()
 
 

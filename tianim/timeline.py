@@ -15,7 +15,7 @@ Usage::
 
     from tianim.timeline import Timeline, Simulation
     tl = Timeline(duration=4.0)                    # 96 frames at 24 fps
-    sim = Simulation(model, state)                 # substeps per frame from the stiffest mode
+    sim = Simulation(tp.plan_steps(model, 1 / 24), state)   # substeps per frame from the stiffest mode
     tl.export("cloth.mp4", sim, lambda x, t: draw(x), size=(640, 480))
 """
 
@@ -111,37 +111,31 @@ class Simulation:
 
     Parameters
     ----------
-    model : tianim.physics.Model
+    plan : tianim.physics.StepPlan
+        From :func:`tianim.physics.plan_steps`: the model, the solver and its substeps per frame.
+        The frame rate is ``1 / plan.frame_dt``.
     state : tianim.physics.State
         Advanced in place; its time ``state.t`` must not pass the requested times.
-    fps : float
-        Frame rate used to choose the step: ``substeps`` equal steps per frame, the fewest
-        that keep the step inside the integrator's stability limit (:func:`tianim.physics.substeps_for`).
-    method : str
-        Integrator (see :data:`tianim.physics.METHODS`).
-    substeps : int, optional
-        Override the number of steps per frame.
     copy : int or None
         Which batch copy to return (default 0); None returns all copies (B, N, D).
 
     Calling ``sim(t)`` steps from the state's time to ``t`` (a whole number of steps of
-    ``dt = 1/(fps * substeps)``) and returns a copy of the positions (N, D).
+    ``plan.dt``) and returns a copy of the positions (N, D).
     """
 
-    def __init__(self, model, state, fps: float = FILM, method: str = "symplectic_euler",
-                 substeps: int | None = None, copy: int | None = 0):
-        import tianim.physics as tp
+    def __init__(self, plan, state, copy: int | None = 0):
+        from tianim.physics.planner import StepPlan
 
-        self.model, self.state, self.method = model, state, method
-        self.fps = _check_fps(fps)
-        if substeps is None:
-            substeps, _ = tp.substeps_for(model, method, frame_dt=1.0 / self.fps)
-        if isinstance(substeps, bool) or not isinstance(substeps, (int, np.integer)) or substeps < 1:
-            raise ValueError(f"substeps={substeps!r} must be an integer >= 1 (steps per frame)")
-        self.substeps = int(substeps)
-        self.dt = 1.0 / (self.fps * self.substeps)
-        self.copy = copy
-        self._step = tp.step
+        if not isinstance(plan, StepPlan):
+            raise TypeError(f"plan={plan!r} must be a tianim.physics.StepPlan; make one with "
+                            "tianim.physics.plan_steps(model, frame_dt=1 / fps)")
+        if getattr(state, "model", None) is not plan.model:
+            raise ValueError("state does not belong to the plan's model; create it with plan.model.state(...)")
+        if copy is not None and not (isinstance(copy, (int, np.integer)) and 0 <= copy < state.batch):
+            raise ValueError(f"copy={copy!r} must be None or a copy index in [0, {state.batch - 1}]")
+        self.plan, self.state, self.copy = plan, state, copy
+        self.fps = _check_fps(1.0 / plan.frame_dt)
+        self.dt = plan.dt
 
     def __call__(self, t: float) -> np.ndarray:
         now = float(self.state.t[0])
@@ -149,7 +143,7 @@ class Simulation:
         if n < 0:
             raise ValueError(f"t={t!r} is before the simulation's time {now!r}; a simulation only runs forward")
         if n:
-            self._step(self.model, self.state, self.dt, substeps=n, method=self.method)
+            self.plan.solver.step(self.plan.model, self.state, self.dt, n)
         x = self.state.x
         return np.array(x if self.copy is None else x[self.copy])
 

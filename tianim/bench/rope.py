@@ -2,7 +2,7 @@
 
 A rope of 32 particles swings from one pinned end; frames of 1/60 s, each
 split into the substeps its stiffest spring needs for symplectic Euler
-(:func:`tianim.physics.substeps_for`, half the stability limit), float32.
+(:func:`tianim.physics.plan_steps` with safety 0.5: half the stability limit), float32.
 tianim runs a whole frame in one kernel launch; the NumPy reference slices the
 chain. Also reported: batches of copies stepped together.
 """
@@ -25,7 +25,8 @@ def rope_model():
 
 def run(batches=(1, 64, 1024), repeats=5) -> dict:
     model = rope_model()
-    sub, dt = tp.substeps_for(model, "symplectic_euler", FRAME_DT)
+    plan = tp.plan_steps(model, FRAME_DT, methods="symplectic_euler", safety=0.5)
+    sub, dt = plan.substeps, plan.dt
     err = check_agreement(model, dt, sub)
     if err > 1e-4:
         raise RuntimeError(f"tianim and the NumPy reference disagree by {err:.3g} m after one frame")

@@ -10,7 +10,7 @@ Three scenes, each swept in omega*dt:
   omega_max*dt of a 0.2 s run that the divergence watchdog must survive.
 
 Theory: the spectral radius of each method's amplification matrix written from
-its formulas (:func:`tianim.physics.stepping.amplification`): explicit Euler is
+its formulas (:func:`tianim.physics.theory.step_matrix`): explicit Euler is
 unstable at every dt when undamped, symplectic Euler and Verlet at omega*dt = 2,
 RK4 at 2 sqrt(2) ~ 2.83, backward Euler and XPBD never.
 
@@ -27,9 +27,10 @@ import numpy as np
 
 import tianim.physics as tp
 from tianim.bench.common import median_time, parser, print_table, write_json
-from tianim.physics.stepping import omega_max, spectral_radius
+from tianim.physics.planner import omega_max
+from tianim.physics.theory import spectral_radius
 
-METHODS = tp.ALL_METHODS
+METHODS = tp.METHODS
 Y_MAX = 1e4  # largest omega*dt tested
 GROWTH = 1e-9  # spectral radius above 1 + GROWTH counts as growth (rounding stays far below)
 

@@ -19,7 +19,7 @@ def frames(width: int, height: int, n_frames: int, fps: float, n: int = 40):
                      damping=(0.02, 0.01, 0.002), medium_damping=2e-4, origin=(-0.6, 0.9, -0.6), pins="none",
                      colliders=[tp.Ground(height=0.0, friction=0.5), sphere])
     state = model.state(batch=1, dtype=np.float32)
-    sim = Simulation(model, state, fps=fps)
+    sim = Simulation(tp.plan_steps(model, 1.0 / fps, methods="symplectic_euler"), state)
     scene = Scene3D(width, height)
     scene.ground(0.0, cell=0.15)
     scene.sphere(sphere.center, sphere.radius * 0.985, color="orange")

@@ -17,7 +17,7 @@ def frames(width: int, height: int, n_frames: int, fps: float, n: int = 40):
     model = tp.rope(n=n, length=1.0, mass=0.01, damping=0.02, direction=(1.0, 0.0, 0.3), origin=(-0.5, 1.3, 0.0),
                     colliders=[tp.Ground(height=0.0, friction=0.5)])
     state = model.state(batch=1, dtype=np.float32)
-    sim = Simulation(model, state, fps=fps)
+    sim = Simulation(tp.plan_steps(model, 1.0 / fps, methods="symplectic_euler"), state)
     scene = Scene3D(width, height)
     anchor = model.positions[0]
     box = np.array([anchor + [-1.05, -1.05, -0.4], anchor + [1.05, 0.05, 0.4]])

@@ -18,7 +18,7 @@ def frames(width: int, height: int, n_frames: int, fps: float):
     Right: x(t) of both; the curves lie on top of each other."""
     model = tp.spring1d(mass=1.0, stiffness=40.0, rest_length=1.0, medium_damping=0.6, x0=1.8)
     state = model.state(batch=1, dtype=np.float64)
-    sim = Simulation(model, state, fps=fps, substeps=8)
+    sim = Simulation(tp.plan_steps(model, 1.0 / fps, methods="symplectic_euler", min_substeps=8), state)
     duration = n_frames / fps
     ts, xs, exact = [], [], []
     aspect = width / height

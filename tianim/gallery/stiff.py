@@ -45,8 +45,8 @@ class _Timed:
 def frames(width: int, height: int, n_frames: int, fps: float, n: int = 16):
     """Yield (height, width, 3) uint8 frames of the two cloths side by side."""
     model = stiff_cloth(n)
-    left = _Timed(Simulation(model, model.state(), fps=fps, method="symplectic_euler"))
-    right = _Timed(Simulation(model, model.state(), fps=fps, method="implicit_euler"))
+    left = _Timed(Simulation(tp.plan_steps(model, 1.0 / fps, methods="symplectic_euler"), model.state()))
+    right = _Timed(Simulation(tp.plan_steps(model, 1.0 / fps, methods="implicit_euler"), model.state()))
     scene = Scene3D(width, height)
     # the swing sweeps the pinned edge's half-disc of radius 1 m: frame all of it
     box = np.array([[-0.5, 0.6, -1.5], [-0.5 + 1.0, 1.6, 0.5]])

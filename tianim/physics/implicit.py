@@ -241,13 +241,11 @@ def _kernel(real_name, dim, grid, spring_damping, medium_damping, colliders):
     return solve
 
 
-def implicit_euler(model, state, dt: float, substeps: int = 1, newton_tol: float | None = None,
-                   cg_tol: float | None = None, max_newton: int | None = None, max_cg: int | None = None) -> dict:
+def run_implicit_euler(model, state, dt: float, substeps: int, options: dict, buffer) -> dict:
     """Advance every copy of ``state`` by ``substeps`` backward Euler steps of ``dt`` [s], in place.
 
-    Callers normally use :func:`tianim.physics.step` with ``method="implicit_euler"``
-    (which validates, watches for divergence and advances ``state.t``); this is the
-    solver itself. Tolerances default to :data:`DEFAULTS` for the state's dtype.
+    The solver itself, without validation: use :class:`tianim.physics.solvers.ImplicitEuler` (which
+    validates, watches for divergence and advances ``state.t``).
 
     Parameters
     ----------
@@ -259,37 +257,32 @@ def implicit_euler(model, state, dt: float, substeps: int = 1, newton_tol: float
     dt : float
         Step size h [s].
     substeps : int
-    newton_tol : float
-        Newton stops when ``|g| <= newton_tol |g_0|`` (g_0: residual at ``v+ = v``).
-    cg_tol : float
-        CG stops when its residual falls below ``cg_tol |g|`` (inexact Newton).
-    max_newton, max_cg : int
-        Iteration caps per step.
+    options : dict
+        ``newton_tol`` (Newton stops when ``|g| <= newton_tol |g_0|``, g_0 the residual at ``v+ = v``),
+        ``cg_tol`` (CG stops when its residual falls below ``cg_tol |g|``: inexact Newton),
+        ``max_newton``, ``max_cg`` (iteration caps per step); missing keys take :data:`DEFAULTS`.
+    buffer : callable
+        ``buffer(name, shape, dtype)`` returns the solver's work array of that name.
 
     Returns
     -------
     dict
-        ``{"newton_iterations": (B,) int, "cg_iterations": (B,) int}`` summed over the substeps
+        ``{"newton": (B,) int, "cg": (B,) int}`` iterations summed over the substeps
         (Newton iterations count linear solves; a step whose first residual already meets the
         tolerance counts none).
     """
     opts = dict(DEFAULTS[state.dtype.name])
-    for name, val in (("newton_tol", newton_tol), ("cg_tol", cg_tol), ("max_newton", max_newton), ("max_cg", max_cg)):
-        if val is not None:
-            opts[name] = val
+    opts.update({key: val for key, val in options.items() if val is not None})
     data = model.kernel_data(state.dtype)
     kernel = _kernel(state.dtype.name, model.dim, model.grid is not None, model.has_spring_damping,
                      model.medium_damping > 0, len(model.colliders) > 0)
     real = state.dtype.type
     b, n, d = state.x.shape
-    pre = state._scratch.get("implicit_pre")
-    if pre is None or pre.shape != (b, n, d, d):
-        pre = np.zeros((b, n, d, d), dtype=state.dtype)
-        state._scratch["implicit_pre"] = pre
+    pre = buffer("preconditioner", (b, n, d, d), state.dtype)
     stats = np.zeros((b, 2), dtype=np.int32)
-    kernel(state.x, state.v, *(state.scratch(s) for s in ("imp_vn", "imp_xs", "imp_r", "imp_p", "imp_ap", "imp_z")),
+    kernel(state.x, state.v, *(buffer(s, state.x.shape, state.dtype) for s in ("vn", "xs", "r", "p", "ap", "z")),
            pre, state.pinned.view(np.uint8), data["mass"], data["off"], data["spr"], data["oth"], data["k"],
            data["rest"], data["damp"], model.gravity.astype(state.dtype), real(model.medium_damping), real(dt),
            model.grid.nx if model.grid is not None else 1, int(substeps), real(opts["newton_tol"]),
            real(opts["cg_tol"]), int(opts["max_newton"]), int(opts["max_cg"]), stats, data["coll"])
-    return {"newton_iterations": stats[:, 0].copy(), "cg_iterations": stats[:, 1].copy()}
+    return {"newton": stats[:, 0].copy(), "cg": stats[:, 1].copy()}

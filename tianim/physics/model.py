@@ -382,33 +382,6 @@ class Model:
 
         return State(self, batch=batch, dtype=dtype)
 
-    def gamma_max(self) -> float:
-        """Upper bound on the largest damping rate of the free particles [1/s].
-
-        Gershgorin bound on the largest eigenvalue of M^-1 C, with C the damping
-        matrix of the spring dashpots plus medium damping:
-        ``gamma_max <= max_i (2 sum_s c_s + rho) / m_i``.
-        """
-        row = np.full(self.n_particles, self.medium_damping)
-        if self.n_springs:
-            np.add.at(row, self.springs[:, 0], 2.0 * self.damping)
-            np.add.at(row, self.springs[:, 1], 2.0 * self.damping)
-        return float(np.max(row / self.mass))
-
-    def omega_max(self) -> float:
-        """Upper bound on the largest angular frequency of the free particles [rad/s].
-
-        Gershgorin bound on the largest eigenvalue of M^-1 K for the linearised
-        springs (each spring of stiffness k adds k/m_i to the diagonal and to one
-        off-diagonal entry of row i, so lambda_max <= max_i 2 sum_s k_s / m_i).
-        """
-        if self.n_springs == 0:
-            return 0.0
-        row = np.zeros(self.n_particles)
-        np.add.at(row, self.springs[:, 0], self.stiffness)
-        np.add.at(row, self.springs[:, 1], self.stiffness)
-        return float(math.sqrt(2.0 * np.max(row / self.mass)))
-
 
 def _frozen(a: np.ndarray) -> np.ndarray:
     a = np.array(a, copy=True)

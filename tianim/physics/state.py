@@ -55,7 +55,6 @@ class State:
         self.t = np.zeros(batch, dtype=np.float64)
         self.pinned = np.zeros((batch, n), dtype=bool)
         self.pinned[:, model.pins] = True
-        self._scratch: dict = {}
 
     # ------------------------------------------------------------------ shape
     @property
@@ -148,7 +147,6 @@ class State:
         other = State.__new__(State)
         other.model, other.dtype = self.model, self.dtype
         other.x, other.v, other.t, other.pinned = self.x.copy(), self.v.copy(), self.t.copy(), self.pinned.copy()
-        other._scratch = {}
         return other
 
     def save(self, path) -> None:
@@ -159,23 +157,6 @@ class State:
         """Read a state written by :meth:`save` into this state (shapes must match)."""
         with np.load(path) as data:
             self.restore({k: data[k] for k in ("x", "v", "t", "pinned")})
-
-    # ------------------------------------------------------------------ scratch buffers
-    def work(self, n: int) -> np.ndarray:
-        """The integrators' work array, shape (>= n, B, N, D) (not part of the snapshot)."""
-        buf = self._scratch.get("_work")
-        if buf is None or buf.shape[0] < n or buf.shape[1:] != self.x.shape:
-            buf = np.zeros((n,) + self.x.shape, dtype=self.dtype)
-            self._scratch["_work"] = buf
-        return buf
-
-    def scratch(self, name: str) -> np.ndarray:
-        """A (B, N, D) work buffer for integrators (not part of the snapshot)."""
-        buf = self._scratch.get(name)
-        if buf is None or buf.shape != self.x.shape:
-            buf = np.zeros_like(self.x)
-            self._scratch[name] = buf
-        return buf
 
 
 def _broadcast(name: str, value, shape) -> np.ndarray:

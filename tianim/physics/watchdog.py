@@ -1,30 +1,33 @@
-"""Divergence watchdog: stop a simulation in the call where it blows up, and say why.
+"""Divergence watchdog: stop a simulation when it blows up, and say why.
 
-:func:`tianim.physics.step` runs it by default around every call. A blow-up
-is either
+Every solver (:mod:`tianim.physics.solvers`) runs one around each ``step`` call unless it is
+turned off. A blow-up is
 
-* non-finite positions or velocities, or
-* total mechanical energy growing past a bound within the call. Without
-  damping and with fixed pins the exact dynamics conserve the energy
-  ``E = kinetic + spring + gravity`` (see :mod:`tianim.physics.diagnostics`);
-  damping only lowers it. The watchdog raises when
+* non-finite positions or velocities (NaN-safe: every comparison is written so that NaN fails it), or
+* energy that the solver created: the watched energy ``E`` (the solver's
+  :attr:`~tianim.physics.solvers.Solver.watched_energy`: kinetic + spring + gravity for the
+  explicit methods; kinetic + gravity for XPBD and backward Euler, whose unconverged
+  stiff constraints carry no physical spring energy) is compared **against the scene, not
+  against the call**. Per copy the watchdog keeps
 
-      E_after - E_before > growth * (K_before + S_before + W),
+      R = K0 + S0 + W  +  (energy added by edits between calls),
+      G = max(0, G + E_after - E_before)     (a CUSUM of the gains within calls; Page 1954),
 
-  with K, S the kinetic and spring energies at the start of the call and
-  ``W = (total mass) |g| (scene diagonal)`` the energy of dropping the whole
-  scene by its own size, which lets scenes that start at rest fall. Moving pins
-  inject energy, so the bound is loose by design (``growth = 10`` by default):
-  an unstable integrator grows its energy by orders of magnitude within a few
-  steps and is caught in the call where it starts.
+  and raises when ``G > growth * R``. ``W = (total mass) |g| (scene diagonal)`` (at least
+  ``total mass x 1 m^2/s^2``) is the energy of dropping the scene by its own size, K0, S0 the
+  kinetic and spring energy when the watchdog first saw the state. Energy the user adds
+  (moving pins, releasing them, writing x or v between calls) raises R by exactly the change
+  the edit made, so an environment that drags a cloth is not flagged; energy that grows call
+  after call accumulates in G however slowly it grows per call, and damping (negative gains)
+  only resets G towards zero. Without damping and with fixed pins exact dynamics conserve E
+  (:mod:`tianim.physics.diagnostics`).
 
-On a blow-up the state is rolled back to the start of the call and a
-:class:`DivergenceError` names the method, the time, the step size, the
-substeps and the estimated stable step of the method on this model.
-
-Energies are summed per copy by one small Taichi kernel (a serial loop per
-copy over particles and springs, parallel over copies): the cost is measured
-by ``tianim bench stability`` (column ``watchdog_overhead``).
+On a blow-up the diverged copies are rolled back to the start of the call (x, v, t and pins,
+bit for bit; the start state passed the previous check, so it is the last sound state).
+``on_divergence="raise"`` (default) rolls back every copy and raises :class:`DivergenceError`
+naming the method, the step and the stable step; ``"rollback"`` rolls back the diverged
+copies only, keeps the others' results and reports them in ``StepStats.diverged``, which is
+what batched environments need (one copy's episode ends, the rest go on).
 """
 
 import math
@@ -37,11 +40,22 @@ from tianim.physics.kernel_types import cached_variants, kernel_types
 
 
 class DivergenceError(RuntimeError):
-    """A simulation blew up (non-finite values or energy growth). The state is rolled back to the start of the call."""
+    """A simulation blew up (non-finite values or energy growth); the state was rolled back to the start
+    of the call. ``copies`` lists the copies that diverged, ``stats`` is the call's
+    :class:`~tianim.physics.solvers.StepStats`."""
+
+    def __init__(self, message: str, copies=(), stats=None):
+        super().__init__(message)
+        self.copies = list(copies)
+        self.stats = stats
 
 
-#: Default bound on the energy gained in one call, in units of K + S + W (see the module docstring).
+#: Default bound on the energy the solver may create, in units of the scene reference R (module docstring).
 DEFAULT_GROWTH = 10.0
+#: What a watchdog does on a blow-up.
+ON_DIVERGENCE = ("raise", "rollback")
+#: Energy terms a solver can watch (columns of :func:`fast_energy`).
+TERMS = {"kinetic": 0, "spring": 1, "gravity": 2}
 
 _FORWARD = tuple(o for o, (dc, dr, _) in enumerate(GRID_STENCIL) if dc > 0 or (dc == 0 and dr > 0))
 @cached_variants
@@ -126,86 +140,115 @@ def _small_energy(model, state) -> np.ndarray:
     return out
 
 
-_scales: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def energy_scale(model) -> float:
     """W = total mass * |g| * diagonal of the initial bounding box [J] (at least total mass * 1 m^2/s^2)."""
-    scale = _scales.get(model)
-    if scale is None:
-        extent = float(np.linalg.norm(np.ptp(model.positions, axis=0)))
-        scale = float(np.sum(model.mass)) * max(float(np.linalg.norm(model.gravity)) * extent, 1.0)
-        _scales[model] = scale
-    return scale
+    extent = float(np.linalg.norm(np.ptp(model.positions, axis=0)))
+    return float(np.sum(model.mass)) * max(float(np.linalg.norm(model.gravity)) * extent, 1.0)
+
+
+class _Memory:
+    """What a watchdog remembers of one state between calls (per copy)."""
+
+    __slots__ = ("x", "v", "pinned", "energy", "reference", "cusum")
 
 
 class Watchdog:
-    """Checks one :func:`~tianim.physics.step` call for a blow-up.
+    """Watches :meth:`Solver.step <tianim.physics.solvers.Solver.step>` calls for blow-ups (module docstring).
 
     Parameters
     ----------
     growth : float or None
-        Energy bound factor (module docstring); None checks only for non-finite values.
+        Bound on the energy a solver may create, in units of the scene reference R; None checks
+        only for non-finite values.
+    on_divergence : {"raise", "rollback"}
+        Roll back every copy and raise :class:`DivergenceError`, or roll back the diverged copies
+        only and report them in the returned stats.
+
+    A watchdog remembers each state it has seen (weakly: forgetting a state frees the memory);
+    one watchdog can watch any number of states.
     """
 
-    def __init__(self, growth: float | None = DEFAULT_GROWTH):
-        if growth is not None and not (isinstance(growth, (int, float)) and math.isfinite(growth) and growth > 0):
-            raise ValueError(f"growth={growth!r} must be a finite number > 0, or None to check only for NaN/inf")
+    def __init__(self, growth: float | None = DEFAULT_GROWTH, on_divergence: str = "raise"):
+        from tianim._checks import check_choice, check_finite_scalar
+
+        if growth is not None:
+            growth = check_finite_scalar("growth", growth, lo=0.0, lo_open=True)
         self.growth = growth
+        self.on_divergence = check_choice("on_divergence", on_divergence, ON_DIVERGENCE)
+        self._memory: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
-    def before(self, model, state):
-        """Snapshot taken before the call: ``(x, v, energies or None)``.
+    def __repr__(self) -> str:
+        return f"Watchdog(growth={self.growth!r}, on_divergence={self.on_divergence!r})"
 
-        When the state is exactly as the previous successful call left it (checked by
-        comparing with the copy kept then), that copy and its energies are reused: a
-        running simulation pays one energy evaluation and one copy per call.
-        """
-        last = state._scratch.get("_watchdog_last")
-        if last is not None and last[0] is self and np.array_equal(last[1], state.x) and np.array_equal(last[2], state.v):
-            return last[1], last[2], last[3]
-        e = fast_energy(model, state) if self.growth is not None else None
-        return state.x.copy(), state.v.copy(), e
+    def forget(self, state) -> None:
+        """Drop what this watchdog remembers of ``state`` (the next call starts a new reference)."""
+        self._memory.pop(state, None)
 
-    def after(self, model, state, token, dt, substeps, method, limit_fn) -> None:
-        """Raise :class:`DivergenceError` (after rolling back) if the call blew up.
+    # ------------------------------------------------------------------ the two halves of a call
+    def before(self, model, state, terms):
+        """Snapshot before a call: ``(snapshot, watched energy per copy or None)``; updates the reference
+        by the energy that edits since the last call added."""
+        snap = state.snapshot()
+        if self.growth is None:
+            return snap, None
+        mem = self._memory.get(state)
+        if mem is not None and mem.x.shape == state.x.shape and mem.x.dtype == state.x.dtype:
+            unchanged = (np.array_equal(mem.x, state.x) and np.array_equal(mem.v, state.v)
+                         and np.array_equal(mem.pinned, state.pinned))
+            if unchanged:
+                return snap, mem.energy
+            e = _watched(fast_energy(model, state), terms)
+            mem.reference = mem.reference + np.maximum(e - mem.energy, 0.0)
+            return snap, e
+        parts = fast_energy(model, state)
+        mem = _Memory()
+        mem.reference = parts[:, 0] + parts[:, 1] + energy_scale(model)
+        mem.cusum = np.zeros(state.batch)
+        mem.energy = _watched(parts, terms)
+        mem.x, mem.v, mem.pinned = state.x.copy(), state.v.copy(), state.pinned.copy()
+        self._memory[state] = mem
+        return snap, mem.energy
 
-        ``limit_fn()`` returns the estimated stable step [s] of ``method`` (only called on failure).
-        """
-        x0, v0, e0 = token
-        # One sum over each array is finite iff every entry is (a sum that overflows to inf
-        # is a blow-up too); the per-copy detail is computed only on failure.
-        all_finite = math.isfinite(float(np.sum(state.x, dtype=np.float64)) + float(np.sum(state.v, dtype=np.float64)))
+    def after(self, model, state, token, terms):
+        """Check the call; returns ``(diverged (B,) bool, reason or None)`` after rolling back the diverged
+        copies (all copies when ``on_divergence="raise"``: the caller then raises)."""
+        snap, e0 = token
+        finite = np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2))
+        bad = ~finite
         reason = None
-        e1 = None
-        if not all_finite:
-            finite = np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2))
-            reason = f"non-finite positions or velocities in copies {np.flatnonzero(~finite).tolist()[:8]}"
-        elif e0 is not None:
-            e1 = fast_energy(model, state)
-            gain = e1.sum(axis=1) - e0.sum(axis=1)
-            bound = self.growth * (e0[:, 0] + e0[:, 1] + energy_scale(model))
-            bad = np.flatnonzero(gain > bound)
-            if bad.size:
-                b = int(bad[0])
-                reason = (f"energy grew by {gain[b]:.4g} J (bound {bound[b]:.4g} J = {self.growth:g} x (kinetic + "
-                          f"spring + scene scale)) in copies {bad.tolist()[:8]}")
-        if reason is None:
-            if state.batch * model.n_particles <= 4096:  # small: keep a copy to reuse as the next snapshot
-                state._scratch["_watchdog_last"] = (self, state.x.copy(), state.v.copy(), e1 if e0 is not None else None)
-            return
-        state.x[...], state.v[...] = x0, v0
-        t0 = float(state.t.min())
-        where = f"within {substeps} substeps of dt={dt:.4g} s from t={t0:.6g} s (steps {_step_index(t0, dt)}.."
-        where += f"{_step_index(t0, dt) + substeps - 1} at this dt)"
-        limit = limit_fn()
-        limit_txt = "no stability limit (unconditionally stable)" if math.isinf(limit) else f"about {limit:.4g} s"
-        raise DivergenceError(
-            f"{method} diverged: {reason} {where}; the stiffest mode limits dt to {limit_txt} for this "
-            f"method (tianim.physics.stable_dt). Use a smaller dt or more substeps "
-            "(tianim.physics.plan_steps chooses them), or a more stable method (implicit_euler, xpbd). "
-            "The state was rolled back to the start of this call."
-        )
+        if not finite.all():
+            reason = f"non-finite positions or velocities in copies {np.flatnonzero(bad).tolist()[:8]}"
+        mem = self._memory.get(state) if e0 is not None else None
+        if mem is not None:
+            with np.errstate(invalid="ignore", over="ignore"):
+                e1 = _watched(fast_energy(model, state), terms)
+                cusum = np.maximum(mem.cusum + (e1 - e0), 0.0)
+                bound = self.growth * mem.reference
+                grown = ~(cusum <= bound) & finite  # NaN or inf energies fail `<=`
+            if grown.any():
+                b = int(np.flatnonzero(grown)[0])
+                reason = ((reason + "; ") if reason else "") + (
+                    f"energy grew: the solver created {cusum[b]:.4g} J (bound {bound[b]:.4g} J = {self.growth:g} x the "
+                    f"scene's energy scale) in copies {np.flatnonzero(grown).tolist()[:8]}")
+                bad |= grown
+        if not bad.any():
+            if mem is not None:
+                mem.cusum, mem.energy = cusum, e1
+                mem.x[...], mem.v[...], mem.pinned[...] = state.x, state.v, state.pinned
+            return bad, None
+        rollback = np.ones(state.batch, dtype=bool) if self.on_divergence == "raise" else bad
+        for key in ("x", "v", "t", "pinned"):
+            getattr(state, key)[rollback] = snap[key][rollback]
+        if mem is not None:
+            keep = ~rollback
+            mem.cusum = np.where(keep, cusum, mem.cusum)
+            mem.energy = np.where(keep, e1, e0)
+            mem.x[...], mem.v[...], mem.pinned[...] = state.x, state.v, state.pinned
+        return bad, reason
 
 
-def _step_index(t: float, dt: float) -> int:
-    return int(round(t / dt)) if dt > 0 else 0
+def _watched(parts: np.ndarray, terms) -> np.ndarray:
+    """Sum of the watched energy columns, shape (B,)."""
+    return parts[:, [TERMS[t] for t in terms]].sum(axis=1)

@@ -7,18 +7,26 @@ A spring of stiffness k, rest length l and damping c is the constraint
 ``C = |x_i - x_j| - l`` with compliance ``alpha = 1/k`` (``alpha~ = alpha / h^2``)
 and damping ``beta = c`` (``gamma = alpha~ beta h = c / (k h)``). One substep of size h:
 
-1. predict: ``v += h (g - rho v / m)``, ``p = x``, ``x += h v`` (free particles); ``lambda = 0``;
+1. predict: ``v += h (g - rho v / m)``, ``dx = h v``, ``x += dx`` (free particles); ``lambda = 0``;
 2. ``iterations`` symmetric Gauss-Seidel sweeps over the springs: a forward sweep
    then the same springs in reverse order. Each spring update is XPBD eq. 18 with
    the damping of eq. 26, numerator and denominator multiplied by ``k h^2``
    (so that ``k = 0`` needs no division; ``lambda`` is the paper's multiplier):
 
-       dlambda = (-k h^2 C - lambda - c h n . ((x_i - p_i) - (x_j - p_j))) / ((k h^2 + c h)(w_i + w_j) + 1)
+       dlambda = (-k h^2 C - lambda - c h n . (dx_i - dx_j)) / ((k h^2 + c h)(w_i + w_j) + 1)
        lambda += dlambda,   x_i += w_i dlambda n,   x_j -= w_j dlambda n,   n = (x_i - x_j)/|x_i - x_j|
 
-   (w = 1/m, 0 for pinned particles);
-3. ``v = (x - p) / h``; colliders (:mod:`tianim.physics.contact`) then push
+   (w = 1/m, 0 for pinned particles), and every correction is added to ``dx`` as well;
+3. ``v = dx / h``; colliders (:mod:`tianim.physics.contact`) then push
    particles out and apply restitution and friction.
+
+Velocity in float32. The papers form ``v = (x - p) / h`` from two positions. In float32 that
+difference keeps nothing below the resolution of x (~6e-8 m at 1 m): at h = 5e-5 s gravity's
+``h^2 g = 2.5e-8 m`` rounds away and a falling particle hovers (measured before this change:
+it fell 0.0 m in 0.1 s; exact 0.049 m). Here the displacement of the substep, ``dx``, is kept
+in its own buffer: the predicted ``h v`` plus the sum of the corrections, each exact to float32
+relative to its own (small) size, so ``v = dx / h`` keeps gravity and small motions at any h. In
+exact arithmetic ``dx = x - p`` and the method is unchanged.
 
 Why symmetric sweeps. One sweep of Gauss-Seidel per substep (the plain "small
 steps" loop) is, linearised, ``x+ = G (2 x - x-)`` with ``G`` the Gauss-Seidel
@@ -75,7 +83,7 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
     respond = contact_response(real_name, dim)
 
     @ti.func
-    def project(b, i, j, s, li, x: T, prev: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T, damp: T, h):
+    def project(b, i, j, s, li, x: T, dx: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T, damp: T, h):
         """One XPBD update of spring s (multiplier lam[b, li]) between particles i and j of copy b."""
         wi = ti.select(pinned[b, i] == 0, inv_mass[i], 0)
         wj = ti.select(pinned[b, j] == 0, inv_mass[j], 0)
@@ -88,27 +96,31 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
             den = kh2 * (wi + wj) + 1
             if ti.static(spring_damping):
                 ch = damp[s] * h
-                num -= ch * n.dot((x[b, i] - prev[b, i]) - (x[b, j] - prev[b, j]))
+                num -= ch * n.dot(dx[b, i] - dx[b, j])
                 den += ch * (wi + wj)
             dl = num / den
             lam[b, li] += dl
-            x[b, i] += (wi * dl) * n
-            x[b, j] -= (wj * dl) * n
+            ci = (wi * dl) * n
+            cj = (wj * dl) * n
+            x[b, i] += ci
+            dx[b, i] += ci
+            x[b, j] -= cj
+            dx[b, j] -= cj
 
     @ti.func
-    def predict(b, i, x: T, v: T, prev: T, pinned: T, inv_mass: T, g, rho, h):
-        prev[b, i] = x[b, i]
+    def predict(b, i, x: T, v: T, dx: T, pinned: T, inv_mass: T, g, rho, h):
         if pinned[b, i] == 0:
             a = g
             if ti.static(medium_damping):
                 a -= rho * inv_mass[i] * v[b, i]
             v[b, i] += h * a
-        x[b, i] += h * v[b, i]
+        dx[b, i] = h * v[b, i]
+        x[b, i] += dx[b, i]
 
     @ti.func
-    def finish(b, i, x: T, v: T, prev: T, pinned: T, coll: T, g_norm, h):
+    def finish(b, i, x: T, v: T, dx: T, pinned: T, coll: T, g_norm, h):
         if pinned[b, i] == 0:
-            v[b, i] = (x[b, i] - prev[b, i]) / h
+            v[b, i] = dx[b, i] / h
             if ti.static(colliders):
                 x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, g_norm, h)
 
@@ -130,7 +142,7 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
         return ((along + 2 * a - 1) // (2 * a)) * a * across
 
     @ti.func
-    def grid_colour(b, m, c: ti.template(), x: T, prev: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T,
+    def grid_colour(b, m, c: ti.template(), x: T, dx: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T,
                     damp: T, h, nx):
         """Update the m-th spring of colour c of copy b (if it exists)."""
         o, dc, dr, a, vertical, parity = ti.static(colour_geometry(c))
@@ -148,14 +160,14 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
         rr = row + dr
         if 0 <= col < nx and 0 <= row < ny and 0 <= cc < nx and 0 <= rr < ny:
             i = row * nx + col
-            project(b, i, rr * nx + cc, o, i * nf + c // 2, x, prev, lam, pinned, inv_mass, k, rest, damp, h)
+            project(b, i, rr * nx + cc, o, i * nf + c // 2, x, dx, lam, pinned, inv_mass, k, rest, damp, h)
 
     def sweep_order(sweeps):
         """Compile-time colour order of ``sweeps`` symmetric sweeps."""
         return (tuple(range(N_COLOURS)) + tuple(reversed(range(N_COLOURS)))) * sweeps
 
     @ti.kernel
-    def per_copy(x: vec_arr, v: vec_arr, prev: vec_arr, lam: real2_arr, pinned: mask_arr, inv_mass: real_arr,
+    def per_copy(x: vec_arr, v: vec_arr, dx: vec_arr, lam: real2_arr, pinned: mask_arr, inv_mass: real_arr,
                  ends: int_arr, k: real_arr, rest: real_arr, damp: real_arr,
                  coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32, n_springs: ti.i32, nsub: ti.i32,
                  iters: ti.i32):
@@ -164,7 +176,7 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
         for b in range(x.shape[0]):
             for _sub in range(nsub):
                 for i in range(n):
-                    predict(b, i, x, v, prev, pinned, inv_mass, g, rho, h)
+                    predict(b, i, x, v, dx, pinned, inv_mass, g, rho, h)
                 for li in range(lam.shape[1]):
                     lam[b, li] = 0
                 for sweep in range(2 * iters):
@@ -172,18 +184,18 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
                         if sweep % 2 == 0:
                             for c in ti.static(range(N_COLOURS)):
                                 for m in range(colour_count(c, n, nx)):
-                                    grid_colour(b, m, c, x, prev, lam, pinned, inv_mass, k, rest, damp, h, nx)
+                                    grid_colour(b, m, c, x, dx, lam, pinned, inv_mass, k, rest, damp, h, nx)
                         else:
                             for c in ti.static(tuple(reversed(range(N_COLOURS)))):
                                 for m in range(colour_count(c, n, nx)):
-                                    grid_colour(b, m, c, x, prev, lam, pinned, inv_mass, k, rest, damp, h, nx)
+                                    grid_colour(b, m, c, x, dx, lam, pinned, inv_mass, k, rest, damp, h, nx)
                     else:
                         for ss in range(n_springs):
                             s = ss if sweep % 2 == 0 else n_springs - 1 - ss
-                            project(b, ends[2 * s], ends[2 * s + 1], s, s, x, prev, lam, pinned, inv_mass, k,
+                            project(b, ends[2 * s], ends[2 * s + 1], s, s, x, dx, lam, pinned, inv_mass, k,
                                     rest, damp, h)
                 for i in range(n):
-                    finish(b, i, x, v, prev, pinned, coll, g_norm, h)
+                    finish(b, i, x, v, dx, pinned, coll, g_norm, h)
 
     kernels = {"per_copy": per_copy}
     if grid:
@@ -191,7 +203,7 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
 
         def make(phase):
             @ti.kernel
-            def parallel_substep(x: vec_arr, v: vec_arr, prev: vec_arr, lam: real2_arr, pinned: mask_arr,
+            def parallel_substep(x: vec_arr, v: vec_arr, dx: vec_arr, lam: real2_arr, pinned: mask_arr,
                                  inv_mass: real_arr, k: real_arr, rest: real_arr,
                                  damp: real_arr, coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32):
                 """A piece of a substep, parallel over (copy, particle); each top-level loop ends in a barrier.
@@ -201,15 +213,15 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
                 """
                 if ti.static(phase in (0, 3)):
                     for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                        predict(b, i, x, v, prev, pinned, inv_mass, g, rho, h)
+                        predict(b, i, x, v, dx, pinned, inv_mass, g, rho, h)
                         for f in ti.static(range(nf)):
                             lam[b, i * nf + f] = 0
                 for c in ti.static(order):
                     for b, m in ti.ndrange(x.shape[0], colour_count(c, x.shape[1], nx)):
-                        grid_colour(b, m, c, x, prev, lam, pinned, inv_mass, k, rest, damp, h, nx)
+                        grid_colour(b, m, c, x, dx, lam, pinned, inv_mass, k, rest, damp, h, nx)
                 if ti.static(phase in (2, 3)):
                     for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                        finish(b, i, x, v, prev, pinned, coll, g.norm(), h)
+                        finish(b, i, x, v, dx, pinned, coll, g.norm(), h)
 
             return parallel_substep
 
@@ -229,11 +241,11 @@ def choose_xpbd_layout(model, batch: int) -> str:
     return "per_copy"
 
 
-def xpbd(model, state, dt: float, substeps: int = 1, iterations: int = 1, layout: str = "auto") -> None:
+def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: str, buffer) -> None:
     """Advance every copy of ``state`` by ``substeps`` XPBD substeps of ``dt`` [s], in place.
 
-    Callers normally use :func:`tianim.physics.step` with ``method="xpbd"``
-    (validation, divergence watchdog, ``state.t``); this is the solver itself.
+    The solver itself, without validation: use :class:`tianim.physics.solvers.XPBD` (which validates,
+    watches for divergence and advances ``state.t``).
 
     Parameters
     ----------
@@ -250,33 +262,29 @@ def xpbd(model, state, dt: float, substeps: int = 1, iterations: int = 1, layout
     layout : str
         ``"auto"`` (:func:`choose_xpbd_layout`), ``"per_copy"`` or ``"parallel"`` (grids only);
         all give bit-identical results.
+    buffer : callable
+        ``buffer(name, shape, dtype)`` returns the solver's work array of that name (contents need not
+        be kept between calls).
     """
-    iterations = int(iterations)
-    if iterations < 1:
-        raise ValueError(f"iterations={iterations} must be >= 1 (symmetric sweeps per substep)")
     if layout == "auto":
         layout = choose_xpbd_layout(model, state.batch)
-    if layout not in ("per_copy", "parallel") or (layout == "parallel" and model.grid is None):
-        raise ValueError(f"layout={layout!r} is not an XPBD layout; use 'auto', 'per_copy' or 'parallel' (grids only)")
     data = model.kernel_data(state.dtype)
     grid = model.grid is not None
     kernels = _kernels(state.dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
                        len(model.colliders) > 0)
     edges = not grid and model.n_springs > 0
     n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
-    lam = state._scratch.get("xpbd_lambda")
-    if lam is None or lam.shape != (state.batch, n_lam) or lam.dtype != state.dtype:
-        lam = np.zeros((state.batch, n_lam), dtype=state.dtype)
-        state._scratch["xpbd_lambda"] = lam
+    lam = buffer("lambda", (state.batch, n_lam), state.dtype)
     real = state.dtype.type
-    common_head = (state.x, state.v, state.scratch("xpbd_prev"), lam, state.pinned.view(np.uint8), data["inv_mass"])
+    common_head = (state.x, state.v, buffer("dx", state.x.shape, state.dtype), lam, state.pinned.view(np.uint8),
+                   data["inv_mass"])
     g, rho, h = model.gravity.astype(state.dtype), real(model.medium_damping), real(dt)
     nx = model.grid.nx if grid else 1
     if layout == "per_copy":
         ends = model.springs.ravel() if edges else np.zeros(2, np.int32)
         kernels["per_copy"](*common_head, np.ascontiguousarray(ends, dtype=np.int32), data["k"], data["rest"],
                             data["damp"], data["coll"], g, rho, h, nx, model.n_springs if edges else 0,
-                            int(substeps), iterations)
+                            int(substeps), int(iterations))
         return
     first, middle, last, whole = kernels["parallel"]
     args = common_head + (data["k"], data["rest"], data["damp"], data["coll"], g, rho, h, nx)

@@ -1,0 +1,476 @@
+"""Solvers: one class per time-integration method, one way to step.
+
+A solver owns its options and its work buffers, and advances a
+:class:`~tianim.physics.state.State` of a :class:`~tianim.physics.model.Model` in place
+(the model/state/solver split of NVIDIA Warp/Newton and MuJoCo's mjModel/mjData)::
+
+    solver = tp.XPBD(iterations=2)
+    stats = solver.step(model, state, dt=1e-3, substeps=16)      # -> StepStats
+
+``tp.step(model, state, dt, substeps, method="xpbd", iterations=2)`` is the one-line
+convenience; :func:`tianim.physics.plan_steps` chooses a solver, dt and substeps for a frame.
+
+=================  ======  =====  =========================================================
+method             class   order  one step (h = dt); stable on an undamped mode for omega h <
+=================  ======  =====  =========================================================
+explicit_euler     ExplicitEuler      1  x' = x + h v;  v' = v + h a(x, v);  never (grows)
+symplectic_euler   SymplecticEuler    1  v' = v + h a(x, v);  x' = x + h v';  2
+verlet             VelocityVerlet     2  x' = x + h v + h^2/2 a;  v' = v + h/2 (a + a(x', v + h a));  2
+rk4                RK4                4  classical Runge-Kutta (Hairer, Norsett, Wanner I, II.1);  2 sqrt 2
+implicit_euler     ImplicitEuler      1  backward Euler, Newton + CG (:mod:`~tianim.physics.implicit`);  any h
+xpbd               XPBD               1  compliant constraints, small steps (:mod:`~tianim.physics.xpbd`);  any h
+=================  ======  =====  =========================================================
+
+Every solver knows its :attr:`~Solver.order`, its stability limit on a model
+(:meth:`Solver.stable_dt`, from :mod:`tianim.physics.theory`) and its divergence criterion
+(:attr:`Solver.watched_energy`, used by :mod:`tianim.physics.watchdog`). Forces: springs,
+spring damping, gravity and medium damping (:mod:`tianim.physics.model`); pinned particles
+have zero acceleration; colliders act after each substep.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from tianim._checks import check_choice, check_finite_scalar, check_positive_int
+from tianim.physics import theory
+from tianim.physics.kernels import SUBSTEPS_PER_LAUNCH, WORK, frame_kernel
+from tianim.physics.watchdog import DivergenceError, Watchdog
+
+#: Loop layouts of the explicit kernels (all give bit-identical results).
+LAYOUTS = ("auto", "serial", "frame", "substep")
+#: Loop layouts of XPBD.
+XPBD_LAYOUTS = ("auto", "per_copy", "parallel")
+
+#: The watchdog that ``watchdog=True`` means: one per process, so that it remembers every state it watches.
+DEFAULT_WATCHDOG = Watchdog()
+
+
+@dataclass
+class StepStats:
+    """What one :meth:`Solver.step` call did.
+
+    Attributes
+    ----------
+    method : str
+    dt : float               substep [s]
+    substeps : int
+    diverged : ndarray, (B,) bool
+        Copies the watchdog rolled back (only with ``Watchdog(on_divergence="rollback")``;
+        otherwise a divergence raises).
+    reason : str or None     why they diverged
+    iterations : dict of str -> ndarray (B,) int
+        Iteration counts of iterative solvers (``{"newton", "cg"}`` for backward Euler, summed over
+        the substeps); empty for the others.
+    """
+
+    method: str
+    dt: float
+    substeps: int
+    diverged: np.ndarray
+    reason: str | None = None
+    iterations: dict = field(default_factory=dict)
+
+
+def _as_watchdog(watchdog):
+    if watchdog is True:
+        return DEFAULT_WATCHDOG
+    if watchdog is False or watchdog is None:
+        return None
+    if isinstance(watchdog, Watchdog):
+        return watchdog
+    raise TypeError(f"watchdog={watchdog!r} must be True, False or a tianim.physics.Watchdog")
+
+
+class Solver:
+    """Base of the solvers: validation, the watchdog, ``state.t`` and work buffers.
+
+    Parameters
+    ----------
+    watchdog : bool or Watchdog
+        True (default): the process-wide :data:`DEFAULT_WATCHDOG`; a :class:`Watchdog` sets the bound and
+        what happens on a blow-up; False turns it off.
+
+    Class attributes
+    ----------------
+    name : str               the ``method=`` string
+    order : int              global order of accuracy
+    stability_limit : float  largest stable omega*h on an undamped oscillator (inf: any h)
+    evals_per_substep : float  force-evaluation equivalents per substep (the planner's cost)
+    watched_energy : tuple   energy terms the watchdog compares against the scene
+    """
+
+    name = ""
+    order = 0
+    stability_limit = 0.0
+    evals_per_substep = 1.0
+    watched_energy = ("kinetic", "spring", "gravity")
+
+    def __init__(self, watchdog=True):
+        self.watchdog = _as_watchdog(watchdog)
+        self._buffers: dict = {}
+
+    def __repr__(self) -> str:
+        opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
+        return f"{type(self).__name__}({opts})"
+
+    def options(self) -> dict:
+        """The solver's options (constructor arguments other than the watchdog)."""
+        return {}
+
+    # ------------------------------------------------------------------ theory
+    def stable_dt(self, model, positions=None, pinned=None) -> float:
+        """Largest stable step [s] on ``model`` linearised at ``positions`` (default the model's), for the
+        free particles of ``pinned`` (default ``model.pins``): never above the true limit of the
+        linearised scene (:mod:`tianim.physics.theory`); ``inf`` for unconditionally stable solvers
+        and for scenes with neither springs nor damping; 0 when no step is stable."""
+        if math.isinf(self.stability_limit):
+            return math.inf
+        w = theory.omega_bound(model, positions, pinned)
+        g = theory.gamma_bound(model, positions, pinned)
+        ratio = theory.damping_ratio_bound(model, w, pinned) if self.name == "explicit_euler" else 0.0
+        return theory.stable_step(self.name, w, g, ratio)
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, model, state, dt: float, substeps: int = 1) -> StepStats:
+        """Advance every copy of ``state`` by ``substeps`` steps of ``dt`` [s], in place.
+
+        Parameters
+        ----------
+        model : Model
+        state : State
+            Must belong to ``model``; ``x``, ``v`` (B, N, D), ``t`` (B,) are updated.
+        dt : float
+            Step size [s], finite and > 0.
+        substeps : int
+            Number of steps, 1 <= substeps < 2**31 (small scenes run them all in one kernel launch).
+
+        Returns
+        -------
+        StepStats
+
+        Raises
+        ------
+        ValueError, TypeError
+            Bad arguments, or non-finite values already in the state (nothing is changed).
+        DivergenceError
+            The watchdog saw a blow-up (the state is rolled back to the start of the call).
+        """
+        return self._step(model, state, dt, substeps, self.watchdog)
+
+    def _step(self, model, state, dt, substeps, watchdog) -> StepStats:
+        dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
+        substeps = check_positive_int("substeps", substeps)
+        check_state(model, state)
+        if not math.isfinite(dt * substeps) or float(state.dtype.type(dt)) == 0.0:
+            raise ValueError(f"dt={dt!r} with substeps={substeps} is not representable in {state.dtype.name}")
+        token = watchdog.before(model, state, self.watched_energy) if watchdog is not None else None
+        iterations = self._advance(model, state, dt, substeps) or {}
+        state.t += dt * substeps
+        diverged = np.zeros(state.batch, dtype=bool)
+        reason = None
+        if watchdog is not None:
+            diverged, reason = watchdog.after(model, state, token, self.watched_energy)
+        stats = StepStats(self.name, dt, substeps, diverged, reason, iterations)
+        if reason is not None and watchdog.on_divergence == "raise":
+            raise DivergenceError(self._divergence_message(model, state, reason, dt, substeps),
+                                  np.flatnonzero(diverged).tolist(), stats)
+        return stats
+
+    def _advance(self, model, state, dt, substeps):  # pragma: no cover - every subclass overrides it
+        raise NotImplementedError
+
+    def _divergence_message(self, model, state, reason, dt, substeps) -> str:
+        t0 = float(state.t.min())
+        first = int(round(t0 / dt))
+        limit = self.stable_dt(model)
+        limit_txt = "no stability limit (unconditionally stable)" if math.isinf(limit) else f"about {limit:.4g} s"
+        return (
+            f"{self.name} diverged: {reason} within {substeps} substeps of dt={dt:.4g} s from t={t0:.6g} s "
+            f"(steps {first}..{first + substeps - 1} at this dt); the stiffest mode limits dt to {limit_txt} "
+            "for this method (Solver.stable_dt). Use a smaller dt or more substeps (tianim.physics.plan_steps "
+            "chooses them), or a more stable method (implicit_euler, xpbd). The state was rolled back to the "
+            "start of this call."
+        )
+
+    def _buffer(self, name: str, shape: tuple, dtype) -> np.ndarray:
+        """A work array owned by the solver (kept between calls, reallocated when the shape changes)."""
+        key = (name, tuple(shape), np.dtype(dtype))
+        buf = self._buffers.get(key)
+        if buf is None:
+            if len(self._buffers) > 64:  # many states of different shapes: do not hoard memory
+                self._buffers.clear()
+            buf = np.zeros(shape, dtype=dtype)
+            self._buffers[key] = buf
+        return buf
+
+
+def check_state(model, state) -> None:
+    """Raise a ValueError naming the problem if ``state`` cannot be stepped with ``model``."""
+    if getattr(state, "model", None) is not model:
+        raise ValueError("state does not belong to this model; create it with model.state(batch=...)")
+    state.check_arrays()
+    for name in ("x", "v"):
+        a = getattr(state, name)
+        if not math.isfinite(float(np.sum(a, dtype=np.float64))) and not np.isfinite(a).all():
+            b, i, d = (int(k) for k in np.argwhere(~np.isfinite(a))[0])
+            raise ValueError(f"state.{name}[{b}, {i}, {d}] = {a[b, i, d]} is not finite; write finite values "
+                             f"(state.{name}[...] = ...) or restore a snapshot before stepping")
+    if not np.isfinite(state.t).all():
+        raise ValueError("state.t holds non-finite times; write finite values into it in place")
+
+
+# --------------------------------------------------------------------------- explicit methods
+class _Explicit(Solver):
+    """The explicit integrators: Taichi kernels of :mod:`tianim.physics.kernels`.
+
+    Parameters
+    ----------
+    layout : str
+        ``"auto"`` (:func:`choose_layout`), ``"serial"``, ``"frame"`` or ``"substep"``; all give
+        bit-identical results.
+    watchdog : bool or Watchdog
+    """
+
+    def __init__(self, layout: str = "auto", watchdog=True):
+        super().__init__(watchdog)
+        self.layout = check_choice("layout", layout, LAYOUTS)
+
+    def options(self) -> dict:
+        return {"layout": self.layout}
+
+    def _advance(self, model, state, dt, substeps):
+        launch(model, state, dt, substeps, self.name, self.layout, self._buffer)
+
+
+class ExplicitEuler(_Explicit):
+    __doc__ = "Forward (explicit) Euler, order 1: grows on every undamped mode (a teaching reference).\n" + _Explicit.__doc__
+    name, order, stability_limit = "explicit_euler", 1, theory.STABILITY_LIMIT["explicit_euler"]
+
+
+class SymplecticEuler(_Explicit):
+    __doc__ = "Symplectic (semi-implicit) Euler, order 1, stable for omega h < 2.\n" + _Explicit.__doc__
+    name, order, stability_limit = "symplectic_euler", 1, theory.STABILITY_LIMIT["symplectic_euler"]
+
+
+class VelocityVerlet(_Explicit):
+    __doc__ = ("Velocity Verlet, order 2, stable for omega h < 2. Damping uses ``a(x', v + h a)``; the\n"
+               "acceleration is carried across the substeps of a call and recomputed at its start.\n") + _Explicit.__doc__
+    name, order, stability_limit = "verlet", 2, theory.STABILITY_LIMIT["verlet"]
+
+
+class RK4(_Explicit):
+    __doc__ = "Classical Runge-Kutta, order 4, stable for omega h < 2 sqrt 2 (4 force evaluations per step).\n" + _Explicit.__doc__
+    name, order, stability_limit, evals_per_substep = "rk4", 4, theory.STABILITY_LIMIT["rk4"], 4.0
+
+
+def choose_layout(model, batch: int) -> str:
+    """Loop layout for a scene of ``model.n_particles`` particles and ``batch`` copies.
+
+    Small scenes run a whole frame per launch (``"serial"`` for one copy,
+    ``"frame"``: parallel over copies); large scenes parallelise over particles
+    (``"substep"``). All layouts give bit-identical results.
+    """
+    n = model.n_particles
+    if n >= 1024 or (batch >= 1024 and n >= 16):
+        return "substep"
+    return "serial" if batch == 1 or n * batch <= 256 else "frame"
+
+
+def launch(model, state, dt, substeps, method, layout, buffer):
+    """Run the kernels of explicit ``method`` on ``state`` (no validation: callers validate)."""
+    if layout == "auto":
+        layout = choose_layout(model, state.batch)
+    data = model.kernel_data(state.dtype)
+    pre, kernel, multi = frame_kernel(
+        state.dtype, model.dim, method, layout,
+        grid=model.grid is not None,
+        colliders=len(model.colliders) > 0,
+        spring_damping=model.has_spring_damping,
+        medium_damping=model.medium_damping > 0,
+    )
+    real = state.dtype.type
+    work = buffer("work", (WORK[method],) + state.x.shape, state.dtype)
+    args = (
+        state.x, state.v, work, state.pinned.view(np.uint8), data["params"], data["topo"],
+        data["coll"], real(dt),
+        model.grid.nx if model.grid is not None else 1,
+    )
+    if pre is not None:
+        pre(*args, 1)
+    if layout == "substep":
+        for _ in range(substeps // SUBSTEPS_PER_LAUNCH):
+            multi(*args, SUBSTEPS_PER_LAUNCH)
+        for _ in range(substeps % SUBSTEPS_PER_LAUNCH):
+            kernel(*args, 1)
+    else:
+        kernel(*args, substeps)
+    return work
+
+
+_ACCELERATION_BUFFERS: dict = {}
+
+
+def accelerations(model, state) -> np.ndarray:
+    """Accelerations ``a(x, v)`` of every particle, shape (B, N, D) [m/s^2], computed by the kernels.
+
+    Springs, spring damping, gravity and medium damping; zero for pinned particles.
+    """
+    check_state(model, state)
+
+    def buffer(name, shape, dtype):
+        key = (tuple(shape), np.dtype(dtype))
+        if key not in _ACCELERATION_BUFFERS:
+            _ACCELERATION_BUFFERS.clear()
+            _ACCELERATION_BUFFERS[key] = np.zeros(shape, dtype)
+        return _ACCELERATION_BUFFERS[key]
+
+    return launch(model, state, 1.0, 1, "accelerations", "auto", buffer)[0].copy()
+
+
+# --------------------------------------------------------------------------- stiff methods
+class ImplicitEuler(Solver):
+    """Backward Euler, order 1, L-stable (any h; damps stiff modes): Newton with matrix-free CG
+    (:mod:`tianim.physics.implicit`). One launch per call, parallel over copies.
+
+    Parameters
+    ----------
+    newton_tol : float, optional
+        Newton stops when ``|g| <= newton_tol |g_0|`` (default 1e-4 in float32, 1e-10 in float64).
+    cg_tol : float, optional
+        CG stops when its residual is below ``cg_tol |g|`` (default 1e-3 / 1e-4).
+    max_newton, max_cg : int, optional
+        Iteration caps per step (default 6 / 500 in float32, 12 / 2000 in float64).
+    watchdog : bool or Watchdog
+    """
+
+    name, order, stability_limit = "implicit_euler", 1, math.inf
+    watched_energy = ("kinetic", "gravity")
+
+    def __init__(self, newton_tol=None, cg_tol=None, max_newton=None, max_cg=None, watchdog=True):
+        super().__init__(watchdog)
+        self.newton_tol = None if newton_tol is None else check_finite_scalar("newton_tol", newton_tol, lo=0.0, lo_open=True)
+        self.cg_tol = None if cg_tol is None else check_finite_scalar("cg_tol", cg_tol, lo=0.0, lo_open=True)
+        self.max_newton = None if max_newton is None else check_positive_int("max_newton", max_newton)
+        self.max_cg = None if max_cg is None else check_positive_int("max_cg", max_cg)
+
+    def options(self) -> dict:
+        return {"newton_tol": self.newton_tol, "cg_tol": self.cg_tol, "max_newton": self.max_newton,
+                "max_cg": self.max_cg}
+
+    def _advance(self, model, state, dt, substeps):
+        from tianim.physics.implicit import run_implicit_euler
+
+        return run_implicit_euler(model, state, dt, substeps, self.options(), self._buffer)
+
+
+class XPBD(Solver):
+    """Extended position-based dynamics with small steps (Macklin et al. 2016, 2019), order 1, stable at
+    any h; velocities kept exactly in float32 (:mod:`tianim.physics.xpbd`).
+
+    Parameters
+    ----------
+    iterations : int
+        Symmetric Gauss-Seidel sweeps (forward + backward) per substep, >= 1.
+    layout : str
+        ``"auto"``, ``"per_copy"`` or ``"parallel"`` (grids only); bit-identical results.
+    watchdog : bool or Watchdog
+    """
+
+    name, order, stability_limit = "xpbd", 1, math.inf
+    watched_energy = ("kinetic", "gravity")
+
+    def __init__(self, iterations: int = 1, layout: str = "auto", watchdog=True):
+        super().__init__(watchdog)
+        self.iterations = check_positive_int("iterations", iterations)
+        self.layout = check_choice("layout", layout, XPBD_LAYOUTS)
+        self.evals_per_substep = 2.0 * self.iterations  # a symmetric sweep visits every spring twice
+
+    def options(self) -> dict:
+        return {"iterations": self.iterations, "layout": self.layout}
+
+    def _advance(self, model, state, dt, substeps):
+        from tianim.physics.xpbd import run_xpbd
+
+        if self.layout == "parallel" and model.grid is None:
+            raise ValueError("layout='parallel' needs a cloth grid model; use 'auto' or 'per_copy'")
+        run_xpbd(model, state, dt, substeps, self.iterations, self.layout, self._buffer)
+
+
+# --------------------------------------------------------------------------- registry and the convenience
+#: Every solver class by its ``method=`` name.
+SOLVERS = {cls.name: cls for cls in (ExplicitEuler, SymplecticEuler, VelocityVerlet, RK4, ImplicitEuler, XPBD)}
+#: Every method name, explicit ones first.
+METHODS = tuple(SOLVERS)
+#: Methods stable at any step (for stiff scenes).
+STIFF_METHODS = ("implicit_euler", "xpbd")
+#: The conditionally stable (explicit) methods.
+EXPLICIT_METHODS = tuple(m for m in METHODS if m not in STIFF_METHODS)
+
+
+def make_solver(method: str = "symplectic_euler", **options) -> Solver:
+    """The solver object for ``method`` (a name of :data:`METHODS`) with ``options``."""
+    check_choice("method", method, METHODS)
+    try:
+        return SOLVERS[method](**options)
+    except TypeError as exc:
+        if "unexpected keyword" not in str(exc):
+            raise
+        import inspect
+
+        known = [p for p in inspect.signature(SOLVERS[method]).parameters if p != "watchdog"]
+        bad = sorted(set(options) - set(known) - {"watchdog"})
+        raise TypeError(f"method={method!r} has no option {bad[0]!r}; its options are {known}") from None
+
+
+_CONVENIENCE: dict = {}
+
+
+def step(model, state, dt: float, substeps: int = 1, method: str = "symplectic_euler", check=True, **options) -> StepStats:
+    """Advance every copy of ``state`` by ``substeps`` steps of ``dt`` [s] with ``method``, in place.
+
+    The one-line form of ``make_solver(method, **options).step(model, state, dt, substeps)``
+    (solvers are cached per method and options, so repeated calls allocate nothing).
+
+    Parameters
+    ----------
+    model, state, dt, substeps
+        As :meth:`Solver.step`.
+    method : str
+        One of :data:`METHODS`.
+    check : bool or Watchdog
+        The divergence watchdog (True: :data:`DEFAULT_WATCHDOG`; False: off).
+    **options
+        The solver's options, e.g. ``layout="substep"``, ``iterations=4`` (XPBD), ``newton_tol=1e-8``.
+
+    Returns
+    -------
+    StepStats
+    """
+    check_choice("method", method, METHODS)
+    watchdog = _as_watchdog(check) if isinstance(check, Watchdog) else _as_watchdog(_flag("check", check))
+    key = (method, tuple(sorted(options.items())))
+    try:
+        solver = _CONVENIENCE.get(key)
+    except TypeError:  # unhashable option value: let the constructor report it
+        solver = None
+        key = None
+    if solver is None:
+        solver = make_solver(method, watchdog=False, **options)
+        if key is not None:
+            _CONVENIENCE[key] = solver
+    return solver._step(model, state, dt, substeps, watchdog)
+
+
+def _flag(name, value):
+    from tianim._checks import check_bool
+
+    return check_bool(name, value)
+
+
+def stable_dt(model, method: str = "symplectic_euler") -> float:
+    """``make_solver(method).stable_dt(model)``: the largest stable step [s] of ``method`` on ``model``."""
+    return SOLVERS[check_choice("method", method, METHODS)](watchdog=False).stable_dt(model)
