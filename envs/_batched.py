@@ -116,6 +116,7 @@ class BatchedEnv(VectorEnv):
             if reset_mask.any():
                 self._reset_copies(np.flatnonzero(reset_mask))
             obs, reward, terminated = self._advance(a, reset_mask)
+            info.update(getattr(self, "_step_info", {}))
             self._steps += 1
             self._steps[reset_mask] = 0
             truncated = (self._steps >= self.max_episode_steps) & ~reset_mask
@@ -124,6 +125,7 @@ class BatchedEnv(VectorEnv):
             self._done = terminated | truncated
         else:
             obs, reward, terminated = self._advance(a, np.zeros(self.num_envs, bool))
+            info.update(getattr(self, "_step_info", {}))
             self._steps += 1
             truncated = self._steps >= self.max_episode_steps
             done = terminated | truncated
@@ -176,7 +178,8 @@ class SimEnv(gym.Env):
             raise RuntimeError("call reset() before step()")
         a = check_action(action, self.action_space.shape)
         reward = self._sim.step(a[None])
-        return self._sim.observe()[0], float(reward[0]), False, False, {}
+        diverged = bool(self._sim.diverged[0])  # the copy was rolled back; the episode ends
+        return self._sim.observe()[0], float(reward[0]), diverged, False, {"diverged": diverged}
 
     def render(self):
         if self.render_mode == "rgb_array" and self._sim is not None:
@@ -217,9 +220,11 @@ class SimVectorEnv(BatchedEnv):
             actions = actions.copy()
             actions[reset_mask] = 0.0
         reward = self._sim.step(actions)
+        diverged = self._sim.diverged & ~reset_mask
         if saved is not None:
             self._sim.restore(reset_mask, saved)
-        return self._sim.observe(), reward, np.zeros(self.num_envs, bool)
+        self._step_info = {"diverged": diverged.copy(), "_diverged": diverged.copy()} if diverged.any() else {}
+        return self._sim.observe(), reward, diverged.copy()
 
     def _observe_all(self):
         return self._sim.observe()

@@ -42,12 +42,13 @@ holding nothing. All from ``np_random``.
 
 ## Episode end
 
-Never terminates; truncated after 100 steps (2 s).
+Terminates only if the simulation of a copy diverges (``info["diverged"] = True``; the cloth and
+the pickers are rolled back to the start of that step); truncated after 100 steps (2 s).
 
 ## Physics (fixed for version 0)
 
-Control step 0.02 s (``render_fps`` 50) = 45 substeps (``tianim.physics.substeps_for(model,
-frame_dt=0.02, safety=0.5)``), symplectic Euler, float32 state, ground contact with
+Control step 0.02 s (``render_fps`` 50) = 45 substeps (below half the stability limit of the
+stiffest mode, ``tianim.physics.SymplecticEuler().stable_dt``; a test checks it), symplectic Euler, float32 state, ground contact with
 Coulomb friction each substep. No self-collision: a folded layer rests on the
 table through the layer under it (the reward measures positions, which this does
 not change). Springs stay within a 25% stretch bound under any picker motion
@@ -113,6 +114,9 @@ class ClothFoldSim:
         self.pickers = np.zeros((batch, 2, 3), np.float32)
         self.held = np.full((batch, 2), -1, np.int64)
         self.start = np.zeros((batch, NX * NX, 3), np.float32)
+        # a diverged copy is rolled back and reported, not raised: its episode ends, the others go on
+        self.solver = tp.SymplecticEuler(watchdog=tp.Watchdog(on_divergence="rollback"))
+        self.diverged = np.zeros(batch, bool)
 
     def reset(self, k: int, rng: np.random.Generator) -> None:
         ox, oz, p0x, p0z, p1x, p1z = sample_start(rng).tolist()
@@ -124,12 +128,14 @@ class ClothFoldSim:
         self.start[k] = s.x[k]
         self.pickers[k] = ((p0x, 0.1, p0z), (p1x, 0.1, p1z))
         self.held[k] = -1
+        self.solver.watchdog.forget(s, k)
 
     def step(self, actions: np.ndarray) -> np.ndarray:
         """Apply picker actions (B, 8), advance the cloth; return the reward (B,) float64."""
         s = self.state
         rows = np.arange(s.batch)
         old = self.pickers.copy()
+        held_before, pinned_before = self.held.copy(), s.pinned.copy()
         a = actions.reshape(-1, 2, 4)
         new = np.clip(old + a[:, :, :3] * np.float32(MOVE), PICKER_LOW, PICKER_HIGH)
         self._guard_stretch(new)
@@ -153,7 +159,11 @@ class ClothFoldSim:
             s.x[on, held[on]] = old[on, p]
             s.v[on, held[on]] = (new[on, p] - old[on, p]) / np.float32(DT)
         self.pickers[:] = new
-        tp.step(self.model, s, DT / SUBSTEPS, SUBSTEPS, method="symplectic_euler")
+        self.diverged = self.solver.step(self.model, s, DT / SUBSTEPS, SUBSTEPS).diverged
+        if self.diverged.any():  # the watchdog rolled the cloth back: put the pickers back too
+            bad = np.flatnonzero(self.diverged)
+            self.pickers[bad], self.held[bad] = old[bad], held_before[bad]
+            s.pinned[bad] = pinned_before[bad]
         return self.reward()
 
     def _guard_stretch(self, new: np.ndarray) -> None:

@@ -68,7 +68,7 @@ def frames(width: int, height: int, n_frames: int, fps: float, n: int = 16):
         for x0, sim in ((8, left), (width // 2 + 8, right)):
             name = "symplectic Euler" if sim is left else "backward Euler"
             ms = 1e3 * sim.seconds / max(sim.calls, 1)
-            pen.text((x0, 8), f"{name}: {sim.sim.substeps} step(s)/frame, {ms:.0f} ms/frame", fill=(20, 20, 20))
+            pen.text((x0, 8), f"{name}: {sim.sim.plan.substeps} step(s)/frame, {ms:.0f} ms/frame", fill=(20, 20, 20))
         return np.asarray(image)
 
     yield from Timeline(frames=n_frames, fps=fps).render(q, draw)

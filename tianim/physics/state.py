@@ -78,8 +78,10 @@ class State:
                 raise ValueError(f"state.{name} must be C-contiguous; assign with state.{name}[...] = values")
         if not isinstance(self.pinned, np.ndarray) or self.pinned.shape != (b, n) or self.pinned.dtype != bool:
             raise ValueError(f"state.pinned must be a ({b}, {n}) bool array; write into it in place")
-        if not isinstance(self.t, np.ndarray) or self.t.shape != (b,):
-            raise ValueError(f"state.t must be a ({b},) array; write into it in place")
+        if not isinstance(self.t, np.ndarray) or self.t.shape != (b,) or self.t.dtype != np.float64:
+            raise ValueError(f"state.t has shape {getattr(self.t, 'shape', None)} and dtype "
+                             f"{getattr(self.t, 'dtype', None)}; expected ({b},) float64: write into it in place "
+                             "(state.t[...] = ...)")
 
     # ------------------------------------------------------------------ pins
     def _copies(self, copies) -> np.ndarray:

@@ -17,7 +17,10 @@ turned off. A blow-up is
   ``total mass x 1 m^2/s^2``) is the energy of dropping the scene by its own size, K0, S0 the
   kinetic and spring energy when the watchdog first saw the state. Energy the user adds
   (moving pins, releasing them, writing x or v between calls) raises R by exactly the change
-  the edit made, so an environment that drags a cloth is not flagged; energy that grows call
+  the edit made, and energy an edit removes is taken off G, so an environment that drags a
+  cloth is not flagged; the work that pins moving with their own velocity do during a call
+  (``-sum f_p . dx_p`` against the spring forces f on them, trapezoid rule) is not counted as
+  created either. Energy that grows call
   after call accumulates in G however slowly it grows per call, and damping (negative gains)
   only resets G towards zero. Without damping and with fixed pins exact dynamics conserve E
   (:mod:`tianim.physics.diagnostics`).
@@ -151,7 +154,7 @@ def energy_scale(model) -> float:
 class _Memory:
     """What a watchdog remembers of one state between calls (per copy)."""
 
-    __slots__ = ("x", "v", "pinned", "energy", "reference", "cusum")
+    __slots__ = ("x", "v", "pinned", "energy", "reference", "cusum", "terms")
 
 
 class Watchdog:
@@ -182,9 +185,18 @@ class Watchdog:
     def __repr__(self) -> str:
         return f"Watchdog(growth={self.growth!r}, on_divergence={self.on_divergence!r})"
 
-    def forget(self, state) -> None:
-        """Drop what this watchdog remembers of ``state`` (the next call starts a new reference)."""
-        self._memory.pop(state, None)
+    def forget(self, state, copies=None) -> None:
+        """Drop what this watchdog remembers of ``state`` (all copies, or the copy indices ``copies``):
+        the next call takes a new reference for them (an environment does this when it resets a copy)."""
+        mem = self._memory.get(state)
+        if mem is None:
+            return
+        if copies is None:
+            self._memory.pop(state, None)
+            return
+        idx = np.atleast_1d(np.asarray(copies, dtype=np.int64))
+        mem.reference[idx] = np.nan  # recomputed by the next `before`
+        mem.cusum[idx] = 0.0
 
     # ------------------------------------------------------------------ the two halves of a call
     def before(self, model, state, terms):
@@ -192,29 +204,40 @@ class Watchdog:
         by the energy that edits since the last call added."""
         snap = state.snapshot()
         if self.growth is None:
-            return snap, None
+            return snap, None, None
+        pins0 = _pin_forces(model, state)
         mem = self._memory.get(state)
         if mem is not None and mem.x.shape == state.x.shape and mem.x.dtype == state.x.dtype:
             unchanged = (np.array_equal(mem.x, state.x) and np.array_equal(mem.v, state.v)
                          and np.array_equal(mem.pinned, state.pinned))
-            if unchanged:
-                return snap, mem.energy
-            e = _watched(fast_energy(model, state), terms)
-            mem.reference = mem.reference + np.maximum(e - mem.energy, 0.0)
-            return snap, e
+            fresh = np.isnan(mem.reference)
+            if unchanged and not fresh.any() and mem.terms == tuple(terms):
+                return snap, mem.energy, pins0
+            parts = fast_energy(model, state)
+            e = _watched(parts, terms)
+            if mem.terms == tuple(terms):
+                edit = e - mem.energy
+                mem.reference = mem.reference + np.maximum(edit, 0.0)  # energy the user added
+                mem.cusum = np.maximum(mem.cusum + np.minimum(edit, 0.0), 0.0)  # or took away
+            else:  # another solver (another criterion) on the same state
+                mem.terms, mem.cusum = tuple(terms), np.zeros(state.batch)
+            mem.reference = np.where(fresh, parts[:, 0] + parts[:, 1] + energy_scale(model), mem.reference)
+            mem.energy = e
+            return snap, e, pins0
         parts = fast_energy(model, state)
         mem = _Memory()
         mem.reference = parts[:, 0] + parts[:, 1] + energy_scale(model)
         mem.cusum = np.zeros(state.batch)
         mem.energy = _watched(parts, terms)
+        mem.terms = tuple(terms)
         mem.x, mem.v, mem.pinned = state.x.copy(), state.v.copy(), state.pinned.copy()
         self._memory[state] = mem
-        return snap, mem.energy
+        return snap, mem.energy, pins0
 
     def after(self, model, state, token, terms):
         """Check the call; returns ``(diverged (B,) bool, reason or None)`` after rolling back the diverged
         copies (all copies when ``on_divergence="raise"``: the caller then raises)."""
-        snap, e0 = token
+        snap, e0, pins0 = token
         finite = np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2))
         bad = ~finite
         reason = None
@@ -224,7 +247,8 @@ class Watchdog:
         if mem is not None:
             with np.errstate(invalid="ignore", over="ignore"):
                 e1 = _watched(fast_energy(model, state), terms)
-                cusum = np.maximum(mem.cusum + (e1 - e0), 0.0)
+                work = _pin_work(model, state, snap, pins0)
+                cusum = np.maximum(mem.cusum + (e1 - e0 - work), 0.0)
                 bound = self.growth * mem.reference
                 grown = ~(cusum <= bound) & finite  # NaN or inf energies fail `<=`
             if grown.any():
@@ -252,3 +276,38 @@ class Watchdog:
 def _watched(parts: np.ndarray, terms) -> np.ndarray:
     """Sum of the watched energy columns, shape (B,)."""
     return parts[:, [TERMS[t] for t in terms]].sum(axis=1)
+
+
+def _pin_forces(model, state):
+    """Spring forces on the pinned particles that move, ``(mask (B, N), force (B, N, D))`` float64, or
+    None when no pin moves (then pins do no work)."""
+    moving = state.pinned & np.any(state.v != 0, axis=2)
+    if model.n_springs == 0 or not moving.any():
+        return None
+    i, j = model.springs[:, 0], model.springs[:, 1]
+    touched = moving.any(axis=0)
+    sel = np.flatnonzero(touched[i] | touched[j])
+    i, j = i[sel], j[sel]
+    x, v = state.x.astype(np.float64), state.v.astype(np.float64)
+    d = x[:, i] - x[:, j]
+    length = np.sqrt(np.einsum("bsd,bsd->bs", d, d))
+    n = d / np.where(length > 0, length, 1.0)[..., None]
+    mag = -model.stiffness[sel] * (length - model.rest_length[sel])
+    mag = mag - model.damping[sel] * np.einsum("bsd,bsd->bs", v[:, i] - v[:, j], n)
+    f = np.zeros(x.shape)
+    for b in range(state.batch):  # f_i += mag n, f_j -= mag n (model.py's spring force)
+        np.add.at(f[b], i, mag[b, :, None] * n[b])
+        np.add.at(f[b], j, -mag[b, :, None] * n[b])
+    return moving, f
+
+
+def _pin_work(model, state, snap, pins0) -> np.ndarray:
+    """Work [J] per copy that moving pins did on the scene during the call: the pins are held against
+    the spring forces f on them, so ``W = -sum_p f_p . dx_p`` (trapezoid rule over the call)."""
+    if pins0 is None:
+        return np.zeros(state.batch)
+    moving, f0 = pins0
+    pins1 = _pin_forces(model, state)
+    f1 = pins1[1] if pins1 is not None else np.zeros_like(f0)
+    dx = (state.x.astype(np.float64) - snap["x"].astype(np.float64)) * moving[..., None]
+    return -0.5 * np.einsum("bnd,bnd->b", f0 + f1, dx)
