@@ -60,7 +60,7 @@ def test_centripetal_middle_segment_has_no_cusp_or_self_intersection(pts):
 def test_uniform_loops_on_random_points_where_centripetal_does_not():
     rng = np.random.default_rng(42)
     uniform_loops = 0
-    for _ in range(2000):  # uniform loops on ~0.5% of random point sets (DESIGN.md section 6)
+    for _ in range(2000):  # uniform loops on ~0.5% of random point sets (docs/architecture.md, "Measured facts")
         pts = rng.uniform(-1, 1, size=(4, 2))
         p_c, _ = _middle_segment(pts, "centripetal", 80)
         assert not _polyline_self_intersects(p_c)

@@ -26,7 +26,7 @@ def test_stretched_pulls_compressed_pushes(d):
 
 
 def test_chapter_printed_sign_is_wrong():
-    """DESIGN.md section 2: the chapter prints f_ij = -k e_ij (p_i - p_j)/|p_i - p_j| with e_ij = l - |p_i - p_j|.
+    """docs/architecture.md, "Errors in the source chapter": the chapter prints f_ij = -k e_ij (p_i - p_j)/|p_i - p_j| with e_ij = l - |p_i - p_j|.
 
     For a stretched spring that formula pushes the ends apart; tianim's force is its negative,
     f_i = -k (|d| - l) d/|d| = +k e d/|d|.

@@ -9,7 +9,7 @@ per frame. ``q(t)`` can be
 
 Frame rates: film is 24 fps (:data:`FILM`, the default); video is 25 fps
 (:data:`PAL`) or 30 fps (:data:`NTSC`, exactly 30000/1001 = 29.97 in broadcast).
-(The source chapter swaps film and video; see DESIGN.md section 2.)
+(The source chapter swaps film and video; see docs/architecture.md, "Errors in the source chapter".)
 
 Usage::
 

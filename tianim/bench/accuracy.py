@@ -141,7 +141,8 @@ def stiff_cloth_table(n=64, frames=2, frame_dt=1 / 24, repeats=1) -> list:
           f"{float(tp.max_strain(model, ref)[0]):.3g}")
     rows = []
     for method, sub, iters in ((se.method, se.substeps, 1), ("implicit_euler", 1, 1), ("implicit_euler", 4, 1),
-                               ("xpbd", 20, 1), ("xpbd", 80, 1), ("xpbd", 320, 1), ("xpbd", 80, 4)):
+                               ("xpbd", 20, 1), ("xpbd", 80, 1), ("xpbd", 320, 1), ("xpbd", 1280, 1),
+                               ("xpbd", 5120, 1), ("xpbd", 80, 4)):
         state = model.state()
         solver = tp.XPBD(iterations=iters) if method == "xpbd" else tp.make_solver(method)
 

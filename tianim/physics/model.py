@@ -8,7 +8,7 @@ What changes (positions, velocities, time, which particles are pinned) lives
 in a :class:`~tianim.physics.state.State`, with a leading batch axis.
 
 Forces (source chapter 15.6, with the chapter's sign error corrected, see
-DESIGN.md section 2): for a spring between particles i and j with
+docs/architecture.md, "Errors in the source chapter"): for a spring between particles i and j with
 ``d = x_i - x_j``, rest length ``l``, stiffness ``k`` and damping ``c``,
 
     f_i = -k (|d| - l) d/|d|  -  c ((v_i - v_j) . d/|d|) d/|d|,     f_j = -f_i
