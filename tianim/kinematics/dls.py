@@ -14,9 +14,9 @@ The null-space phase for redundant chains is :mod:`tianim.kinematics.nullspace`.
 
 from __future__ import annotations
 
-from math import cos, sin
-
 import numpy as np
+
+from tianim.kinematics.planar import fk_tail_sums
 
 _LAM0 = 1e-3  # initial lam^2, in units of reach^2
 _LAM_MIN = 1e-14
@@ -32,27 +32,6 @@ def _scale2(chain) -> float:
 
 
 # -- single target, planar chain: plain Python floats (about 4x faster than NumPy for n <= ~30) ------------------
-def _planar_fk(L, bx, by, q):
-    """End effector (x, y) and tail sums dx[i], dy[i] = end - joint i; the Jacobian column i is (-dy[i], dx[i])."""
-    n = len(L)
-    cs = [0.0] * n
-    ss = [0.0] * n
-    phi = 0.0
-    for i in range(n):
-        phi += q[i]
-        cs[i] = L[i] * cos(phi)
-        ss[i] = L[i] * sin(phi)
-    dx = [0.0] * n
-    dy = [0.0] * n
-    x = y = 0.0
-    for i in range(n - 1, -1, -1):
-        x += cs[i]
-        y += ss[i]
-        dx[i] = x
-        dy[i] = y
-    return x + bx, y + by, dx, dy
-
-
 def plain_constants(chain):
     """(lengths, base x, base y, lower, upper, limited) of a PlanarChain as Python floats, cached on the
     (immutable) chain so a single-target solve converts nothing."""
@@ -74,7 +53,7 @@ def dls_planar_single(chain, target, q0, tol: float, iters: int):
     tol2 = tol * tol
     q = [float(v) for v in q0]
     n = len(q)
-    x, y, dx, dy = _planar_fk(L, bx, by, q)
+    x, y, dx, dy = fk_tail_sums(L, bx, by, q)
     e0, e1 = tx - x, ty - y
     r2 = e0 * e0 + e1 * e1
     k = 0
@@ -117,7 +96,7 @@ def dls_planar_single(chain, target, q0, tol: float, iters: int):
         qn = [q[i] + qn[i] for i in range(n)]
         if limited:
             qn = [min(max(v, lo[i]), hi[i]) for i, v in enumerate(qn)]
-        xn, yn, dxn, dyn = _planar_fk(L, bx, by, qn)
+        xn, yn, dxn, dyn = fk_tail_sums(L, bx, by, qn)
         f0, f1 = tx - xn, ty - yn
         r2n = f0 * f0 + f1 * f1
         better = r2n < r2

@@ -4,13 +4,17 @@ Conventions are those of :class:`tianim.kinematics.PlanarChain`: ``q[i]`` is the
 angle (rad) of link ``i`` relative to link ``i-1`` (``q[0]`` relative to world +x),
 counter-clockwise positive; the base (joint 0) is fixed in the world; ``tau[i]``
 (N m) is the torque the motor at joint ``i`` applies to link ``i`` (and, with
-opposite sign, to link ``i-1``). Gravity is a world-frame acceleration vector in
-m/s^2, by default ``(0, -9.81)`` (the y axis points up). SI units throughout.
+opposite sign, to link ``i-1``). Gravity is the chain's world-frame acceleration
+vector ``chain.gravity`` in m/s^2 (``(0, -9.81)`` unless the chain says otherwise;
+the y axis points up), which the ``gravity=`` argument of each function can
+override. Joint damping ``chain.damping`` (N m s/rad) is viscous friction at the
+joints. SI units throughout.
 
-The equations of motion are ``M(q) qdd + h(q, qd) = tau`` with ``h`` the Coriolis,
-centrifugal and gravity terms. :func:`inverse_dynamics` evaluates the left side
-by the recursive Newton-Euler algorithm (Luh, Walker and Paul 1980; Featherstone,
-*Rigid Body Dynamics Algorithms*, 2008, ch. 5) specialised to the plane:
+The equations of motion are ``M(q) qdd + h(q, qd) + b qd = tau`` with ``h`` the
+Coriolis, centrifugal and gravity terms and ``b`` the joint damping.
+:func:`inverse_dynamics` evaluates the left side by the recursive Newton-Euler
+algorithm (Luh, Walker and Paul 1980; Featherstone, *Rigid Body Dynamics
+Algorithms*, 2008, ch. 5) specialised to the plane:
 
 forward pass (base to tip), with ``u_i = (cos phi_i, sin phi_i)``,
 ``n_i = (-sin phi_i, cos phi_i)``, ``w_i = sum_{k<=i} qd_k``, ``al_i = sum_{k<=i} qdd_k``::
@@ -25,6 +29,13 @@ backward pass (tip to base), ``f_i`` = force of link i-1 on link i at joint i::
     tau_i = tau_{i+1} + I_i al_i + c_i (u_i x f_i) + (l_i - c_i) (u_i x f_{i+1})
 
 with ``f_n = 0``, ``tau_n = 0`` and ``a x b = a_x b_y - a_y b_x``.
+
+:func:`forward_dynamics` solves ``M qdd = tau - b qd - h`` with the mass matrix
+built column by column from the same recursion (``M e_j`` is the inverse dynamics
+of ``qdd = e_j`` at rest without gravity: Walker and Orin 1982, method 1;
+Featherstone 2008, section 6.1) and ``h`` from one more call with ``qdd = 0``.
+This is the one forward and the one inverse dynamics of a planar chain; the fast
+steppers of :mod:`tianim.kinematics.arm` are checked against them by the tests.
 """
 
 from __future__ import annotations
@@ -32,12 +43,15 @@ from __future__ import annotations
 import numpy as np
 
 from tianim._checks import float_array, joint_vector
-from tianim.kinematics.planar import PlanarChain
+from tianim.kinematics.planar import DEFAULT_GRAVITY, PlanarChain
 
-DEFAULT_GRAVITY = (0.0, -9.81)
+__all__ = ["DEFAULT_GRAVITY", "inverse_dynamics", "mass_matrix", "bias_torques", "forward_dynamics", "energy",
+           "point_mass_forces"]
 
 
-def _gravity(gravity) -> np.ndarray:
+def _gravity(chain: PlanarChain, gravity) -> np.ndarray:
+    if gravity is None:
+        return chain.gravity
     g = float_array("gravity", gravity, "of shape (2,), m/s^2")
     if g.shape != (2,):
         raise ValueError(f"gravity has shape {g.shape}; pass a 2-vector in m/s^2, e.g. (0, -9.81)")
@@ -59,10 +73,9 @@ def _broadcast_joint_args(chain, **arrays):
 
 
 def _rnea(chain: PlanarChain, q, qd, qdd, g) -> np.ndarray:
-    phi = np.cumsum(q, axis=-1)
+    _, u = chain._links(q)  # link directions (..., n, 2)
     w = np.cumsum(qd, axis=-1)
     al = np.cumsum(qdd, axis=-1)
-    u = np.stack([np.cos(phi), np.sin(phi)], axis=-1)  # (..., n, 2)
     nrm = np.stack([-u[..., 1], u[..., 0]], axis=-1)
     rel = al[..., None] * nrm - (w**2)[..., None] * u  # acceleration per unit length along link i
     # a_joint[i] = sum_{k<i} l_k rel_k
@@ -82,7 +95,7 @@ def _rnea(chain: PlanarChain, q, qd, qdd, g) -> np.ndarray:
     return np.cumsum(local[..., ::-1], axis=-1)[..., ::-1]
 
 
-def inverse_dynamics(chain: PlanarChain, q, qd, qdd, gravity=DEFAULT_GRAVITY) -> np.ndarray:
+def inverse_dynamics(chain: PlanarChain, q, qd, qdd, gravity=None) -> np.ndarray:
     """Joint torques that make a planar chain follow ``q(t)`` (recursive Newton-Euler).
 
     Parameters
@@ -93,18 +106,18 @@ def inverse_dynamics(chain: PlanarChain, q, qd, qdd, gravity=DEFAULT_GRAVITY) ->
     q, qd, qdd : array_like, shape (..., n)
         Joint angles (rad, each relative to the previous link), velocities (rad/s)
         and accelerations (rad/s^2). Leading axes broadcast (e.g. time samples).
-    gravity : array_like, shape (2,)
-        World-frame gravitational acceleration, m/s^2; default ``(0, -9.81)``.
+    gravity : array_like, shape (2,), optional
+        World-frame gravitational acceleration, m/s^2; default ``chain.gravity``.
 
     Returns
     -------
     tau : ndarray, shape (..., n)
-        Motor torques (N m), ``tau = M(q) qdd + C(q, qd) qd + G(q)``; see the module
-        docstring for the recursion and sign conventions.
+        Motor torques (N m), ``tau = M(q) qdd + C(q, qd) qd + G(q) + b qd`` (``b``:
+        ``chain.damping``); see the module docstring for the recursion and sign conventions.
     """
     _check_chain(chain)
     q, qd, qdd = _broadcast_joint_args(chain, q=q, qd=qd, qdd=qdd)
-    return _rnea(chain, q, qd, qdd, _gravity(gravity))
+    return _rnea(chain, q, qd, qdd, _gravity(chain, gravity)) + chain.damping * qd
 
 
 def mass_matrix(chain: PlanarChain, q) -> np.ndarray:
@@ -121,37 +134,36 @@ def mass_matrix(chain: PlanarChain, q) -> np.ndarray:
     return np.swapaxes(cols, -1, -2)
 
 
-def bias_torques(chain: PlanarChain, q, qd, gravity=DEFAULT_GRAVITY) -> np.ndarray:
-    """Coriolis, centrifugal and gravity torques ``h(q, qd)``, shape (..., n), N m."""
+def bias_torques(chain: PlanarChain, q, qd, gravity=None) -> np.ndarray:
+    """Coriolis, centrifugal and gravity torques ``h(q, qd)``, shape (..., n), N m (damping not included)."""
     _check_chain(chain)
     q, qd = _broadcast_joint_args(chain, q=q, qd=qd)
-    return _rnea(chain, q, qd, np.zeros_like(q), _gravity(gravity))
+    return _rnea(chain, q, qd, np.zeros_like(q), _gravity(chain, gravity))
 
 
-def forward_dynamics(chain: PlanarChain, q, qd, tau, gravity=DEFAULT_GRAVITY) -> np.ndarray:
-    """Joint accelerations ``qdd = M(q)^-1 (tau - h(q, qd))``, shape (..., n), rad/s^2.
+def forward_dynamics(chain: PlanarChain, q, qd, tau, gravity=None) -> np.ndarray:
+    """Joint accelerations ``qdd = M(q)^-1 (tau - b qd - h(q, qd))``, shape (..., n), rad/s^2.
 
-    The inverse of :func:`inverse_dynamics` (same conventions); integrate it to
-    forward-simulate the chain.
+    The inverse of :func:`inverse_dynamics` (same conventions); joint, torque and speed
+    limits are not applied here (the steppers of :mod:`tianim.kinematics.arm` apply them).
     """
     _check_chain(chain)
     q, qd, tau = _broadcast_joint_args(chain, q=q, qd=qd, tau=tau)
-    h = _rnea(chain, q, qd, np.zeros_like(q), _gravity(gravity))
+    h = _rnea(chain, q, qd, np.zeros_like(q), _gravity(chain, gravity)) + chain.damping * qd
     return np.linalg.solve(mass_matrix(chain, q), (tau - h)[..., None])[..., 0]
 
 
-def energy(chain: PlanarChain, q, qd, gravity=DEFAULT_GRAVITY) -> np.ndarray:
+def energy(chain: PlanarChain, q, qd, gravity=None) -> np.ndarray:
     """Total mechanical energy (J), shape (...): ``qd^T M qd / 2 - sum_i m_i g . c_i``.
 
-    Conserved when ``tau = 0``; used to check the dynamics independently.
+    Conserved when ``tau = 0`` and the chain is undamped; used to check the dynamics independently.
     """
     _check_chain(chain)
     q, qd = _broadcast_joint_args(chain, q=q, qd=qd)
-    g = _gravity(gravity)
+    g = _gravity(chain, gravity)
     kin = 0.5 * np.einsum("...i,...ij,...j->...", qd, mass_matrix(chain, q), qd)
     pos = chain.joint_positions(q)
-    phi = np.cumsum(q, axis=-1)
-    coms = pos[..., :-1, :] + chain.com[:, None] * np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+    coms = pos[..., :-1, :] + chain.com[:, None] * chain._links(q)[1]
     pot = -np.sum(chain.masses * (coms @ g), axis=-1)
     return kin + pot
 

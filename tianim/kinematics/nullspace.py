@@ -33,7 +33,8 @@ from __future__ import annotations
 import numpy as np
 
 from tianim.kinematics import dls
-from tianim.kinematics.dls import _MAX_STEP, _planar_fk, plain_constants
+from tianim.kinematics.dls import _MAX_STEP, plain_constants
+from tianim.kinematics.planar import fk_tail_sums
 
 ITERS = 100
 _PTOL = 1e-10  # stop when |N (q - rest)| <= _PTOL (1 + |q - rest|), radians
@@ -181,7 +182,7 @@ def _polish_planar_one(chain, target, q, rest, tol: float, iters: int):
 
     def fkj(qq):
         """(e0, e1, J0, J1, a, b, c): residual, Jacobian rows, J J^T = [[a, b], [b, c]] (+1e-15 trace)."""
-        x, y, dx, dy = _planar_fk(L, bx, by, qq)
+        x, y, dx, dy = fk_tail_sums(L, bx, by, qq)
         J0 = [-v for v in dy]
         a, b, c = _dot(dy, dy), -_dot(dy, dx), _dot(dx, dx)
         eps = 1e-15 * (a + c)

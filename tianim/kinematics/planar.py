@@ -11,18 +11,74 @@ Conventions (used by every function in :mod:`tianim.kinematics` that takes a
 * Forward kinematics is the chapter's closed form generalised to n links
   (chapter 15.3.1): ``p = (sum_i l_i cos(phi_i), sum_i l_i sin(phi_i)) + base``;
   for two links ``p = (l1 cos q1 + l2 cos(q1+q2), l1 sin q1 + l2 sin(q1+q2))``.
-* Dynamics parameters (only needed by :mod:`tianim.kinematics.dynamics`):
-  ``masses[i]`` (kg), ``com[i]`` = distance (m) of link ``i``'s centre of mass
-  from joint ``i`` along the link, ``inertias[i]`` = moment of inertia (kg m^2)
-  of link ``i`` about its centre of mass, about the z axis. Defaults: 1 kg
-  uniform rods, ``com = l/2``, ``I = m l^2 / 12``.
+* Dynamics parameters (used by :mod:`tianim.kinematics.dynamics` and the stepper
+  :mod:`tianim.kinematics.arm`): ``masses[i]`` (kg), ``com[i]`` = distance (m) of
+  link ``i``'s centre of mass from joint ``i`` along the link, ``inertias[i]`` =
+  moment of inertia (kg m^2) of link ``i`` about its centre of mass, about the z
+  axis; ``damping[i]`` (N m s/rad), viscous friction at joint ``i`` (the joint
+  torque is ``tau_i - damping_i qd_i``); ``max_torque[i]`` (N m), the motor's
+  torque limit; ``max_velocity`` (rad/s), the joint speed limit; ``gravity``
+  (m/s^2), a world-frame 2-vector. Defaults: 1 kg uniform rods, ``com = l/2``,
+  ``I = m l^2 / 12``, no damping, no torque or speed limit, ``gravity = (0, -9.81)``
+  (the y axis points up; ``(0, 0)`` for an arm lying in a horizontal plane).
+* This is the one planar arm model of tianim: inverse and forward dynamics
+  (:mod:`tianim.kinematics.dynamics`), the launch-free and batched steppers
+  (:mod:`tianim.kinematics.arm`), IK, rendering and the ArmReach environment all
+  read it. The NumPy forward kinematics is :meth:`PlanarChain.joint_positions`
+  and :meth:`PlanarChain._fk_jac` (both from :meth:`PlanarChain._links`); the
+  plain-float one (single-target IK) is :func:`fk_tail_sums`.
 """
 
 from __future__ import annotations
 
+from math import cos, sin
+
 import numpy as np
 
 from tianim._checks import float_array, joint_limits, joint_vector, per_joint
+
+
+DEFAULT_GRAVITY = (0.0, -9.81)
+
+
+def fk_tail_sums(L, bx, by, q):
+    """Plain-float forward kinematics for one pose (lists of n floats; about 4x faster than
+    NumPy for n <= ~30): end effector ``(x, y)`` and tail sums ``dx[i], dy[i]`` = end minus
+    joint i, so that the Jacobian column i is ``(-dy[i], dx[i])``."""
+    n = len(L)
+    cs = [0.0] * n
+    ss = [0.0] * n
+    phi = 0.0
+    for i in range(n):
+        phi += q[i]
+        cs[i] = L[i] * cos(phi)
+        ss[i] = L[i] * sin(phi)
+    dx = [0.0] * n
+    dy = [0.0] * n
+    x = y = 0.0
+    for i in range(n - 1, -1, -1):
+        x += cs[i]
+        y += ss[i]
+        dx[i] = x
+        dy[i] = y
+    return x + bx, y + by, dx, dy
+
+
+def _limit(name: str, value, n: int, unit: str) -> np.ndarray:
+    """A per-joint limit > 0 (``inf``: none), from None (no limit), a scalar or n values."""
+    if value is None:
+        return np.full(n, np.inf)
+    try:
+        arr = np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name}={value!r} is not numeric; pass a scalar or {n} values > 0 ({unit}, inf for none)") from exc
+    if arr.ndim == 0:
+        arr = np.full(n, float(arr))
+    if arr.shape != (n,):
+        raise ValueError(f"{name} has shape {arr.shape}; pass a scalar or {n} values, one per joint")
+    if np.isnan(arr).any() or (arr <= 0).any():
+        raise ValueError(f"{name}={arr.tolist()} must all be > 0 {unit} (inf or None for no limit)")
+    return arr
 
 
 class PlanarChain:
@@ -39,6 +95,15 @@ class PlanarChain:
         Joint limits in radians (None: unlimited). ``lower <= upper`` per joint.
     base : array_like, shape (2,), optional
         Position of joint 0 in metres (default origin).
+    damping : array_like, shape (n,) or scalar, optional
+        Viscous joint damping, N m s/rad, >= 0 (default 0).
+    max_torque : array_like, shape (n,) or scalar, optional
+        Motor torque limits, N m, > 0 (default None: unlimited). The stepper clamps
+        torques to it; environments scale an action of 1 to it.
+    max_velocity : float, optional
+        Joint speed limit, rad/s, > 0 (default None: unlimited); the stepper clamps to it.
+    gravity : array_like, shape (2,), optional
+        World-frame gravitational acceleration, m/s^2 (default ``(0, -9.81)``).
 
     The object is immutable after construction; bad input raises ValueError or
     TypeError naming the argument.
@@ -46,7 +111,8 @@ class PlanarChain:
 
     task_dim = 2
 
-    def __init__(self, lengths, masses=None, com=None, inertias=None, lower=None, upper=None, base=(0.0, 0.0)):
+    def __init__(self, lengths, masses=None, com=None, inertias=None, lower=None, upper=None, base=(0.0, 0.0),
+                 damping=None, max_torque=None, max_velocity=None, gravity=DEFAULT_GRAVITY):
         lengths = float_array("lengths", lengths, "of shape (n,), metres")
         if lengths.ndim != 1 or lengths.size == 0:
             raise ValueError(f"lengths has shape {lengths.shape}; pass a 1-D list of n >= 1 link lengths in metres")
@@ -64,10 +130,20 @@ class PlanarChain:
         if base.shape != (2,):
             raise ValueError(f"base has shape {base.shape}; pass (x, y) in metres")
         lo, hi = joint_limits(lower, upper, n)
+        damping = per_joint("damping", damping, n, 0.0)
+        if np.any(damping < 0):
+            raise ValueError(f"damping={damping.tolist()} must all be >= 0 N m s/rad")
+        max_torque = _limit("max_torque", max_torque, n, "N m")
+        vmax = _limit("max_velocity", max_velocity, 1, "rad/s")
+        gravity = float_array("gravity", gravity, "of shape (2,), m/s^2")
+        if gravity.shape != (2,):
+            raise ValueError(f"gravity has shape {gravity.shape}; pass a 2-vector in m/s^2, e.g. (0, -9.81)")
         for name, arr in (("lengths", lengths), ("masses", masses), ("com", com), ("inertias", inertias),
-                          ("lower", lo), ("upper", hi), ("base", base)):
+                          ("lower", lo), ("upper", hi), ("base", base), ("damping", damping),
+                          ("max_torque", max_torque), ("gravity", gravity)):
             arr.setflags(write=False)
             setattr(self, name, arr)
+        self.max_velocity = float(vmax[0])
         self.n = n
 
     @property
@@ -78,12 +154,17 @@ class PlanarChain:
     def __repr__(self) -> str:
         return f"PlanarChain(lengths={self.lengths.tolist()})"
 
-    # -- kinematics -------------------------------------------------------------------------------------
+    # -- kinematics (the one NumPy forward kinematics of a planar chain) ---------------------------------
+    @staticmethod
+    def _links(q: np.ndarray):
+        """Absolute link angles ``phi`` (..., n) and link directions ``u = (cos phi, sin phi)`` (..., n, 2)."""
+        phi = np.cumsum(q, axis=-1)
+        return phi, np.stack([np.cos(phi), np.sin(phi)], axis=-1)
+
     def joint_positions(self, q) -> np.ndarray:
         """Positions of joints 0..n-1 and the end effector, shape (..., n+1, 2), metres, for ``q`` (..., n)."""
         q = joint_vector("q", q, self.n)
-        phi = np.cumsum(q, axis=-1)
-        steps = np.stack([np.cos(phi), np.sin(phi)], axis=-1) * self.lengths[:, None]
+        steps = self._links(q)[1] * self.lengths[:, None]
         out = np.zeros(q.shape[:-1] + (self.n + 1, 2))
         out[..., 1:, :] = np.cumsum(steps, axis=-2)
         return out + self.base
@@ -104,9 +185,9 @@ class PlanarChain:
     # -- helpers used by the IK solvers (no validation: internal, batched (B, n)) ----------------------
     def _fk_jac(self, q: np.ndarray):
         """(end (B,2), J (B,2,n)) for q (B,n), without validation."""
-        phi = np.cumsum(q, axis=1)
-        c = np.cos(phi) * self.lengths
-        s = np.sin(phi) * self.lengths
+        u = self._links(q)[1]
+        c = u[..., 0] * self.lengths
+        s = u[..., 1] * self.lengths
         # tail sums: position of the end relative to joint i
         dx = np.cumsum(c[:, ::-1], axis=1)[:, ::-1]
         dy = np.cumsum(s[:, ::-1], axis=1)[:, ::-1]
