@@ -5,7 +5,8 @@
 A planar serial arm of ``n_links`` revolute joints (default 2, at most 7; reach
 1 m, total mass 1 kg split equally, uniform-rod links) lies in a horizontal plane,
 like MuJoCo's Reacher, but with its dynamics written out in
-:mod:`tianim.articulated`: link masses and inertias, viscous joint damping
+:mod:`tianim.kinematics` (a :class:`~tianim.kinematics.PlanarChain` stepped by
+:mod:`tianim.kinematics.arm`): link masses and inertias, viscous joint damping
 (0.1 N m s/rad), joint limits (the base joint is free, the others are limited
 to +-2.6 rad with an inelastic stop) and a 20 rad/s joint speed limit. The
 agent commands joint torques; the goal is to bring the tip to a target.
@@ -72,8 +73,8 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
-from tianim import articulated
-from tianim.articulated import scalar
+from tianim.kinematics import PlanarChain
+from tianim.kinematics import arm as tka
 
 from ._batched import BatchedEnv, check_action
 
@@ -88,7 +89,7 @@ INIT_NOISE_QD = 0.005
 MAX_LINKS = 7
 
 
-def make_arm(n_links: int) -> articulated.PlanarArm:
+def make_arm(n_links: int) -> PlanarChain:
     """The arm of ArmReach-v0 with ``n_links`` links (see the module docstring). One
     immutable object per link count, shared by every environment (nothing is rebuilt
     or recompiled per instance)."""
@@ -98,12 +99,12 @@ def make_arm(n_links: int) -> articulated.PlanarArm:
 
 
 @lru_cache(maxsize=None)
-def _arm(n: int) -> articulated.PlanarArm:
+def _arm(n: int) -> PlanarChain:
     lower = [-math.inf] + [-JOINT_LIMIT] * (n - 1)
     upper = [math.inf] + [JOINT_LIMIT] * (n - 1)
-    return articulated.planar_arm(
-        n, lengths=1.0 / n, masses=1.0 / n, damping=0.1, max_torque=[2.0 * (n - i) / n for i in range(n)],
-        lower=lower, upper=upper, max_velocity=MAX_VELOCITY, gravity=0.0)
+    return PlanarChain(
+        [1.0 / n] * n, masses=1.0 / n, damping=0.1, max_torque=[2.0 * (n - i) / n for i in range(n)],
+        lower=lower, upper=upper, max_velocity=MAX_VELOCITY, gravity=(0.0, 0.0))
 
 
 def observation_space(n: int) -> spaces.Box:
@@ -111,14 +112,13 @@ def observation_space(n: int) -> spaces.Box:
     return spaces.Box(-high, high, dtype=np.float32)
 
 
-def sample_start(rng: np.random.Generator, params: tuple) -> tuple[list, list, float, float]:
+def sample_start(rng: np.random.Generator, observe, n: int) -> tuple[list, list, float, float]:
     """Initial ``(q, qd, target_x, target_y)`` drawn with ONE call to ``rng`` (single env and
-    batch copies draw identically)."""
-    n = params[0]
+    batch copies draw identically); ``observe`` is the arm's ``tianim.kinematics.arm.observer``."""
     lim = [math.pi] + [JOINT_LIMIT] * (n - 1)
     high = np.array([INIT_NOISE_Q] * n + [INIT_NOISE_QD] * n + lim)
     u = rng.uniform(-high, high).tolist()
-    _, _, tx, ty = scalar.observe(params, u[2 * n:])
+    _, _, tx, ty = observe(u[2 * n:])
     return u[:n], u[n:2 * n], tx, ty
 
 
@@ -132,9 +132,9 @@ class ArmReachEnv(gym.Env):
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode={render_mode!r}; choose one of {self.metadata['render_modes']} or None")
         self.render_mode = render_mode
-        self.n_links = n = self.arm.n_links
-        self._params = scalar.unpack(self.arm)
-        self._stepper = articulated.stepper(self.arm, DT, SUBSTEPS)
+        self.n_links = n = self.arm.n
+        self._observe_arm = tka.observer(self.arm)
+        self._stepper = tka.stepper(self.arm, DT, SUBSTEPS)
         self._max_torque = self.arm.max_torque.tolist()
         self.action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
         self.observation_space = observation_space(n)
@@ -143,14 +143,14 @@ class ArmReachEnv(gym.Env):
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
-        q, qd, tx, ty = sample_start(self.np_random, self._params)
+        q, qd, tx, ty = sample_start(self.np_random, self._observe_arm, self.n_links)
         self._state = (q, qd, tx, ty)
         obs, _dist = self._observe()
         return obs, {}
 
     def _observe(self):
         q, qd, tx, ty = self._state
-        cq, sq, x, y = scalar.observe(self._params, q)
+        cq, sq, x, y = self._observe_arm(q)
         dx = x - tx
         dy = y - ty
         obs = np.array(cq + sq + qd + [tx, ty, dx, dy], dtype=np.float32)
@@ -197,9 +197,9 @@ class ArmReachVectorEnv(BatchedEnv):
             raise ValueError(f"render_mode={render_mode!r}; choose 'rgb_array' or None")
         super().__init__(num_envs, max_episode_steps, autoreset_mode)
         self.render_mode = render_mode
-        n, b = self.arm.n_links, self.num_envs
+        n, b = self.arm.n, self.num_envs
         self.n_links = n
-        self._params = scalar.unpack(self.arm)
+        self._observe_arm = tka.observer(self.arm)
         self.single_action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
         self.action_space = batch_space(self.single_action_space, b)
         self.single_observation_space = observation_space(n)
@@ -214,13 +214,13 @@ class ArmReachVectorEnv(BatchedEnv):
 
     def _reset_copies(self, idx):
         for k in idx.tolist():
-            q, qd, tx, ty = sample_start(self._rngs[k], self._params)
+            q, qd, tx, ty = sample_start(self._rngs[k], self._observe_arm, self.n_links)
             self.q[k] = q
             self.qd[k] = qd
             self.target[k] = (tx, ty)
 
     def _launch(self, tau, active):
-        articulated.step_batch(self.arm, self.q, self.qd, tau, DT, SUBSTEPS, active, self._cos, self._sin, self._tip)
+        tka.step_batch(self.arm, self.q, self.qd, tau, DT, SUBSTEPS, active, self._cos, self._sin, self._tip)
 
     def _obs(self):
         rel = self._tip - self.target

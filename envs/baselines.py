@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim.kinematics import PlanarChain, solve_ik, two_link_ik
+from tianim.kinematics import PlanarChain, arm as tka, solve_ik, two_link_ik
 
 
 def _wrap(a):
@@ -25,9 +25,10 @@ class ArmReachIKPD:
 
     def __init__(self, arm, kp: float = 40.0, kd: float = 6.0):
         self.arm = arm
-        self.n = arm.n_links
+        self.n = arm.n
         self.kp, self.kd = kp, kd
         self.chain = PlanarChain(arm.lengths, lower=np.maximum(arm.lower, -np.pi), upper=np.minimum(arm.upper, np.pi))
+        self._gain = tka.coefficients(arm).C.diagonal()  # link inertia about its joint, outer links lumped
 
     def __call__(self, obs):
         """Actions ``(B, n)`` float32 for observations ``(B, 3n+4)`` (or ``(3n+4,)``, B = 1)."""
@@ -45,7 +46,7 @@ class ArmReachIKPD:
         else:
             res = solve_ik(self.chain, target, method="dls", q0=q)
             e = _wrap(res.q - q)
-        tau = self.kp * self.arm.coeffs.diagonal() * e - self.kd * self.arm.coeffs.diagonal() * qd
+        tau = self.kp * self._gain * e - self.kd * self._gain * qd
         return np.clip(tau / self.arm.max_torque, -1.0, 1.0).astype(np.float32)
 
 

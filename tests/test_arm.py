@@ -1,64 +1,124 @@
-"""Planar arm dynamics (tianim.articulated): closed forms, an independent inverse
-dynamics (tianim.kinematics, recursive Newton-Euler), energy, limits, and bit-identity
-of the launch-free scalar path and the batched Taichi kernel."""
+"""The one planar arm model (tianim.kinematics.PlanarChain): forward dynamics against
+independent references (the 2-link closed form, energy conservation under RK4, M(q)
+symmetric positive definite, inverse(forward(tau)) == tau), the fast steppers of
+tianim.kinematics.arm against the one forward dynamics, limits, and bit-identity of
+the launch-free scalar path, its generated straight-line form and the batched kernel."""
 
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
-from tianim import articulated as ta
 from tianim import kinematics as tk
-from tianim.articulated import scalar
+from tianim.kinematics import _arm_scalar
+from tianim.kinematics import arm as tka
+from tianim.kinematics.planar import fk_tail_sums
 
 
-def _chain(arm):
-    return tk.PlanarChain(arm.lengths, masses=arm.masses, inertias=arm.inertias)
+def _random_chain(rng, n, gravity=(0.0, -9.81), damping=None, com=True, **kw):
+    lengths = rng.uniform(0.2, 0.6, n)
+    return tk.PlanarChain(lengths, masses=rng.uniform(0.3, 2.0, n),
+                          com=lengths * rng.uniform(0.2, 0.8, n) if com else None,
+                          inertias=rng.uniform(0.001, 0.05, n), gravity=gravity,
+                          damping=rng.uniform(0.0, 0.3, n) if damping is None else damping, **kw)
 
 
-@pytest.mark.parametrize("n,g", [(1, 9.81), (2, 0.0), (3, 9.81), (7, 3.0)])
-def test_forward_dynamics_inverts_newton_euler(n, g):
-    """tau from tianim.kinematics' RNEA (plus the joint damping our model subtracts)
-    gives back the accelerations it was computed for."""
-    rng = np.random.default_rng(n)
-    arm = ta.planar_arm(n, lengths=rng.uniform(0.2, 0.6, n), masses=rng.uniform(0.3, 2.0, n),
-                        damping=rng.uniform(0.0, 0.3, n), gravity=g)
-    for _ in range(10):
-        q, qd, qdd = rng.uniform(-3, 3, n), rng.uniform(-4, 4, n), rng.uniform(-10, 10, n)
-        tau = tk.inverse_dynamics(_chain(arm), q, qd, qdd, gravity=(0.0, -g)) + arm.damping * qd
-        np.testing.assert_allclose(ta.forward_dynamics(arm, q, qd, tau), qdd, rtol=1e-9, atol=1e-9)
+def _spong_two_link(l1, lc1, lc2, m1, m2, i1, i2, g, q, qd):
+    """Spong, Hutchinson & Vidyasagar (2006), eq. 7.87: M, C qd + G of a 2-link arm (relative angles)."""
+    (q1, q2), (d1, d2) = q, qd
+    m11 = m1 * lc1**2 + m2 * (l1**2 + lc2**2 + 2 * l1 * lc2 * math.cos(q2)) + i1 + i2
+    m12 = m2 * (lc2**2 + l1 * lc2 * math.cos(q2)) + i2
+    m22 = m2 * lc2**2 + i2
+    h = -m2 * l1 * lc2 * math.sin(q2)
+    c = np.array([h * d2 * d2 + 2 * h * d1 * d2, -h * d1 * d1])
+    grav = np.array([(m1 * lc1 + m2 * l1) * g * math.cos(q1) + m2 * lc2 * g * math.cos(q1 + q2),
+                     m2 * lc2 * g * math.cos(q1 + q2)])
+    return np.array([[m11, m12], [m12, m22]]), c + grav
 
 
-def test_two_link_closed_form():
-    """Spong, Hutchinson & Vidyasagar (2006), eq. 7.87: 2-link arm in relative angles."""
+def test_two_link_closed_form_mass_matrix_and_forward_dynamics():
     l1, l2, m1, m2, g = 0.7, 0.4, 1.3, 0.6, 9.81
-    arm = ta.planar_arm(2, lengths=[l1, l2], masses=[m1, m2], damping=0.0, gravity=g)
-    i1, i2 = m1 * l1**2 / 12, m2 * l2**2 / 12
-    lc1, lc2 = l1 / 2, l2 / 2
+    lc1, lc2, i1, i2 = 0.3, 0.25, 0.05, 0.01
+    chain = tk.PlanarChain([l1, l2], masses=[m1, m2], com=[lc1, lc2], inertias=[i1, i2], gravity=(0.0, -g))
     rng = np.random.default_rng(0)
     for _ in range(20):
-        (q1, q2), (d1, d2), tau = rng.uniform(-3, 3, 2), rng.uniform(-3, 3, 2), rng.uniform(-2, 2, 2)
-        m11 = m1 * lc1**2 + m2 * (l1**2 + lc2**2 + 2 * l1 * lc2 * math.cos(q2)) + i1 + i2
-        m12 = m2 * (lc2**2 + l1 * lc2 * math.cos(q2)) + i2
-        m22 = m2 * lc2**2 + i2
-        h = -m2 * l1 * lc2 * math.sin(q2)
-        c = np.array([h * d2 * d2 + 2 * h * d1 * d2, -h * d1 * d1])
-        grav = np.array([(m1 * lc1 + m2 * l1) * g * math.cos(q1) + m2 * lc2 * g * math.cos(q1 + q2),
-                         m2 * lc2 * g * math.cos(q1 + q2)])
-        expected = np.linalg.solve([[m11, m12], [m12, m22]], tau - c - grav)
-        np.testing.assert_allclose(ta.forward_dynamics(arm, [q1, q2], [d1, d2], tau), expected, rtol=1e-10)
+        q, qd, tau = rng.uniform(-3, 3, 2), rng.uniform(-3, 3, 2), rng.uniform(-2, 2, 2)
+        M, h = _spong_two_link(l1, lc1, lc2, m1, m2, i1, i2, g, q, qd)
+        np.testing.assert_allclose(tk.mass_matrix(chain, q), M, rtol=1e-12)
+        np.testing.assert_allclose(tk.forward_dynamics(chain, q, qd, tau), np.linalg.solve(M, tau - h), rtol=1e-10)
+        params = _arm_scalar.unpack(chain)
+        np.testing.assert_allclose(_arm_scalar.accelerations(params, q.tolist(), qd.tolist(), tau.tolist()),
+                                   np.linalg.solve(M, tau - h), rtol=1e-10)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 7])
+def test_mass_matrix_symmetric_positive_definite(n):
+    rng = np.random.default_rng(n)
+    chain = _random_chain(rng, n)
+    for q in rng.uniform(-3, 3, (10, n)):
+        M = tk.mass_matrix(chain, q)
+        np.testing.assert_allclose(M, M.T, rtol=0, atol=1e-14)
+        assert np.linalg.eigvalsh(M).min() > 0
+
+
+@pytest.mark.parametrize("n,gravity", [(1, (0.0, -9.81)), (2, (0.0, 0.0)), (3, (1.5, -9.81)), (7, (0.0, -3.0))])
+def test_inverse_of_forward_dynamics_is_identity(n, gravity):
+    """With damping and any gravity vector: inverse_dynamics(forward_dynamics(tau)) == tau."""
+    rng = np.random.default_rng(10 + n)
+    chain = _random_chain(rng, n, gravity=gravity)
+    q, qd, tau = rng.uniform(-3, 3, (8, n)), rng.uniform(-4, 4, (8, n)), rng.uniform(-5, 5, (8, n))
+    qdd = tk.forward_dynamics(chain, q, qd, tau)
+    np.testing.assert_allclose(tk.inverse_dynamics(chain, q, qd, qdd), tau, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.parametrize("n,gravity", [(1, (0.0, -9.81)), (2, (0.0, 0.0)), (3, (1.5, -9.81)), (7, (-2.0, 3.0))])
+def test_fast_path_accelerations_match_the_one_forward_dynamics(n, gravity):
+    """The absolute-angle form the fast paths use equals M^-1 (tau - b qd - h) from the RNEA."""
+    rng = np.random.default_rng(20 + n)
+    chain = _random_chain(rng, n, gravity=gravity)
+    params = _arm_scalar.unpack(chain)
+    for _ in range(10):
+        q, qd, tau = rng.uniform(-3, 3, n), rng.uniform(-4, 4, n), rng.uniform(-5, 5, n)
+        fast = _arm_scalar.accelerations(params, q.tolist(), qd.tolist(), tau.tolist())
+        np.testing.assert_allclose(fast, tk.forward_dynamics(chain, q, qd, tau), rtol=1e-9, atol=1e-9)
+
+
+def test_energy_conserved_by_rk4_on_the_forward_dynamics():
+    """Undamped, unforced 3-link arm under gravity, RK4 on tk.forward_dynamics: the energy
+    drift is tiny and falls at least like dt^4 (measured: ~dt^5, ratio 32 per halving), an
+    independent check of M, h and the energy."""
+    chain = tk.PlanarChain([0.5, 0.4, 0.3], masses=[1.0, 0.8, 0.6], com=[0.2, 0.25, 0.1])
+    q0, qd0 = np.array([0.3, -0.5, 0.9]), np.array([1.0, -2.0, 0.5])
+    e0 = float(tk.energy(chain, q0, qd0))
+
+    def f(y):
+        return np.concatenate([y[3:], tk.forward_dynamics(chain, y[:3], y[3:], np.zeros(3))])
+
+    drift = []
+    for dt in (4e-3, 2e-3):
+        y = np.concatenate([q0, qd0])
+        for _ in range(int(round(1.0 / dt))):
+            k1 = f(y)
+            k2 = f(y + 0.5 * dt * k1)
+            k3 = f(y + 0.5 * dt * k2)
+            k4 = f(y + dt * k3)
+            y = y + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        drift.append(abs(float(tk.energy(chain, y[:3], y[3:])) - e0))
+    assert drift[1] < 1e-6 * abs(e0)
+    assert 14 < drift[0] / drift[1] < 40  # fourth order or better (16 .. 32)
 
 
 def test_pendulum_small_swing_period():
     """One link as a compound pendulum: period 2 pi sqrt(I_pivot / (m g l/2)) for small swings."""
-    arm = ta.planar_arm(1, lengths=0.8, masses=1.2, damping=0.0, gravity=9.81)
-    i_pivot = 1.2 * 0.8**2 / 3
-    period = 2 * math.pi * math.sqrt(i_pivot / (1.2 * 9.81 * 0.4))
+    chain = tk.PlanarChain([0.8], masses=1.2, gravity=(0.0, -9.81))
+    period = 2 * math.pi * math.sqrt((1.2 * 0.8**2 / 3) / (1.2 * 9.81 * 0.4))
     dt = 1e-4
     q, qd = np.array([-math.pi / 2 + 0.01]), np.zeros(1)  # hanging straight down, displaced 0.01 rad
     crossings, t, prev = [], 0.0, q[0] + math.pi / 2
     while len(crossings) < 3:
-        q, qd = ta.step(arm, q, qd, [0.0], dt, 1)
+        q, qd = tka.step(chain, q, qd, [0.0], dt, 1)
         t += dt
         x = q[0] + math.pi / 2
         if prev > 0 >= x or prev < 0 <= x:
@@ -68,10 +128,9 @@ def test_pendulum_small_swing_period():
 
 
 def test_inverse_dynamics_round_trip_converges():
-    """Torques from the independent RNEA along q(t), forward-simulated by ta.step, reproduce
-    q(t); the error falls like dt (semi-implicit Euler is first order)."""
-    arm = ta.planar_arm(3, lengths=[0.4, 0.3, 0.3], masses=[1.0, 0.7, 0.5], damping=0.05, gravity=9.81)
-    chain = _chain(arm)
+    """Torques from the RNEA along q(t), forward-simulated by arm.step, reproduce q(t);
+    the error falls like dt (semi-implicit Euler is first order)."""
+    chain = tk.PlanarChain([0.4, 0.3, 0.3], masses=[1.0, 0.7, 0.5], damping=0.05)
     w, a, b = np.array([2.0, 3.0, 1.5]), np.array([0.8, 0.5, 0.6]), np.array([0.1, -0.4, 0.3])
 
     def path(t):
@@ -82,114 +141,156 @@ def test_inverse_dynamics_round_trip_converges():
         q, qd, _ = path(0.0)
         steps = int(round(0.5 / dt))
         for k in range(steps):
-            pq, pqd, pqdd = path(k * dt)
-            tau = tk.inverse_dynamics(chain, pq, pqd, pqdd, gravity=(0.0, -9.81)) + arm.damping * pqd
-            q, qd = ta.step(arm, q, qd, tau, dt, 1)
+            tau = tk.inverse_dynamics(chain, *path(k * dt))
+            q, qd = tka.step(chain, q, qd, tau, dt, 1)
         errors.append(np.abs(q - path(steps * dt)[0]).max())
     assert errors[-1] < 2e-3
     for e1, e2 in zip(errors, errors[1:]):
         assert 1.6 < e1 / e2 < 2.4
 
 
-def test_energy_matches_kinematics_and_is_conserved():
-    arm = ta.planar_arm(3, lengths=[0.5, 0.4, 0.3], masses=[1.0, 0.8, 0.6], damping=0.0, gravity=9.81)
+def test_stepper_energy_error_is_first_order():
+    chain = tk.PlanarChain([0.5, 0.4, 0.3], masses=[1.0, 0.8, 0.6])
     q, qd = np.array([0.3, -0.5, 0.9]), np.array([1.0, -2.0, 0.5])
-    e0 = ta.energy(arm, q, qd)["total"]
-    np.testing.assert_allclose(e0, tk.energy(_chain(arm), q, qd, gravity=(0, -9.81)), rtol=1e-12)
+    e0 = float(tk.energy(chain, q, qd))
     drift = []
-    for dt in (1e-3, 5e-4):  # semi-implicit Euler in (q, q'): energy error of first order in dt
+    for dt in (1e-3, 5e-4):
         qq, vv, worst = q, qd, 0.0
         for _ in range(int(round(1.0 / dt))):
-            qq, vv = ta.step(arm, qq, vv, np.zeros(3), dt, 1)
-            worst = max(worst, abs(ta.energy(arm, qq, vv)["total"] - e0))
+            qq, vv = tka.step(chain, qq, vv, np.zeros(3), dt, 1)
+            worst = max(worst, abs(float(tk.energy(chain, qq, vv)) - e0))
         drift.append(worst)
     assert drift[1] < 0.05 * abs(e0)
     assert 1.8 < drift[0] / drift[1] < 2.2
 
 
 def test_damping_dissipates():
-    arm = ta.planar_arm(2, damping=0.2)
+    chain = tk.PlanarChain([0.5, 0.5], damping=0.2, gravity=(0.0, 0.0))
     q, qd = np.zeros(2), np.array([3.0, -2.0])
-    e = [ta.energy(arm, q, qd)["total"]]
+    e = [float(tk.energy(chain, q, qd))]
     for _ in range(50):
-        q, qd = ta.step(arm, q, qd, np.zeros(2), 0.01, 1)
-        e.append(ta.energy(arm, q, qd)["total"])
+        q, qd = tka.step(chain, q, qd, np.zeros(2), 0.01, 1)
+        e.append(float(tk.energy(chain, q, qd)))
     assert all(b < a for a, b in zip(e, e[1:]))
 
 
 def test_joint_limit_is_an_inelastic_stop():
-    arm = ta.planar_arm(2, lower=[-math.inf, -1.0], upper=[math.inf, 1.0])
+    chain = tk.PlanarChain([0.5, 0.5], damping=0.1, lower=[-math.inf, -1.0], upper=[math.inf, 1.0], gravity=(0, 0))
     q, qd = np.zeros(2), np.zeros(2)
     for _ in range(200):
-        q, qd = ta.step(arm, q, qd, [0.0, 1.0], 0.01, 2)
+        q, qd = tka.step(chain, q, qd, [0.0, 1.0], 0.01, 2)
         assert q[1] <= 1.0
     assert q[1] == 1.0 and qd[1] == 0.0
 
 
-def test_speed_limit():
-    arm = ta.planar_arm(1, damping=0.0, max_velocity=5.0)
-    q, qd = ta.step(arm, [0.0], [0.0], [100.0], 0.01, 100)
+def test_speed_and_torque_limits():
+    chain = tk.PlanarChain([1.0], max_velocity=5.0, gravity=(0, 0))
+    q, qd = tka.step(chain, [0.0], [0.0], [100.0], 0.01, 100)
     assert qd[0] == 5.0
+    limited = tk.PlanarChain([1.0], max_torque=0.5, gravity=(0, 0))
+    a = tka.step(limited, [0.0], [0.0], [100.0], 0.01, 3)
+    b = tka.step(limited, [0.0], [0.0], [0.5], 0.01, 3)
+    assert np.array_equal(a[1], b[1]) and a[1][0] > 0
 
 
-@pytest.mark.parametrize("n", [1, 2, 3, 7])
-def test_scalar_compiled_and_batched_paths_are_bit_identical(n):
-    """The generic scalar reference, its compiled straight-line form and the Taichi kernel
+@pytest.mark.parametrize("n,gravity", [(1, (0.0, -9.81)), (2, (0.0, 0.0)), (3, (0.7, -9.81)), (7, (0.0, 0.0))])
+def test_scalar_generated_and_batched_paths_are_bit_identical(n, gravity):
+    """The scalar reference, the straight-line code generated from it and the Taichi kernel
     perform the same float64 operations: states agree bit for bit (gravity, limits, clamps)."""
     rng = np.random.default_rng(n)
-    arm = ta.planar_arm(n, masses=rng.uniform(0.3, 1.0, n), damping=0.05, lower=-2.0, upper=2.0,
-                        max_velocity=8.0, gravity=9.81 if n % 2 else 0.0)
-    params = scalar.unpack(arm)
+    chain = _random_chain(rng, n, gravity=gravity, damping=0.05, lower=-2.0, upper=2.0, max_velocity=8.0,
+                          max_torque=rng.uniform(1.0, 3.0, n))
+    params = _arm_scalar.unpack(chain)
     b = 5
     q, qd = rng.uniform(-1.5, 1.5, (b, n)), rng.uniform(-3, 3, (b, n))
     qr, qdr = q.copy(), qd.copy()
     qc, qdc = q.tolist(), qd.tolist()
-    fast = ta.stepper(arm, 0.01, 2)
+    fast = tka.stepper(chain, 0.01, 2)
     cos_q, sin_q, tip = np.empty((b, n)), np.empty((b, n)), np.empty((b, 2))
     for _ in range(60):
         tau = rng.uniform(-3, 3, (b, n))
-        ta.step_batch(arm, q, qd, tau, 0.01, 2, cos_q=cos_q, sin_q=sin_q, tip=tip)
+        tka.step_batch(chain, q, qd, tau, 0.01, 2, cos_q=cos_q, sin_q=sin_q, tip=tip)
         for k in range(b):
-            a, v = scalar.step(params, qr[k].tolist(), qdr[k].tolist(), tau[k].tolist(), 0.01, 2)
-            qr[k], qdr[k] = a, v
+            qr[k], qdr[k] = _arm_scalar.step(params, qr[k].tolist(), qdr[k].tolist(), tau[k].tolist(), 0.01, 2)
             qc[k], qdc[k] = fast(qc[k], qdc[k], tau[k].tolist())
     assert np.array_equal(q, qr) and np.array_equal(qd, qdr)
     assert np.array_equal(q, np.array(qc)) and np.array_equal(qd, np.array(qdc))
+    observe = tka.observer(chain)
     for k in range(b):
-        cq, sq, x, y = scalar.observe(params, q[k].tolist())
+        cq, sq, x, y = observe(q[k].tolist())
         assert np.array_equal(cos_q[k], cq) and np.array_equal(sin_q[k], sq) and tuple(tip[k]) == (x, y)
-    np.testing.assert_allclose(tip[0], ta.tip_position(arm, q[0]))
-    np.testing.assert_allclose(tip[0], _chain(arm).end_effector(q[0]), atol=1e-12)
+    # the kernel's and the scalar tip agree with the one NumPy forward kinematics
+    np.testing.assert_allclose(tip, chain.end_effector(q) - chain.base, atol=1e-12)
+
+
+def test_plain_float_fk_matches_numpy_fk():
+    rng = np.random.default_rng(3)
+    chain = tk.PlanarChain(rng.uniform(0.1, 1.0, 6), base=(0.3, -0.2))
+    q = rng.uniform(-3, 3, (4, 6))
+    end, J = chain._fk_jac(q)
+    np.testing.assert_allclose(end, chain.end_effector(q), atol=1e-12)
+    np.testing.assert_allclose(J, chain.jacobian(q), atol=1e-12)
+    for k in range(4):
+        x, y, dx, dy = fk_tail_sums(chain.lengths.tolist(), 0.3, -0.2, q[k].tolist())
+        np.testing.assert_allclose([x, y], end[k], atol=1e-12)
+        np.testing.assert_allclose([[-v for v in dy], dx], J[k], atol=1e-12)
 
 
 def test_inactive_copies_are_only_observed():
-    arm = ta.planar_arm(2)
+    chain = tk.PlanarChain([0.5, 0.5], gravity=(0, 0))
     q, qd = np.array([[0.1, 0.2], [0.3, 0.4]]), np.array([[1.0, 1.0], [1.0, 1.0]])
     q0 = q.copy()
-    ta.step_batch(arm, q, qd, np.zeros((2, 2)), 0.01, 1, active=np.array([0, 1]))
+    tka.step_batch(chain, q, qd, np.zeros((2, 2)), 0.01, 1, active=np.array([0, 1]))
     assert np.array_equal(q[0], q0[0]) and not np.array_equal(q[1], q0[1])
 
 
+def test_coefficients_are_read_only_and_consistent():
+    chain = tk.PlanarChain([0.5, 0.4], masses=[1.0, 0.5])
+    c = tka.coefficients(chain)
+    # C_jj: I_j + m_j c_j^2 + l_j^2 (mass beyond j); M(q) at q2 = 0 has C_11 as its last diagonal entry
+    np.testing.assert_allclose(c.C[1, 1], tk.mass_matrix(chain, [0.0, 0.0])[1, 1], rtol=1e-14)
+    assert c.Gx.tolist() == [0.0, 0.0] and (c.Gy > 0).all()
+    with pytest.raises(ValueError, match="read-only"):
+        c.C[0, 0] = 1.0
+
+
 @pytest.mark.parametrize("kwargs,word", [
-    ({"n_links": 0}, "n_links"), ({"lengths": [1.0, -1.0]}, "lengths"), ({"masses": float("nan")}, "masses"),
-    ({"lower": 1.0, "upper": 0.5}, "lower"), ({"max_velocity": 0.0}, "max_velocity"), ({"gravity": -1.0}, "gravity"),
-    ({"damping": -0.1}, "damping"),
+    ({"lengths": [1.0, -1.0]}, "lengths"), ({"masses": float("nan")}, "masses"),
+    ({"lower": 1.0, "upper": 0.5}, "lower"), ({"max_velocity": 0.0}, "max_velocity"),
+    ({"gravity": (0.0, float("inf"))}, "gravity"), ({"gravity": 9.81}, "gravity"),
+    ({"damping": -0.1}, "damping"), ({"max_torque": [1.0, 0.0]}, "max_torque"),
+    ({"max_torque": float("nan")}, "max_torque"),
 ])
 def test_bad_arm_parameters(kwargs, word):
     with pytest.raises(ValueError, match=word):
-        ta.planar_arm(**{"n_links": 2, **kwargs})
+        tk.PlanarChain(**{"lengths": [0.5, 0.5], **kwargs})
 
 
 def test_bad_state_and_step_arguments():
-    arm = ta.planar_arm(2)
+    chain = tk.PlanarChain([0.5, 0.5])
     with pytest.raises(ValueError, match="q"):
-        ta.step(arm, [0.0, float("nan")], [0, 0], [0, 0], 0.01)
+        tka.step(chain, [0.0, float("nan")], [0, 0], [0, 0], 0.01)
     with pytest.raises(ValueError, match="shape"):
-        ta.step(arm, [0.0], [0, 0], [0, 0], 0.01)
+        tka.step(chain, [0.0], [0, 0], [0, 0], 0.01)
     with pytest.raises(ValueError, match="dt"):
-        ta.step(arm, [0, 0], [0, 0], [0, 0], -0.01)
-    q = np.zeros((3, 2), np.float32)
+        tka.step(chain, [0, 0], [0, 0], [0, 0], -0.01)
+    with pytest.raises(ValueError, match="substeps"):
+        tka.step(chain, [0, 0], [0, 0], [0, 0], 0.01, 0)
+    with pytest.raises(TypeError, match="PlanarChain"):
+        tka.step("arm", [0, 0], [0, 0], [0, 0], 0.01)
     with pytest.raises(ValueError, match="float64"):
-        ta.step_batch(arm, q, np.zeros((3, 2)), np.zeros((3, 2)), 0.01)
+        tka.step_batch(chain, np.zeros((3, 2), np.float32), np.zeros((3, 2)), np.zeros((3, 2)), 0.01)
+    with pytest.raises(ValueError, match="active"):
+        tka.step_batch(chain, np.zeros((3, 2)), np.zeros((3, 2)), np.zeros((3, 2)), 0.01, active=np.ones(2))
     with pytest.raises(ValueError, match="read-only"):
-        arm.lengths[0] = 2.0  # read-only arrays: the model is immutable
+        chain.damping[0] = 2.0  # read-only arrays: the model is immutable
+
+
+def test_importing_kinematics_loads_no_taichi():
+    code = "import sys, tianim.kinematics; assert 'taichi' not in sys.modules, 'taichi imported'"
+    subprocess.run([sys.executable, "-c", code], check=True)
+
+
+def test_articulated_is_gone():
+    with pytest.raises(ImportError):
+        __import__("tianim.articulated")

@@ -1,14 +1,18 @@
 """Kinematics and dynamics of articulated chains (chapter 15.3 and 15.5).
 
-* :class:`PlanarChain` - planar revolute chain (FK, Jacobian, dynamics parameters)
+* :class:`PlanarChain` - the planar arm model: revolute chain (FK, Jacobian) with masses,
+  inertias, joint damping, torque, speed and joint limits, gravity
 * :class:`JointTree` (skeletons), :class:`SerialChain` - 3D revolute/prismatic joints, FK, Jacobians
 * :func:`solve_ik` (DLS, Jacobian transpose, CCD, FABRIK; batched; limits; redundant and
   unreachable targets), :func:`two_link_ik` (closed form, both elbows)
 * :func:`inverse_dynamics`, :func:`forward_dynamics`, :func:`mass_matrix`,
   :func:`bias_torques`, :func:`energy` - planar chain dynamics (recursive Newton-Euler)
+* :mod:`tianim.kinematics.arm` - stepping a planar chain in time: launch-free single arm
+  (``arm.step``, ``arm.stepper``) and ``B`` arms in one kernel launch (``arm.step_batch``)
 * :func:`point_mass_forces` - forces for a point mass to follow a path
 """
 
+from tianim.kinematics import arm
 from tianim.kinematics.dynamics import (
     DEFAULT_GRAVITY,
     bias_torques,
@@ -29,6 +33,7 @@ __all__ = [
     "METHODS",
     "PlanarChain",
     "SerialChain",
+    "arm",
     "rotation",
     "solve_ik",
     "two_link_ik",

@@ -1,6 +1,6 @@
-"""Straight-line Python for one arm's substeps, traced from :func:`.scalar.accelerations`.
+"""Straight-line Python for one arm's substeps, traced from :func:`._arm_scalar.accelerations`.
 
-Interpreting the generic loops of :func:`.scalar.accelerations` costs ~10 us per
+Interpreting the generic loops of :func:`._arm_scalar.accelerations` costs ~6 us per
 substep for two links (list indexing and loop overhead dominate). Here the same
 function is run once on symbolic inputs; every arithmetic operation it performs
 is recorded, in order, as one line of Python, and the lines are compiled into a
@@ -8,13 +8,20 @@ function of plain local floats. Because the recorded operations are the
 reference function's own, in its own order (operations on two constants are
 folded at trace time with the same IEEE arithmetic), the compiled function
 returns bit-identical results: the tests check it.
+
+Why ``exec``: this is the "generated from the one source" option for the single
+environment's fast path, not a second copy of the dynamics. Measured on this
+machine, two links, two substeps: 11.5 us per call interpreted against 1.4 us
+compiled (ArmReach-v0 steps in ~10 us in all); seven links: 46 against 22 us.
+The generated source is kept on the function (``fn.source``) for inspection;
+its only inputs are floats from a validated chain (``repr`` of finite floats).
 """
 
 from __future__ import annotations
 
 import math
 
-from . import scalar
+from . import _arm_scalar as scalar
 
 
 class _Sym:
@@ -91,8 +98,9 @@ class _Tape:
 
 def compile_stepper(params: tuple, dt: float, substeps: int):
     """A function ``f(q, qd, tau) -> (q, qd)`` (lists of n floats) equal to
-    ``scalar.step(params, q, qd, tau, dt, substeps)`` bit for bit, ~5x faster."""
-    n, _c, _g, _b, lower, upper, _len, vmax = params
+    ``_arm_scalar.step(params, q, qd, tau, dt, substeps)`` bit for bit, ~8x faster for
+    two links. Clamps at an infinite limit are left out (they never act)."""
+    n, lower, upper, tmax, vmax = params[0], params[5], params[6], params[8], params[9]
     tape = _Tape()
     qs = [_Sym(f"q{i}", tape) for i in range(n)]
     vs = [_Sym(f"v{i}", tape) for i in range(n)]
@@ -101,8 +109,9 @@ def compile_stepper(params: tuple, dt: float, substeps: int):
     body = list(tape.lines)
     for i in range(n):
         body.append(f"w = v{i} + {dt!r} * {_src(acc[i])}")
-        body.append(f"if w > {vmax!r}: w = {vmax!r}")
-        body.append(f"if w < {-vmax!r}: w = {-vmax!r}")
+        if math.isfinite(vmax):
+            body.append(f"if w > {vmax!r}: w = {vmax!r}")
+            body.append(f"if w < {-vmax!r}: w = {-vmax!r}")
         body.append(f"p = q{i} + {dt!r} * w")
         if math.isfinite(lower[i]):
             body.append(f"if p < {lower[i]!r}:\n            p = {lower[i]!r}\n            if w < 0.0: w = 0.0")
@@ -113,17 +122,20 @@ def compile_stepper(params: tuple, dt: float, substeps: int):
     body.append(", ".join(f"q{i}" for i in range(n)) + ", = " + ", ".join(f"n_q{i}" for i in range(n)) + ",")
     body.append(", ".join(f"v{i}" for i in range(n)) + ", = " + ", ".join(f"n_v{i}" for i in range(n)) + ",")
     args = ", ".join(f"q{i}" for i in range(n))
+    clamps = "".join(f"    if u{i} > {tmax[i]!r}: u{i} = {tmax[i]!r}\n    if u{i} < {-tmax[i]!r}: u{i} = {-tmax[i]!r}\n"
+                     for i in range(n) if math.isfinite(tmax[i]))
     src = (
         "def _stepper(q, qd, tau):\n"
         f"    {args}, = q\n"
         f"    {', '.join(f'v{i}' for i in range(n))}, = qd\n"
         f"    {', '.join(f'u{i}' for i in range(n))}, = tau\n"
-        f"    for _ in range({int(substeps)}):\n"
+        + clamps
+        + f"    for _ in range({int(substeps)}):\n"
         + "".join(f"        {line}\n" for line in body)
         + f"    return [{args}], [{', '.join(f'v{i}' for i in range(n))}]\n"
     )
     namespace = {"sin": math.sin, "cos": math.cos, "sqrt": math.sqrt}
-    exec(compile(src, f"<tianim.articulated stepper n={n}>", "exec"), namespace)
+    exec(compile(src, f"<tianim.kinematics.arm stepper n={n}>", "exec"), namespace)
     fn = namespace["_stepper"]
     fn.source = src
     return fn

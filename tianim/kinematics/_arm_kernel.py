@@ -1,0 +1,173 @@
+"""Taichi kernel: B planar arms stepped in one launch (one copy per loop iteration).
+
+The body mirrors :func:`tianim.kinematics._arm_scalar.accelerations`,
+:func:`~tianim.kinematics._arm_scalar.step` and
+:func:`~tianim.kinematics._arm_scalar.observe` operation for operation (same order,
+float64 throughout, every constant read from the packed parameter array, see
+:func:`~tianim.kinematics._arm_scalar.packed`, since Taichi would round a float
+literal to float32), so copy ``b`` of a batch and a single arm stepped in plain
+floats agree bit for bit (tests/test_arm.py checks it). Loops over joints are
+unrolled at compile time (``ti.static``): one kernel per link count and gravity
+pattern, built on first use by the cached factory :func:`arm_step_kernel` (no
+Taichi import when this module is imported).
+"""
+
+
+import functools
+
+
+@functools.lru_cache(maxsize=None)
+def arm_step_kernel(n: int, gy_on: bool, gx_on: bool):
+    """The kernel ``k(substeps, dt, p, q, qd, tau, active, cos_q, sin_q, tip)`` for ``n`` links.
+
+    Steps the copies with ``active[b] != 0`` by ``substeps`` x ``dt``; writes every copy's
+    cos q, sin q and tip position (relative to the base). ``p``: the packed parameters.
+    """
+    from tianim.runtime import ensure_taichi
+
+    ti = ensure_taichi()
+    f64 = ti.f64
+    arr1, arr2 = ti.types.ndarray(dtype=f64, ndim=1), ti.types.ndarray(dtype=f64, ndim=2)
+    o = n * n  # offsets of the packed rows: Gy, Gx, damping, lower, upper, lengths, max_torque, vmax
+    o_gy, o_gx, o_b, o_lo, o_hi, o_len, o_tm, o_vmax = (o + i * n for i in range(8))
+
+    @ti.func
+    def accelerations(c, gy, gx, damp, q, qd, tau):
+        phi = ti.Vector.zero(f64, n)
+        w = ti.Vector.zero(f64, n)
+        phi[0] = q[0]
+        w[0] = qd[0]
+        for j in ti.static(range(1, n)):
+            phi[j] = phi[j - 1] + q[j]
+            w[j] = w[j - 1] + qd[j]
+        u = ti.Vector.zero(f64, n)
+        for i in ti.static(range(n)):
+            u[i] = tau[i] - damp[i] * qd[i]
+        r = ti.Vector.zero(f64, n)
+        for j in ti.static(range(n)):
+            qj = u[j]
+            if ti.static(j + 1 < n):
+                qj = u[j] - u[j + 1]
+            if ti.static(gy_on):
+                qj = qj - gy[j] * ti.cos(phi[j])
+            if ti.static(gx_on):
+                qj = qj + gx[j] * ti.sin(phi[j])
+            r[j] = qj
+        h = ti.Matrix.zero(f64, n, n)
+        for j in ti.static(range(n)):
+            h[j, j] = c[j, j]
+            for k in ti.static(range(j + 1, n)):
+                d = phi[j] - phi[k]
+                s = c[j, k] * ti.sin(d)
+                h[j, k] = c[j, k] * ti.cos(d)
+                r[j] = r[j] - s * w[k] * w[k]
+                r[k] = r[k] + s * w[j] * w[j]
+        lo = ti.Matrix.zero(f64, n, n)
+        for j in ti.static(range(n)):
+            acc = h[j, j]
+            for k in ti.static(range(j)):
+                acc = acc - lo[j, k] * lo[j, k]
+            dj = ti.sqrt(acc)
+            lo[j, j] = dj
+            for i in ti.static(range(j + 1, n)):
+                acc2 = h[j, i]
+                for k in ti.static(range(j)):
+                    acc2 = acc2 - lo[i, k] * lo[j, k]
+                lo[i, j] = acc2 / dj
+        y = ti.Vector.zero(f64, n)
+        for i in ti.static(range(n)):
+            acc = r[i]
+            for k in ti.static(range(i)):
+                acc = acc - lo[i, k] * y[k]
+            y[i] = acc / lo[i, i]
+        x = ti.Vector.zero(f64, n)
+        for ii in ti.static(range(n)):
+            i = ti.static(n - 1 - ii)
+            acc = y[i]
+            for k in ti.static(range(i + 1, n)):
+                acc = acc - lo[k, i] * x[k]
+            x[i] = acc / lo[i, i]
+        qdd = ti.Vector.zero(f64, n)
+        qdd[0] = x[0]
+        for i in ti.static(range(1, n)):
+            qdd[i] = x[i] - x[i - 1]
+        return qdd
+
+    @ti.func
+    def tip_position(length, qv):
+        """Forward kinematics of the end effector, summed from the base outwards (as ``observe``)."""
+        phi = qv[0]
+        x = length[0] * ti.cos(phi)
+        y = length[0] * ti.sin(phi)
+        for j in ti.static(range(1, n)):
+            phi = phi + qv[j]
+            x = x + length[j] * ti.cos(phi)
+            y = y + length[j] * ti.sin(phi)
+        return x, y
+
+    @ti.kernel
+    def arm_step(substeps: ti.i32, dt: f64, p: arr1, q: arr2, qd: arr2, tau: arr2,
+                 active: ti.types.ndarray(dtype=ti.i32, ndim=1), cos_q: arr2, sin_q: arr2, tip: arr2):
+        for b in range(q.shape[0]):
+            c = ti.Matrix.zero(f64, n, n)
+            gy = ti.Vector.zero(f64, n)
+            gx = ti.Vector.zero(f64, n)
+            damp = ti.Vector.zero(f64, n)
+            lower = ti.Vector.zero(f64, n)
+            upper = ti.Vector.zero(f64, n)
+            length = ti.Vector.zero(f64, n)
+            tmax = ti.Vector.zero(f64, n)
+            for j in ti.static(range(n)):
+                for k in ti.static(range(n)):
+                    c[j, k] = p[j * n + k]
+                gy[j] = p[o_gy + j]
+                gx[j] = p[o_gx + j]
+                damp[j] = p[o_b + j]
+                lower[j] = p[o_lo + j]
+                upper[j] = p[o_hi + j]
+                length[j] = p[o_len + j]
+                tmax[j] = p[o_tm + j]
+            vmax = p[o_vmax]
+            qv = ti.Vector.zero(f64, n)
+            vv = ti.Vector.zero(f64, n)
+            tv = ti.Vector.zero(f64, n)
+            for i in ti.static(range(n)):
+                qv[i] = q[b, i]
+                vv[i] = qd[b, i]
+                t = tau[b, i]
+                if t > tmax[i]:
+                    t = tmax[i]
+                if t < -tmax[i]:
+                    t = -tmax[i]
+                tv[i] = t
+            if active[b] != 0:
+                for _ in range(substeps):
+                    acc = accelerations(c, gy, gx, damp, qv, vv, tv)
+                    for i in ti.static(range(n)):
+                        v = vv[i] + dt * acc[i]
+                        if v > vmax:
+                            v = vmax
+                        if v < -vmax:
+                            v = -vmax
+                        pos = qv[i] + dt * v
+                        if pos < lower[i]:
+                            pos = lower[i]
+                            if v < 0.0:
+                                v = 0.0
+                        if pos > upper[i]:
+                            pos = upper[i]
+                            if v > 0.0:
+                                v = 0.0
+                        qv[i] = pos
+                        vv[i] = v
+                for i in ti.static(range(n)):
+                    q[b, i] = qv[i]
+                    qd[b, i] = vv[i]
+            for i in ti.static(range(n)):
+                cos_q[b, i] = ti.cos(qv[i])
+                sin_q[b, i] = ti.sin(qv[i])
+            x, y = tip_position(length, qv)
+            tip[b, 0] = x
+            tip[b, 1] = y
+
+    return arm_step
