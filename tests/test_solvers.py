@@ -293,3 +293,62 @@ def test_numpy_scalars_are_accepted():
     model = tp.rope(n=5)
     tp.step(model, model.state(), np.float32(1e-3), np.int64(3))
     tp.plan_steps(model, np.float64(1 / 30))
+
+
+# --------------------------------------------------------------------------- bad input across builders, state, pins
+@pytest.mark.parametrize("make,exc,words", [
+    (lambda: tp.rope(n=4).state(dtype=None), TypeError, ["dtype=None"]),
+    (lambda: tp.rope(n=4).state(dtype=np.int32), TypeError, ["dtype"]),
+    (lambda: tp.rope(n=4).state(batch=2**40), ValueError, ["batch", "32-bit"]),
+    (lambda: tp.from_edges(np.array([[0.0, 0, 0], [1e200, 0, 0]]), [[0, 1]]), ValueError, ["positions", "1e+200"]),
+    (lambda: tp.from_edges(np.array([[0.0, 0, 0], [1e12, 0, 0]]), [[0, 1]]).state(), ValueError, ["float32", "float64"]),
+    (lambda: tp.from_edges(np.array([[0.0, 0, 0], [1, 0, 0]]), [[0, 5]]), ValueError, ["edges", "5"]),
+    (lambda: tp.rope(n=4, colliders=tp.Ground()), TypeError, ["colliders", "list"]),
+    (lambda: tp.rope(n=4, gravity=float("nan")), ValueError, ["gravity"]),
+    (lambda: tp.rope(n=4, pins=[7]), ValueError, ["pins", "7"]),
+    (lambda: tp.cloth(4, 4, stiffness=(-1, 2, 3)), ValueError, ["stiffness=(-1.0, 2.0, 3.0)"]),
+    (lambda: tp.spring1d(mass=np.float64(0.0)), ValueError, ["mass[0]=0.0"]),
+    (lambda: tp.rope(n=4, medium_damping=-1), ValueError, ["medium_damping"]),
+    (lambda: tp.rope(n=4, colliders=[tp.Sphere((0, 0, 0), 0)]), ValueError, ["colliders[0].radius"]),
+    (lambda: tp.plan_steps(tp.rope(n=4), min_substeps=0), ValueError, ["min_substeps"]),
+    (lambda: tp.plan_steps(tp.rope(n=4), methods=["explicit_euler"]), ValueError, ["explicit Euler"]),
+    (lambda: tp.Watchdog(on_divergence="ignore"), ValueError, ["on_divergence"]),
+    (lambda: tp.XPBD(iterations=2.5), TypeError, ["iterations"]),
+    (lambda: tp.ImplicitEuler(cg_tol=0), ValueError, ["cg_tol"]),
+    (lambda: tp.make_solver("rk4", iterations=3), TypeError, ["iterations", "rk4"]),
+])
+def test_bad_model_and_solver_arguments_name_the_argument(make, exc, words):
+    with pytest.raises(exc) as err:
+        make()
+    for w in words:
+        assert w in str(err.value), (w, str(err.value))
+    assert "np.float64(" not in str(err.value)  # plain values, not NumPy reprs
+
+
+@pytest.mark.parametrize("edit,words", [
+    (lambda s: s.move_pins(0, [1e39, 0, 0]), ["positions", "float32"]),
+    (lambda s: s.move_pins(0, [0, 0, 0], velocities=[1e39, 0, 0]), ["velocities"]),
+    (lambda s: s.move_pins(0, [np.nan, 0, 0]), ["positions"]),
+    (lambda s: s.move_pins([0, 9], [0, 0, 0]), ["indices", "9"]),
+    (lambda s: s.pin(0, copies=3), ["copies", "3", "2 copies"]),
+    (lambda s: s.release([-1]), ["indices", "-1"]),
+    (lambda s: s.restore({"x": 1}), ["snapshot"]),
+])
+def test_bad_pin_and_state_edits_change_nothing(edit, words):
+    model = tp.rope(n=4)
+    state = model.state(batch=2)
+    before = state.snapshot()
+    with pytest.raises((ValueError, TypeError)) as err:
+        edit(state)
+    for w in words:
+        assert w in str(err.value), (w, str(err.value))
+    for key in ("x", "v", "t", "pinned"):
+        assert np.array_equal(getattr(state, key), before[key])
+
+
+def test_replaced_position_array_reports_the_expected_shape():
+    model = tp.rope(n=4)
+    state = model.state()
+    state.x = np.zeros((4, 4, 3), np.float32)
+    with pytest.raises(ValueError, match=r"state\.x has shape \(4, 4, 3\).*expected \(1, 4, 3\)"):
+        tp.step(model, state, 1e-3)

@@ -118,8 +118,8 @@ def as_float_array(name: str, value, shape: tuple | None = None, ndim: int | Non
     return arr
 
 
-def as_index_array(name: str, value, n: int, ndim: int = 1) -> np.ndarray:
-    """An int32 copy of ``value`` with every entry a valid index in [0, n)."""
+def as_index_array(name: str, value, n: int, ndim: int = 1, of: str = "particles") -> np.ndarray:
+    """An int32 copy of ``value`` with every entry a valid index in [0, n) of ``n`` ``of`` (for the message)."""
     arr = np.asarray(value)
     if arr.size == 0:
         return np.zeros((0,) if ndim == 1 else (0, 2), dtype=np.int32)
@@ -133,7 +133,7 @@ def as_index_array(name: str, value, n: int, ndim: int = 1) -> np.ndarray:
     bad = np.flatnonzero((arr.ravel() < 0) | (arr.ravel() >= n))
     if bad.size:
         raise ValueError(
-            f"{name} holds index {int(arr.ravel()[bad[0]])}, out of range for {n} particles; "
+            f"{name} holds index {int(arr.ravel()[bad[0]])}, out of range for {n} {of}; "
             f"indices must be in [0, {n - 1}]"
         )
     return arr.astype(np.int32)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from tianim.physics.model import GRID_STENCIL, GridTopology, Model
-from tianim._checks import as_float_array, check_finite_scalar, check_positive_int
+from tianim._checks import as_float_array, as_index_array, check_finite_scalar, check_positive_int, fmt
 
 
 def spring1d(mass=1.0, stiffness=10.0, rest_length=1.0, medium_damping=0.0, damping=0.0, gravity=9.81, x0=None, name="spring1d"):
@@ -107,6 +107,8 @@ def rope(n=32, length=1.0, mass=0.01, stiffness=None, damping=0.0, medium_dampin
     ``k = 100 * n * m * g / l_seg``.
     """
     n = check_positive_int("n", n, lo=2)
+    if np.ndim(gravity) == 0:
+        gravity = check_finite_scalar("gravity", gravity)
     if stiffness is None:
         seg = check_finite_scalar("length", length, lo=0.0, lo_open=True) / (n - 1)
         m_total = float(np.sum(np.broadcast_to(mass, (n,))))
@@ -154,11 +156,11 @@ def cloth(nx=32, ny=32, size=(1.0, 1.0), mass=None, total_mass=0.2, stiffness=(5
     ny = check_positive_int("ny", ny, lo=2)
     size = as_float_array("size", size, shape=(2,))
     if np.any(size <= 0):
-        raise ValueError(f"size={tuple(size)} must be positive (width, height) [m]")
+        raise ValueError(f"size={fmt(tuple(size))} must be positive (width, height) [m]")
     k3 = as_float_array("stiffness", np.broadcast_to(stiffness, (3,)) if np.ndim(stiffness) == 0 else stiffness, shape=(3,))
     c3 = as_float_array("damping", np.broadcast_to(damping, (3,)) if np.ndim(damping) == 0 else damping, shape=(3,))
     if np.any(k3 < 0):
-        raise ValueError(f"stiffness={tuple(k3)} must be >= 0 [N/m] (structural, shear, bend)")
+        raise ValueError(f"stiffness={fmt(tuple(k3))} must be >= 0 [N/m] (structural, shear, bend)")
     if np.any(c3 < 0):
         raise ValueError(f"damping={tuple(c3)} must be >= 0 [N s/m] (structural, shear, bend)")
     if plane not in ("xz", "xy"):
@@ -227,7 +229,7 @@ def lattice(nx=6, ny=6, nz=6, size=(0.5, 0.5, 0.5), total_mass=1.0, stiffness=20
     nx, ny, nz = (check_positive_int(a, v, lo=2) for a, v in (("nx", nx), ("ny", ny), ("nz", nz)))
     size = as_float_array("size", size, shape=(3,))
     if np.any(size <= 0):
-        raise ValueError(f"size={tuple(size)} must be positive [m]")
+        raise ValueError(f"size={fmt(tuple(size))} must be positive [m]")
     origin = np.array([-size[0] / 2, 0.5, -size[2] / 2]) if origin is None else as_float_array("origin", origin, shape=(3,))
     h = size / (np.array([nx, ny, nz]) - 1)
     ii, jj, kk = np.meshgrid(np.arange(nx), np.arange(ny), np.arange(nz), indexing="ij")
@@ -274,6 +276,8 @@ def from_edges(positions, edges, mass=1.0, stiffness=100.0, rest_length=None, da
 
     Rest lengths default to the initial edge lengths.
     """
+    if np.ndim(positions) == 2 and np.size(edges):  # name the argument as the caller wrote it
+        edges = as_index_array("edges", edges, np.shape(positions)[0], ndim=2)
     return Model(positions, mass=mass, springs=edges, stiffness=stiffness, rest_length=rest_length, damping=damping,
                  gravity=gravity, medium_damping=medium_damping, pins=pins, colliders=colliders, faces=faces, name=name)
 

@@ -26,7 +26,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from tianim._checks import as_float_array, as_index_array, check_finite_scalar
+from tianim._checks import as_float_array, as_index_array, check_finite_scalar, fmt
+
+#: Largest |coordinate| [m] a model accepts: squared distances must stay finite in float64 kernels.
+MAX_COORDINATE = 1e15
 
 
 # --------------------------------------------------------------------------- colliders
@@ -212,7 +215,7 @@ class Model:
         if np.any(m <= 0):
             bad = int(np.flatnonzero(m <= 0)[0])
             raise ValueError(
-                f"mass[{bad}]={m[bad]!r} must be > 0 [kg]; to fix a particle in place pin it "
+                f"mass[{bad}]={fmt(m[bad])} must be > 0 [kg]; to fix a particle in place pin it "
                 "(pins=[...]) instead of giving it zero mass"
             )
 
@@ -247,19 +250,22 @@ class Model:
         k = per_spring("stiffness", stiffness)
         if np.any(k < 0):
             bad = int(np.flatnonzero(k < 0)[0])
-            raise ValueError(f"stiffness[{bad}]={k[bad]!r} must be >= 0 [N/m]")
+            raise ValueError(f"stiffness[{bad}]={fmt(k[bad])} must be >= 0 [N/m]")
+        if np.abs(pos).max() > MAX_COORDINATE:
+            raise ValueError(f"positions reach {fmt(float(np.abs(pos).max()))} m; coordinates must be within "
+                             f"+-{MAX_COORDINATE:g} m (rescale the scene: lengths squared must stay finite)")
         dist = np.linalg.norm(pos[sp[:, 0]] - pos[sp[:, 1]], axis=1) if s else np.zeros(0)
         rest = dist.copy() if rest_length is None else per_spring("rest_length", rest_length)
         if np.any(rest <= 0):
             bad = int(np.flatnonzero(rest <= 0)[0])
             raise ValueError(
-                f"rest_length[{bad}]={rest[bad]!r} must be > 0 [m] (a zero-length spring has no direction); "
+                f"rest_length[{bad}]={fmt(rest[bad])} must be > 0 [m] (a zero-length spring has no direction); "
                 "give a positive rest length or separate the two particles"
             )
         c = per_spring("damping", damping)
         if np.any(c < 0):
             bad = int(np.flatnonzero(c < 0)[0])
-            raise ValueError(f"damping[{bad}]={c[bad]!r} must be >= 0 [N s/m]")
+            raise ValueError(f"damping[{bad}]={fmt(c[bad])} must be >= 0 [N s/m]")
 
         if np.ndim(gravity) == 0:
             gmag = check_finite_scalar("gravity", gravity)
@@ -273,6 +279,8 @@ class Model:
         rho = check_finite_scalar("medium_damping", medium_damping, lo=0.0)
 
         pin_idx = np.zeros(0, dtype=np.int32) if pins is None else as_index_array("pins", list(pins) if not isinstance(pins, np.ndarray) else pins, n, ndim=1)
+        if isinstance(colliders, (Ground, Sphere)) or not isinstance(colliders, (list, tuple)):
+            raise TypeError(f"colliders={fmt(colliders)} must be a list of colliders, e.g. [tianim.physics.Ground()]")
         table = _collider_table(tuple(colliders), dim, g)
 
         if faces is not None:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim._checks import as_float_array, as_index_array, check_positive_int
+from tianim._checks import as_float_array, as_index_array, check_positive_int, fmt
 
 _DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
 
@@ -44,9 +44,15 @@ class State:
 
     def __init__(self, model, batch: int = 1, dtype=np.float32):
         batch = check_positive_int("batch", batch)
-        dt = np.dtype(dtype)
-        if dt not in _DTYPES:
-            raise TypeError(f"dtype={dtype!r} is not supported; use np.float32 or np.float64")
+        try:
+            dt = None if dtype is None else np.dtype(dtype)
+        except TypeError:
+            dt = None
+        if dt is None or not any(dt is d or dt == d for d in _DTYPES):  # (np.dtype == None is True)
+            raise TypeError(f"dtype={fmt(dtype)} is not supported; use np.float32 or np.float64")
+        if np.abs(model.positions).max() > np.finfo(dt).max ** 0.25:
+            raise ValueError(f"the model's positions reach {fmt(float(np.abs(model.positions).max()))} m, too large "
+                             f"for {dt.name} kernels; use dtype=np.float64 or rescale the scene")
         self.model = model
         self.dtype = dt
         n, d = model.n_particles, model.dim
@@ -55,11 +61,12 @@ class State:
         self.t = np.zeros(batch, dtype=np.float64)
         self.pinned = np.zeros((batch, n), dtype=bool)
         self.pinned[:, model.pins] = True
+        self._shape = (batch, n, d)
 
     # ------------------------------------------------------------------ shape
     @property
     def batch(self) -> int:
-        return int(self.x.shape[0])
+        return self._shape[0]
 
     def __repr__(self) -> str:
         return f"State(batch={self.batch}, particles={self.x.shape[1]}, dim={self.x.shape[2]}, dtype={self.dtype.name})"
@@ -87,7 +94,7 @@ class State:
     def _copies(self, copies) -> np.ndarray:
         if copies is None:
             return np.arange(self.batch)
-        return as_index_array("copies", np.atleast_1d(copies), self.batch)
+        return as_index_array("copies", np.atleast_1d(copies), self.batch, of="copies")
 
     def pin(self, indices, copies=None) -> None:
         """Pin particles ``indices`` in copies ``copies`` (default: all copies)."""
@@ -121,6 +128,11 @@ class State:
         shape = (cps.size, idx.size, self.model.dim)
         pos = _broadcast("positions", positions, shape)
         vel = np.zeros(shape) if velocities is None else _broadcast("velocities", velocities, shape)
+        limit = np.finfo(self.dtype).max ** 0.25  # squares and sums in the kernels must stay finite
+        for name, arr in (("positions", pos), ("velocities", vel)):
+            if np.abs(arr).max() > limit:
+                raise ValueError(f"{name} reach {fmt(float(np.abs(arr).max()))}, beyond what a {self.dtype.name} "
+                                 f"state can step (|value| <= {limit:.3g}); use dtype=np.float64 or smaller values")
         sel = np.ix_(cps, idx)
         self.x[sel] = pos
         self.v[sel] = vel
@@ -149,6 +161,7 @@ class State:
         other = State.__new__(State)
         other.model, other.dtype = self.model, self.dtype
         other.x, other.v, other.t, other.pinned = self.x.copy(), self.v.copy(), self.t.copy(), self.pinned.copy()
+        other._shape = self._shape
         return other
 
     def save(self, path) -> None:
