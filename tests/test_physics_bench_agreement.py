@@ -17,3 +17,9 @@ def test_rope_bench_scene_agrees_with_numpy():
     plan = tp.plan_steps(model, FRAME_DT, methods="symplectic_euler", safety=0.5)
     sub, dt = plan.substeps, plan.dt
     assert check_agreement(model, dt, 3 * sub, batch=3) < 1e-4
+
+
+def test_fast_numpy_cloth_reference_agrees_with_the_kernels():
+    from tianim.bench.cloth import fast_numpy_agreement
+
+    assert fast_numpy_agreement(n=16, substeps=50) < 1e-5  # float32 rounding only
