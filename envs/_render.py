@@ -18,8 +18,7 @@ CLOTH_CAMERA = Camera(eye=(0.0, 0.55, 0.65), target=(0.0, 0.0, 0.0), fov=45.0)
 def arm_frame(arm, q, target) -> np.ndarray:
     """A planar arm (links, joints, tip) and its target, seen from above."""
     reach = arm.reach
-    phi = np.cumsum(np.asarray(q, dtype=np.float64))
-    joints = np.concatenate([[[0.0, 0.0]], np.cumsum(arm.lengths[:, None] * np.stack([np.cos(phi), np.sin(phi)], 1), 0)])
+    joints = arm.joint_positions(np.asarray(q, dtype=np.float64))  # the chain's one forward kinematics
     canvas = Canvas2D(*SIZE, extent=(-1.1 * reach, 1.1 * reach, -1.1 * reach, 1.1 * reach))
     canvas.discs([tuple(target)], radius=0.04 * reach, color="red")
     canvas.chain(joints, width=8.0)
