@@ -31,7 +31,8 @@ class ArmReachIKPD:
         self._gain = tka.coefficients(arm).C.diagonal()  # link inertia about its joint, outer links lumped
 
     def __call__(self, obs):
-        """Actions ``(B, n)`` float32 for observations ``(B, 3n+4)`` (or ``(3n+4,)``, B = 1)."""
+        """Actions ``(B, n)`` float32 for observations ``(B, 3n+4)``; ``(n,)`` for one observation ``(3n+4,)``."""
+        single = obs
         obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
         n = self.n
         q = np.arctan2(obs[:, n:2 * n], obs[:, :n])
@@ -47,7 +48,7 @@ class ArmReachIKPD:
             res = solve_ik(self.chain, target, method="dls", q0=q)
             e = _wrap(res.q - q)
         tau = self.kp * self._gain * e - self.kd * self._gain * qd
-        return np.clip(tau / self.arm.max_torque, -1.0, 1.0).astype(np.float32)
+        return _like(single, np.clip(tau / self.arm.max_torque, -1.0, 1.0).astype(np.float32))
 
 
 class RopeSwingDamped:
@@ -60,11 +61,13 @@ class RopeSwingDamped:
         self.kp, self.ks = kp, ks
 
     def __call__(self, obs):
+        """Actions (B, 3) for observations (B, 30); (3,) for one observation."""
+        single = obs
         obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
         pin, end, target = obs[:, 0:3], obs[:, 12:15], obs[:, 24:27]
         v = self.kp * (target - pin) + self.ks * (end - pin)
         v[:, 1] = self.kp * (target[:, 1] - end[:, 1])
-        return np.clip(v, -1.0, 1.0).astype(np.float32)
+        return _like(single, np.clip(v, -1.0, 1.0).astype(np.float32))
 
 
 class ClothFoldPickPlace:
@@ -85,6 +88,8 @@ class ClothFoldPickPlace:
         self.done_at, self.gain, self.move = done_at, gain, move  # move: picker travel per unit action [m]
 
     def __call__(self, obs):
+        """Actions (B, 8) for observations (B, O); (8,) for one observation."""
+        single = obs
         obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
         keys = obs[:, 8:].reshape(len(obs), -1, 3)
         holding_both = (obs[:, 6] > 0.5) & (obs[:, 7] > 0.5)
@@ -108,7 +113,12 @@ class ClothFoldPickPlace:
             grab = np.where(finished, -1.0, grab)
             act[:, 4 * p:4 * p + 3] = self.gain * (goal - pick) / self.move
             act[:, 4 * p + 3] = grab
-        return np.clip(act, -1.0, 1.0).astype(np.float32)
+        return _like(single, np.clip(act, -1.0, 1.0).astype(np.float32))
+
+
+def _like(obs, action: np.ndarray) -> np.ndarray:
+    """``action`` (B, A) for a batch of observations, (A,) for a single observation (the env's action shape)."""
+    return action[0] if np.ndim(obs) == 1 else action
 
 
 def make_baseline(env_id: str, env):

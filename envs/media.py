@@ -23,7 +23,7 @@ def record(env_id: str, path: str, seed: int = 1, every: int = 2, fps: int = 25)
     obs, _ = env.reset(seed=seed)
     frames = [env.render()]
     for t in range(env.spec.max_episode_steps):
-        obs, *_ = env.step(np.asarray(policy(obs))[0])
+        obs, *_ = env.step(policy(obs))
         if t % every == every - 1:
             frames.append(env.render())
     env.close()

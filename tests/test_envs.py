@@ -202,3 +202,37 @@ def test_scripted_baseline_beats_random(env_id, episodes):
     scripted = evaluate(env, make_baseline(env_id, env), episodes, seed=100)
     # A wide margin: the baseline keeps less than half of random's cost.
     assert scripted.mean() > 0.5 * random_returns.mean(), (scripted.mean(), random_returns.mean())
+
+
+def test_sb3_adapter_per_index_semantics():
+    import gymnasium.wrappers
+
+    from envs.sb3 import SB3VecEnv
+
+    venv = SB3VecEnv("tianim/RopeSwing-v0", num_envs=3)
+    venv.seed(10)
+    obs = venv.reset()
+    single = gym.make("tianim/RopeSwing-v0")
+    assert np.array_equal(obs[2], single.reset(seed=12)[0])  # SB3's seed() reaches the next reset
+    assert venv.get_attr("action_space", [0, 2]) == [single.action_space] * 2  # single-copy spaces
+    rngs = venv.get_attr("np_random")
+    assert len(rngs) == 3 and rngs[0] is not rngs[1]
+    assert venv.get_attr("render_mode", 1) == [None]
+    with pytest.raises(NotImplementedError, match="all copies"):
+        venv.set_attr("render_mode", "rgb_array", indices=[1])
+    with pytest.raises(NotImplementedError, match="all copies"):
+        venv.env_method("reset", indices=[0])
+    assert venv.env_is_wrapped(gymnasium.wrappers.TimeLimit) == [False] * 3
+    venv.close()
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_baselines_return_actions_shaped_like_the_action_space(env_id):
+    from envs.baselines import make_baseline
+
+    env = gym.make(env_id)
+    obs, _ = env.reset(seed=0)
+    policy = make_baseline(env_id, env)
+    action = policy(obs)
+    assert action.shape == env.action_space.shape, action.shape
+    env.step(action)

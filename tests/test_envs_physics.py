@@ -82,19 +82,19 @@ def test_cloth_springs_stay_within_stretch_bound():
     rng = np.random.default_rng(0)
 
     def apart(o):
-        a = script(o)[0]
+        a = script(o).copy()
         if o[6] > 0.5 and o[7] > 0.5:
             a = np.array([-1, 1, -1, 1, 1, 1, 1, 1], np.float32)
         return a
 
     def drag(o):
-        a = script(o)[0]
+        a = script(o).copy()
         a[4:] = (0, 0, 0, -1)
         if o[6] > 0.5:
             a[:3] = 1.0
         return a
 
-    policies = {"script": lambda o: script(o)[0], "random": lambda o: rng.uniform(-1, 1, 8).astype(np.float32),
+    policies = {"script": lambda o: script(o), "random": lambda o: rng.uniform(-1, 1, 8).astype(np.float32),
                 "apart": apart, "drag": drag}
     for name, policy in policies.items():
         obs, _ = env.reset(seed=1)
