@@ -1,0 +1,204 @@
+"""The neighbour grid against scipy's cKDTree and brute force; determinism; capacity; bad input."""
+
+import hashlib
+import os
+import subprocess
+import sys
+import textwrap
+
+import numpy as np
+import pytest
+from scipy.spatial import cKDTree
+
+from tianim.spatial import NeighbourGrid, NeighbourOverflowError, neighbour_lists
+
+
+def kdtree_sets(x, r, queries=None, exclude_self=True):
+    q = x if queries is None else queries
+    res = cKDTree(x).query_ball_point(q, r)
+    return [sorted(set(row) - ({i} if exclude_self else set())) for i, row in enumerate(res)]
+
+
+def grid_sets(nb, b=0):
+    return [sorted(nb.indices[b, i, : nb.counts[b, i]].tolist()) for i in range(nb.counts.shape[1])]
+
+
+def brute_sets(x, r):
+    d2 = ((x[:, None, :] - x[None, :, :]) ** 2).sum(-1)
+    np.fill_diagonal(d2, np.inf)
+    return [sorted(np.flatnonzero(row <= r * r).tolist()) for row in d2]
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_random_points_in_b_copies_match_ckdtree(dim, dtype):
+    rng = np.random.default_rng(dim)
+    B, N, r = 3, 1500, 0.08 if dim == 2 else 0.15
+    x = rng.random((B, N, dim)).astype(dtype)
+    grid = NeighbourGrid(np.zeros(dim), np.ones(dim), r, N, batch=B, max_neighbours=N, dtype=dtype)
+    nb = grid.build(x).query(r)
+    for b in range(B):
+        assert grid_sets(nb, b) == kdtree_sets(x[b].astype(np.float64), r)
+
+
+def test_csr_matches_brute_force_and_rows_are_copy_major():
+    rng = np.random.default_rng(1)
+    x = rng.random((2, 300, 3))
+    off, idx = neighbour_lists(x, 0.2)
+    assert off.shape == (601,)
+    for b in range(2):
+        ref = brute_sets(x[b], 0.2)
+        got = [sorted(idx[off[b * 300 + i]:off[b * 300 + i + 1]].tolist()) for i in range(300)]
+        assert got == ref
+
+
+def test_points_on_cell_borders_and_radius_larger_than_a_cell():
+    h = 0.25
+    g = np.arange(-1, 6) * h  # lattice points exactly on cell borders, some outside [0, 1]
+    x = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    for r, cell in ((1.01 * h, h), (1.5 * h, h), (2.2 * h, h), (1.01 * h, 0.4 * h)):
+        grid = NeighbourGrid((0, 0, 0), (1, 1, 1), cell, len(x), max_neighbours=200, dtype=np.float64)
+        assert grid_sets(grid.build(x[None]).query(r)) == kdtree_sets(x, r)
+
+
+def test_all_points_in_one_cell_and_empty_cells():
+    rng = np.random.default_rng(2)
+    one = 0.4 + 0.05 * rng.random((200, 2))  # one cell of a 10x10 grid, all others empty
+    grid = NeighbourGrid((0, 0), (1, 1), 0.1, 200, max_neighbours=200, dtype=np.float64)
+    nb = grid.build(one[None]).query(0.1)
+    assert np.all(nb.counts == 199) and grid_sets(nb) == kdtree_sets(one, 0.1)
+    clusters = np.concatenate([0.1 + 0.02 * rng.random((50, 2)), 0.9 - 0.02 * rng.random((50, 2))])
+    grid = NeighbourGrid((0, 0), (1, 1), 0.05, 100, max_neighbours=100, dtype=np.float64)
+    assert grid_sets(grid.build(clusters[None]).query(0.05)) == kdtree_sets(clusters, 0.05)
+
+
+def test_points_outside_the_domain_are_clamped_and_still_found():
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-2.0, 3.0, (2000, 3))  # the grid covers only [0, 1]^3
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.2, len(x), max_neighbours=2000, dtype=np.float64)
+    assert grid_sets(grid.build(x[None]).query(0.2)) == kdtree_sets(x, 0.2)
+
+
+def test_query_of_other_points_includes_coincident_ones():
+    rng = np.random.default_rng(4)
+    x = rng.random((1, 800, 3))
+    q = np.concatenate([rng.uniform(-0.5, 1.5, (1, 300, 3)), x[:, :5]], axis=1)
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.12, 800, max_neighbours=800, dtype=np.float64)
+    nb = grid.build(x).query(0.12, points=q)
+    assert grid_sets(nb) == kdtree_sets(x[0], 0.12, q[0], exclude_self=False)
+
+
+def test_neighbours_come_in_cell_then_index_order():
+    rng = np.random.default_rng(5)
+    x = rng.random((1, 500, 2))
+    grid = NeighbourGrid((0, 0), (1, 1), 0.1, 500, max_neighbours=500, dtype=np.float64)
+    nb = grid.build(x).query(0.1)
+    cell = (np.floor(x[0, :, 1] / 0.1) * 10 + np.floor(x[0, :, 0] / 0.1)).astype(int)
+    for i in range(500):
+        row = nb.indices[0, i, : nb.counts[0, i]]
+        key = cell[row] * 1000 + row
+        assert np.all(np.diff(key) > 0)
+
+
+def test_a_batch_equals_separate_grids_bit_for_bit():
+    rng = np.random.default_rng(6)
+    x = rng.random((4, 700, 3)).astype(np.float32)
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.15, 700, batch=4, max_neighbours=64, dtype=np.float32)
+    nb = grid.build(x).query(0.15)
+    both = nb.indices.copy(), nb.counts.copy()
+    for b in range(4):
+        one = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.15, 700, max_neighbours=64, dtype=np.float32)
+        nb1 = one.build(x[b:b + 1].copy()).query(0.15)
+        assert np.array_equal(nb1.counts[0], both[1][b])
+        for i in range(700):
+            k = nb1.counts[0, i]
+            assert np.array_equal(nb1.indices[0, i, :k], both[0][b, i, :k])
+
+
+_THREAD_SCRIPT = textwrap.dedent("""
+    import hashlib, numpy as np
+    from tianim.spatial import NeighbourGrid
+    x = np.random.default_rng(7).random((2, 20000, 3)).astype(np.float32)
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.04, 20000, batch=2, max_neighbours=40, dtype=np.float32)
+    nb = grid.build(x).query(0.04)
+    mask = np.arange(40)[None, None] < nb.counts[..., None]
+    print(hashlib.sha256(nb.counts.tobytes() + np.where(mask, nb.indices, -1).tobytes()
+                         + grid.order.tobytes() + grid.start.tobytes()).hexdigest())
+""")
+
+
+def test_bit_identical_with_one_and_two_threads():
+    digests = []
+    for threads in ("1", "2"):
+        env = dict(os.environ, TIANIM_NUM_THREADS=threads, TIANIM_ARCH="cpu")
+        out = subprocess.run([sys.executable, "-c", _THREAD_SCRIPT], env=env, capture_output=True, text=True, check=True)
+        digests.append(out.stdout.strip().splitlines()[-1])
+    assert digests[0] == digests[1]
+
+
+def test_overflow_is_reported_never_silent():
+    x = np.random.default_rng(8).random((1, 100, 2)) * 0.01  # all within 0.1 of each other
+    grid = NeighbourGrid((0, 0), (1, 1), 0.1, 100, max_neighbours=10, dtype=np.float64)
+    grid.build(x)
+    with pytest.raises(NeighbourOverflowError, match="max_neighbours=10"):
+        grid.query(0.1)
+    with pytest.warns(RuntimeWarning, match="more than max_neighbours"):
+        nb = grid.query(0.1, on_overflow="warn")
+    nb = grid.query(0.1, on_overflow="report")
+    assert nb.overflow == 100 and np.all(nb.counts == 99)
+    with pytest.raises(NeighbourOverflowError):
+        nb.csr()
+
+
+def test_buffers_are_fixed_and_reused():
+    x = np.random.default_rng(9).random((1, 500, 3)).astype(np.float32)
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.2, 500, max_neighbours=100)
+    nb1 = grid.build(x).query(0.2)
+    size = grid.nbytes
+    nb2 = grid.build(x + 0.01).query(0.2)
+    assert grid.nbytes == size and nb1.indices is nb2.indices
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    (dict(cell_size=-1.0), ValueError, "cell_size"),
+    (dict(cell_size=float("nan")), ValueError, "cell_size"),
+    (dict(n_points=0), ValueError, "n_points"),
+    (dict(batch=0), ValueError, "batch"),
+    (dict(max_neighbours=0), ValueError, "max_neighbours"),
+    (dict(lower=(0, 0, 0, 0), upper=(1, 1, 1, 1)), ValueError, "2 or 3"),
+    (dict(upper=(1, 0, 1)), ValueError, "greater than lower"),
+    (dict(upper=(1, 1)), ValueError, "as many coordinates"),
+    (dict(cell_size=1e-4), ValueError, "max_cells"),
+    (dict(dtype=np.int32), TypeError, "dtype"),
+    (dict(lower=(0, float("nan"), 0)), ValueError, "lower"),
+])
+def test_bad_grid_arguments(kwargs, exc, match):
+    args = dict(lower=(0, 0, 0), upper=(1, 1, 1), cell_size=0.1, n_points=10)
+    args.update(kwargs)
+    with pytest.raises(exc, match=match):
+        NeighbourGrid(**args)
+
+
+def test_bad_build_and_query_input_changes_nothing():
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.1, 10, dtype=np.float64)
+    with pytest.raises(RuntimeError, match="before build"):
+        grid.query(0.1)
+    x = np.random.default_rng(0).random((1, 10, 3))
+    grid.build(x)
+    order = grid.order.copy()
+    bad = x.copy()
+    bad[0, 3, 1] = np.nan
+    for arr, exc, match in ((bad, ValueError, r"x\[0, 3, 1\]"), (x[:, :9], ValueError, "shape"),
+                            (x.astype(np.float32), TypeError, "float64"), (x.tolist(), TypeError, "NumPy array")):
+        with pytest.raises(exc, match=match):
+            grid.build(arr)
+    assert np.array_equal(grid.order, order)
+    for r in (0.0, -1.0, float("inf")):
+        with pytest.raises(ValueError, match="radius"):
+            grid.query(r)
+    with pytest.raises(ValueError, match="on_overflow"):
+        grid.query(0.1, on_overflow="drop")
+    with pytest.raises(ValueError, match="points has shape"):
+        grid.query(0.1, points=np.zeros((2, 4, 3)))
+    with pytest.raises(ValueError, match="points"):
+        neighbour_lists(np.zeros((5, 4)), 0.1)

@@ -1,0 +1,131 @@
+"""Taichi kernels of the neighbour grid: cell ids, a counting sort per copy, and the radius query.
+
+Built lazily by a cached factory (one variant per float type and dimension), as the physics
+kernels are (docs/architecture.md, "Kernel conventions"). No atomics: the sort runs serially
+inside each copy (copies in parallel) and each query row is written by one thread, so results
+are bit-identical for any thread count.
+
+Cell coordinates are computed in float64 for every position dtype, ``u_a = floor((x_a - lo_a) / h)``
+clamped to ``[0, n_a - 1]``; the flat cell id is ``(u_z n_y + u_y) n_x + u_x`` (row-major, x fastest).
+Clamping is monotone, so the cells overlapped by a query box ``[p - r, p + r]`` (with the box's
+corners clamped the same way) contain every point within ``r`` of ``p``, inside the domain or not.
+"""
+
+
+from tianim.physics.kernel_types import cached_variants, kernel_types
+
+#: Relative widening of a query box, so that points that pass the distance test in float32
+#: (|d|^2 <= r^2 rounded) are never in a cell outside the box.
+BOX_PAD = 1e-6
+
+
+@cached_variants
+def grid_kernels(real_name: str, dim: int):
+    """Kernels ``cell_ids``, ``counting_sort`` and ``query`` for ``real_name`` positions in ``dim`` D."""
+    t = kernel_types(real_name, dim)
+    ti, real = t.ti, t.real
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    f64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
+    i32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+
+    @ti.func
+    def coord(xa, a: ti.template(), geom: ti.template(), dims: ti.template()):
+        """Clamped cell coordinate along axis ``a`` of coordinate ``xa`` (float64 arithmetic)."""
+        u = ti.floor((ti.cast(xa, ti.f64) - geom[a]) / geom[dim])
+        u = ti.min(ti.max(u, 0.0), ti.cast(dims[a] - 1, ti.f64))
+        return ti.cast(u, ti.i32)
+
+    @ti.kernel
+    def cell_ids(x: t.vec_arr, geom: f64_1, dims: i32_1, cell: i32_2):
+        """cell[b, i] = flat cell id of x[b, i]; geom = [lo_0 .. lo_{D-1}, h], dims = cells per axis."""
+        for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+            c = 0
+            for k in ti.static(range(dim)):
+                a = ti.static(dim - 1 - k)
+                c = c * dims[a] + coord(x[b, i][a], a, geom, dims)
+            cell[b, i] = c
+
+    @ti.kernel
+    def counting_sort(x: t.vec_arr, cell: i32_2, start: i32_2, order: i32_2, xs: t.vec_arr):
+        """Per copy b (in parallel): counting sort of the particles by cell, stable in particle index.
+
+        start[b, c] .. start[b, c + 1] is the span of cell c in order[b] (particle indices) and
+        xs[b] (their positions, sorted). O(N + M) serial work per copy.
+        """
+        for b in range(x.shape[0]):
+            n_cells = start.shape[1] - 1
+            for c in range(n_cells + 1):
+                start[b, c] = 0
+            for i in range(x.shape[1]):  # counts
+                start[b, cell[b, i]] += 1
+            run = 0
+            for c in range(n_cells):  # exclusive scan: start[c] = first slot of cell c
+                cnt = start[b, c]
+                start[b, c] = run
+                run += cnt
+            for i in range(x.shape[1]):  # scatter in particle-index order (stable)
+                c = cell[b, i]
+                k = start[b, c]
+                order[b, k] = i
+                xs[b, k] = x[b, i]
+                start[b, c] = k + 1
+            for k in range(n_cells):  # start[c] now holds the end of cell c: shift right by one
+                c = n_cells - k
+                start[b, c] = start[b, c - 1]
+            start[b, 0] = 0
+
+    @ti.kernel
+    def query(q: t.vec_arr, xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1,
+              r: ti.f64, exclude_self: ti.i32, nbr: i32_3, count: i32_2):
+        """For each query point q[b, i]: the indices j with |x_j - q_i|^2 <= r^2 (in ``real``).
+
+        Cells are visited in fixed order (z, then y ascending; a row of cells along x is one
+        contiguous span of the sorted arrays), within a cell by particle index. The first K =
+        nbr.shape[2] neighbours are stored in nbr[b, i]; count[b, i] is the total (> K: overflow).
+        With ``exclude_self`` the queries are the built points themselves (``q`` is ignored but must
+        have their shape), visited in cell order, and i is not its own neighbour.
+        """
+        r2 = ti.cast(r, real) * ti.cast(r, real)
+        pad = r * (1 + BOX_PAD)
+        for b, s in ti.ndrange(q.shape[0], q.shape[1]):
+            i = s
+            p = q[b, s]
+            if exclude_self != 0:  # the built points, visited in sorted order (cache-friendly)
+                i = order[b, s]
+                p = xs[b, s]
+            lo = ti.Vector.zero(ti.i32, dim)
+            hi = ti.Vector.zero(ti.i32, dim)
+            for a in ti.static(range(dim)):
+                lo[a] = coord(ti.cast(p[a], ti.f64) - pad, a, geom, dims)
+                hi[a] = coord(ti.cast(p[a], ti.f64) + pad, a, geom, dims)
+            n = 0
+            cap = nbr.shape[2]
+            rows = 1
+            for a in ti.static(range(1, dim)):
+                rows *= hi[a] - lo[a] + 1
+            for row in range(rows):
+                base = 0  # flat id of cell (lo_x, y, z) of this row
+                rest = row
+                for k in ti.static(range(1, dim)):
+                    a = ti.static(dim - k)  # z before y: row-major over (z, y)
+                    ext = 1
+                    for m in ti.static(range(1, a)):
+                        ext *= hi[m] - lo[m] + 1
+                    ua = lo[a] + rest // ext
+                    rest = rest % ext
+                    base = base * dims[a] + ua
+                base = base * dims[0]
+                s0 = start[b, base + lo[0]]
+                s1 = start[b, base + hi[0] + 1]
+                for k in range(s0, s1):
+                    j = order[b, k]
+                    if exclude_self == 0 or j != i:
+                        d = xs[b, k] - p
+                        if d.dot(d) <= r2:
+                            if n < cap:
+                                nbr[b, i, n] = j
+                            n += 1
+            count[b, i] = n
+
+    return cell_ids, counting_sort, query

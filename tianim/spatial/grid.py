@@ -1,0 +1,263 @@
+"""The neighbour grid: a uniform cell list over a fixed box, for B copies of N points in 2D or 3D.
+
+Usage::
+
+    grid = NeighbourGrid(lower=(0, 0, 0), upper=(1, 1, 1), cell_size=0.05, n_points=N, batch=B)
+    grid.build(x)                         # x: (B, N, D) float32 or float64 [m]
+    nb = grid.query(0.05)                 # neighbours within 0.05 m of every built point
+    offsets, idx = nb.csr()               # CSR rows in (copy, point) order
+
+Rules
+-----
+* **Neighbours.** j is a neighbour of query point p when ``|x_j - p|^2 <= r^2``, evaluated in the
+  positions' dtype. A point is not its own neighbour (``query`` of the built points); any radius
+  r > 0 works (r <= cell_size visits at most 3^D cells per point, larger radii more).
+* **Order.** Neighbours come in a fixed order: cells by (z, y, x) ascending, within a cell by
+  point index; the same for any thread count and any batch layout (no atomics, see
+  :mod:`tianim.spatial._kernels`).
+* **Outside the domain.** Points outside ``[lower, upper]`` are clamped into the border cells, per
+  axis. Queries stay exact (clamping is monotone, so the clamped query box still covers every
+  neighbour); only speed suffers when many points pile into border cells.
+* **Capacity.** Buffers are sized once (``n_points``, ``batch``, ``max_neighbours``): building and
+  querying every step allocates nothing. A query row with more than ``max_neighbours`` neighbours
+  stores the first ``max_neighbours`` (in the fixed order) and reports the true count in
+  ``NeighbourList.counts``; ``NeighbourList.overflow`` counts such rows, and ``query`` raises
+  (``on_overflow="raise"``, default) or warns (``"warn"``): neighbours are never dropped silently.
+
+Cost
+----
+Memory: ``4 B (3 N + M + 1) + 4 B Q (K + 1)`` bytes plus ``B N D`` reals for sorted positions,
+with M = prod(cells per axis), K = ``max_neighbours``, Q query points.
+Build: O(N + M) per copy, serial inside a copy, copies in parallel (a counting sort by cell id,
+stable in point index; Knuth, TAOCP vol. 3, 5.2 "distribution counting").
+Query: O(Q (C + S)) in parallel over (copy, point), C = cells visited (<= 3^D for r <= h),
+S = points in them (about 3^D rho h^D for density rho).
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from tianim._checks import INT32_MAX, as_float_array, check_choice, check_finite_scalar, check_int, fmt
+
+#: Default cap on the number of cells of one copy's grid (4 bytes each).
+MAX_CELLS = 1 << 26
+
+
+class NeighbourOverflowError(ValueError):
+    """A query found more neighbours for some point than ``max_neighbours`` can hold."""
+
+
+@dataclass
+class NeighbourList:
+    """Neighbours of Q query points in B copies.
+
+    ``indices`` (B, Q, K) int32: the first ``min(counts, K)`` entries of row (b, i) are the
+    neighbours of query point i in copy b (indices of built points of copy b), in the grid's order;
+    ``counts`` (B, Q) int32: the true number of neighbours (may exceed K: see ``overflow``).
+    The arrays are the grid's buffers: the next ``query`` overwrites them (copy to keep).
+    """
+
+    indices: np.ndarray
+    counts: np.ndarray
+    max_neighbours: int
+
+    @property
+    def overflow(self) -> int:
+        """Number of query rows with more neighbours than ``max_neighbours`` (0: nothing was cut)."""
+        return int(np.count_nonzero(self.counts > self.max_neighbours))
+
+    def csr(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(offsets, idx)``: neighbours of row r = b Q + i are ``idx[offsets[r]:offsets[r + 1]]``.
+
+        ``offsets`` (B Q + 1,) int64, ``idx`` int32 (indices local to the copy). Raises
+        :class:`NeighbourOverflowError` if any row overflowed (the list would be incomplete).
+        """
+        if self.overflow:
+            raise NeighbourOverflowError(_overflow_message(self))
+        counts = self.counts.reshape(-1).astype(np.int64)
+        offsets = np.zeros(counts.size + 1, dtype=np.int64)
+        np.cumsum(counts, out=offsets[1:])
+        mask = np.arange(self.max_neighbours)[None, None, :] < self.counts[:, :, None]
+        return offsets, self.indices[mask]
+
+
+def _overflow_message(nb: NeighbourList) -> str:
+    b, i = np.argwhere(nb.counts > nb.max_neighbours)[0]
+    return (
+        f"{nb.overflow} query point(s) have more than max_neighbours={nb.max_neighbours} neighbours "
+        f"(copy {b}, point {i} has {int(nb.counts[b, i])}); give a larger max_neighbours or a smaller radius"
+    )
+
+
+class NeighbourGrid:
+    """A uniform grid over the box ``[lower, upper]`` (D = 2 or 3) for B copies of N points.
+
+    Parameters
+    ----------
+    lower, upper : sequence of D floats
+        Corners of the domain [m]; points outside are clamped into the border cells.
+    cell_size : float
+        Edge h of the cubic cells [m]; use the query radius (queries with r <= h visit <= 3^D cells).
+    n_points : int
+        N, the number of points of each copy (fixed: ``build`` takes exactly (B, N, D)).
+    batch : int
+        B, the number of copies (each has its own cells; copies never see each other).
+    max_neighbours : int
+        K, neighbours stored per query point (see "Capacity" in the module docstring).
+    dtype : float32 or float64
+        Dtype of the positions (the distance test runs in it).
+    max_cells : int
+        Refuse grids with more cells per copy than this (memory guard).
+    """
+
+    def __init__(self, lower, upper, cell_size, n_points, batch=1, max_neighbours=32, dtype=np.float32,
+                 max_cells=MAX_CELLS):
+        lo = as_float_array("lower", lower, ndim=1)
+        hi = as_float_array("upper", upper, ndim=1)
+        if lo.size not in (2, 3):
+            raise ValueError(f"lower={fmt(lo)} must have 2 or 3 coordinates (the grid is 2D or 3D)")
+        if hi.shape != lo.shape:
+            raise ValueError(f"upper={fmt(hi)} must have as many coordinates as lower={fmt(lo)}")
+        if np.any(hi <= lo):
+            raise ValueError(f"upper={fmt(hi)} must be greater than lower={fmt(lo)} on every axis")
+        h = check_finite_scalar("cell_size", cell_size, lo=0.0, lo_open=True)
+        self.n_points = check_int("n_points", n_points, lo=1)
+        self.batch = check_int("batch", batch, lo=1)
+        self.max_neighbours = check_int("max_neighbours", max_neighbours, lo=1)
+        max_cells = check_int("max_cells", max_cells, lo=1)
+        self.dtype = _real_dtype(dtype)
+        dims = np.maximum(np.ceil((hi - lo) / h), 1).astype(np.int64)
+        n_cells = int(np.prod(dims))
+        if n_cells > min(max_cells, INT32_MAX - 1):
+            raise ValueError(
+                f"cell_size={h!r} over the box {fmt(lo)}..{fmt(hi)} gives {n_cells} cells "
+                f"({fmt(dims)} per axis), more than max_cells={max_cells}; use a larger cell_size or a smaller box"
+            )
+        if self.batch * max(n_cells + 1, self.n_points * 3) > INT32_MAX:
+            raise ValueError(f"batch={self.batch} x {n_cells} cells is too large for 32-bit indices")
+        self.dim = lo.size
+        self.lower, self.upper, self.cell_size = lo, hi, h
+        self.dims = dims.astype(np.int32)
+        self.n_cells = n_cells
+        self._geom = np.concatenate([lo, [h]]).astype(np.float64)
+        B, N, D = self.batch, self.n_points, self.dim
+        self.cell = np.zeros((B, N), np.int32)
+        self.start = np.zeros((B, n_cells + 1), np.int32)
+        self.order = np.zeros((B, N), np.int32)
+        self.sorted_x = np.zeros((B, N, D), self.dtype)
+        self._out: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._built = None
+
+    def __repr__(self) -> str:
+        return (f"NeighbourGrid(dim={self.dim}, cells={tuple(int(d) for d in self.dims)}, cell_size={self.cell_size:g}, "
+                f"n_points={self.n_points}, batch={self.batch}, max_neighbours={self.max_neighbours})")
+
+    @property
+    def nbytes(self) -> int:
+        """Bytes held by the grid's buffers (cells, sort, sorted positions, query outputs)."""
+        arrays = [self.cell, self.start, self.order, self.sorted_x] + [a for pair in self._out.values() for a in pair]
+        return int(sum(a.nbytes for a in arrays))
+
+    def _kernels(self):
+        from tianim.spatial._kernels import grid_kernels
+
+        return grid_kernels(np.dtype(self.dtype).name, self.dim)
+
+    def _points(self, name, x, n):
+        if not isinstance(x, np.ndarray):
+            raise TypeError(f"{name} must be a NumPy array of shape ({self.batch}, {n}, {self.dim}), got {type(x).__name__}")
+        if x.dtype != self.dtype:
+            raise TypeError(f"{name} has dtype {x.dtype}; this grid was made for {np.dtype(self.dtype).name} positions")
+        q = x.shape[1] if x.ndim == 3 and n is None else n
+        if x.shape != (self.batch, q, self.dim):
+            want = f"({self.batch}, {n if n is not None else 'Q'}, {self.dim})"
+            raise ValueError(f"{name} has shape {x.shape}; expected {want}")
+        if not np.all(np.isfinite(x)):
+            bad = np.argwhere(~np.isfinite(x))[0]
+            raise ValueError(f"{name}{[int(i) for i in bad]} = {fmt(x[tuple(bad)])} is not finite; give finite positions")
+        return np.ascontiguousarray(x)
+
+    def build(self, x: np.ndarray, check: bool = True) -> "NeighbourGrid":
+        """Sort the points ``x`` (B, N, D) [m] into the cells. ``check=False`` skips the NaN/shape checks."""
+        if check:
+            x = self._points("x", x, self.n_points)
+        cell_ids, counting_sort, _ = self._kernels()
+        cell_ids(x, self._geom, self.dims, self.cell)
+        counting_sort(x, self.cell, self.start, self.order, self.sorted_x)
+        self._built = x
+        return self
+
+    def query(self, radius, points: np.ndarray | None = None, on_overflow: str = "raise") -> NeighbourList:
+        """Neighbours within ``radius`` [m] of each built point (default) or of ``points`` (B, Q, D).
+
+        Querying the built points excludes each point from its own list. ``on_overflow``:
+        ``"raise"`` (:class:`NeighbourOverflowError`), ``"warn"`` (RuntimeWarning) or ``"report"``
+        (only ``NeighbourList.overflow`` says so) when a row has more than ``max_neighbours``.
+        """
+        r = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
+        check_choice("on_overflow", on_overflow, ("raise", "warn", "report"))
+        if self._built is None:
+            raise RuntimeError("query before build: call grid.build(x) first")
+        if points is None:
+            q, exclude = self._built, 1
+        else:
+            q, exclude = self._points("points", points, None), 0
+        nbr, count = self._buffers(q.shape[1])
+        _, _, query = self._kernels()
+        query(q, self.sorted_x, self.order, self.start, self._geom, self.dims, r, exclude, nbr, count)
+        out = NeighbourList(nbr, count, self.max_neighbours)
+        if on_overflow != "report" and out.overflow:
+            if on_overflow == "raise":
+                raise NeighbourOverflowError(_overflow_message(out))
+            warnings.warn(_overflow_message(out), RuntimeWarning, stacklevel=2)
+        return out
+
+    def _buffers(self, q: int):
+        if q not in self._out:
+            self._out[q] = (np.zeros((self.batch, q, self.max_neighbours), np.int32), np.zeros((self.batch, q), np.int32))
+        return self._out[q]
+
+
+def _real_dtype(dtype):
+    try:
+        dt = np.dtype(dtype)
+    except TypeError:
+        raise TypeError(f"dtype={fmt(dtype)} is not a dtype; use np.float32 or np.float64") from None
+    if dt not in (np.float32, np.float64):
+        raise TypeError(f"dtype={dt.name} is not supported; use np.float32 or np.float64")
+    return dt.type
+
+
+def neighbour_lists(points, radius, max_neighbours=None, lower=None, upper=None):
+    """CSR neighbour lists of ``points`` (N, D) or (B, N, D) within ``radius`` [m] (self excluded).
+
+    Returns ``(offsets, idx)`` as :meth:`NeighbourList.csr` (rows in (copy, point) order). The
+    domain defaults to the points' bounding box; the cell size is ``radius`` unless that would
+    exceed :data:`MAX_CELLS` cells. ``max_neighbours`` defaults to N - 1 (never overflows).
+    A convenience for tests and one-off queries: for repeated queries keep a :class:`NeighbourGrid`.
+    """
+    arr = np.asarray(points)
+    if arr.dtype not in (np.float32, np.float64):
+        arr = as_float_array("points", arr)
+    if arr.ndim == 2:
+        arr = arr[None]
+    if arr.ndim != 3 or arr.shape[2] not in (2, 3) or arr.shape[1] < 1:
+        raise ValueError(f"points has shape {np.shape(points)}; expected (N, D) or (B, N, D) with D = 2 or 3 and N >= 1")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError("points holds non-finite values; give finite positions")
+    r = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
+    n = arr.shape[1]
+    lo = arr.min(axis=(0, 1)).astype(np.float64) if lower is None else lower
+    hi = arr.max(axis=(0, 1)).astype(np.float64) if upper is None else upper
+    lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    hi = np.maximum(hi, lo + r)
+    h = max(r, float(np.max(hi - lo)) / MAX_CELLS ** (1 / arr.shape[2]) * 1.01)
+    grid = NeighbourGrid(lo, hi, h, n, batch=arr.shape[0], dtype=arr.dtype,
+                         max_neighbours=max(n - 1, 1) if max_neighbours is None else max_neighbours)
+    grid.build(np.ascontiguousarray(arr))
+    return grid.query(r).csr()
