@@ -202,3 +202,20 @@ def test_bad_build_and_query_input_changes_nothing():
         grid.query(0.1, points=np.zeros((2, 4, 3)))
     with pytest.raises(ValueError, match="points"):
         neighbour_lists(np.zeros((5, 4)), 0.1)
+
+
+def test_inactive_points_are_left_out():
+    rng = np.random.default_rng(10)
+    x = rng.random((2, 1000, 3))
+    active = rng.random((2, 1000)) < 0.6
+    x[~active] = np.nan  # dead slots may hold anything
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.1, 1000, batch=2, max_neighbours=1000, dtype=np.float64)
+    nb = grid.build(x, active=active).query(0.1)
+    for b in range(2):
+        keep = np.flatnonzero(active[b])
+        ref = kdtree_sets(x[b, keep], 0.1)
+        got = grid_sets(nb, b)
+        assert all(got[i] == [] for i in np.flatnonzero(~active[b]))
+        assert [got[i] for i in keep] == [keep[r].tolist() for r in ref]
+    with pytest.raises(ValueError, match="active"):
+        grid.build(x, active=active[:1])

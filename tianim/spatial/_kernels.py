@@ -37,13 +37,21 @@ def grid_kernels(real_name: str, dim: int):
         return ti.cast(u, ti.i32)
 
     @ti.kernel
-    def cell_ids(x: t.vec_arr, geom: f64_1, dims: i32_1, cell: i32_2):
-        """cell[b, i] = flat cell id of x[b, i]; geom = [lo_0 .. lo_{D-1}, h], dims = cells per axis."""
+    def cell_ids(x: t.vec_arr, active: t.mask_arr, geom: f64_1, dims: i32_1, cell: i32_2):
+        """cell[b, i] = flat cell id of x[b, i]; geom = [lo_0 .. lo_{D-1}, h], dims = cells per axis.
+
+        Inactive points (active[b, i] == 0) go to the extra cell M = prod(dims), which no query visits.
+        """
+        n_cells = 1
+        for a in ti.static(range(dim)):
+            n_cells *= dims[a]
         for b, i in ti.ndrange(x.shape[0], x.shape[1]):
             c = 0
             for k in ti.static(range(dim)):
                 a = ti.static(dim - 1 - k)
                 c = c * dims[a] + coord(x[b, i][a], a, geom, dims)
+            if active[b, i] == 0:
+                c = n_cells
             cell[b, i] = c
 
     @ti.kernel
@@ -88,10 +96,13 @@ def grid_kernels(real_name: str, dim: int):
         """
         r2 = ti.cast(r, real) * ti.cast(r, real)
         pad = r * (1 + BOX_PAD)
+        last = start.shape[1] - 2  # the extra cell of inactive points
         for b, s in ti.ndrange(q.shape[0], q.shape[1]):
             i = s
             p = q[b, s]
-            if exclude_self != 0:  # the built points, visited in sorted order (cache-friendly)
+            skip = 0
+            if exclude_self != 0:
+                skip = ti.cast(s >= start[b, last], ti.i32)  # an inactive point: no neighbours  # the built points, visited in sorted order (cache-friendly)
                 i = order[b, s]
                 p = xs[b, s]
             lo = ti.Vector.zero(ti.i32, dim)
@@ -104,6 +115,8 @@ def grid_kernels(real_name: str, dim: int):
             rows = 1
             for a in ti.static(range(1, dim)):
                 rows *= hi[a] - lo[a] + 1
+            if skip != 0:
+                rows = 0
             for row in range(rows):
                 base = 0  # flat id of cell (lo_x, y, z) of this row
                 rest = row

@@ -26,7 +26,7 @@ Rules
 
 Cost
 ----
-Memory: ``4 B (3 N + M + 1) + 4 B Q (K + 1)`` bytes plus ``B N D`` reals for sorted positions,
+Memory: ``4 B (3 N + M + 2) + 4 B Q (K + 1)`` bytes plus ``B N D`` reals for sorted positions,
 with M = prod(cells per axis), K = ``max_neighbours``, Q query points.
 Build: O(N + M) per copy, serial inside a copy, copies in parallel (a counting sort by cell id,
 stable in point index; Knuth, TAOCP vol. 3, 5.2 "distribution counting").
@@ -147,10 +147,11 @@ class NeighbourGrid:
         self._geom = np.concatenate([lo, [h]]).astype(np.float64)
         B, N, D = self.batch, self.n_points, self.dim
         self.cell = np.zeros((B, N), np.int32)
-        self.start = np.zeros((B, n_cells + 1), np.int32)
+        self.start = np.zeros((B, n_cells + 2), np.int32)  # + the cell of inactive points
         self.order = np.zeros((B, N), np.int32)
         self.sorted_x = np.zeros((B, N, D), self.dtype)
         self._out: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._all_active = np.ones((B, N), np.uint8)
         self._built = None
 
     def __repr__(self) -> str:
@@ -168,7 +169,7 @@ class NeighbourGrid:
 
         return grid_kernels(np.dtype(self.dtype).name, self.dim)
 
-    def _points(self, name, x, n):
+    def _points(self, name, x, n, active=None):
         if not isinstance(x, np.ndarray):
             raise TypeError(f"{name} must be a NumPy array of shape ({self.batch}, {n}, {self.dim}), got {type(x).__name__}")
         if x.dtype != self.dtype:
@@ -177,17 +178,33 @@ class NeighbourGrid:
         if x.shape != (self.batch, q, self.dim):
             want = f"({self.batch}, {n if n is not None else 'Q'}, {self.dim})"
             raise ValueError(f"{name} has shape {x.shape}; expected {want}")
-        if not np.all(np.isfinite(x)):
-            bad = np.argwhere(~np.isfinite(x))[0]
+        finite = np.isfinite(x)
+        if active is not None:
+            finite |= active[..., None] == 0
+        if not np.all(finite):
+            bad = np.argwhere(~finite)[0]
             raise ValueError(f"{name}{[int(i) for i in bad]} = {fmt(x[tuple(bad)])} is not finite; give finite positions")
         return np.ascontiguousarray(x)
 
-    def build(self, x: np.ndarray, check: bool = True) -> "NeighbourGrid":
-        """Sort the points ``x`` (B, N, D) [m] into the cells. ``check=False`` skips the NaN/shape checks."""
+    def build(self, x: np.ndarray, active: np.ndarray | None = None, check: bool = True) -> "NeighbourGrid":
+        """Sort the points ``x`` (B, N, D) [m] into the cells.
+
+        ``active`` (B, N) uint8 or bool, optional: points with 0 are left out (never neighbours, and
+        their own query rows are empty), e.g. the dead slots of a particle pool. ``check=False`` skips
+        the NaN/shape checks (inactive points need not be finite).
+        """
+        if active is None:
+            active = self._all_active
+        elif check:
+            active = np.asarray(active)
+            if active.shape != (self.batch, self.n_points) or active.dtype not in (np.uint8, np.bool_):
+                raise ValueError(f"active has shape {active.shape} and dtype {active.dtype}; "
+                                 f"expected ({self.batch}, {self.n_points}) uint8 or bool")
+        active = active.view(np.uint8) if active.dtype == np.bool_ else active
         if check:
-            x = self._points("x", x, self.n_points)
+            x = self._points("x", x, self.n_points, active)
         cell_ids, counting_sort, _ = self._kernels()
-        cell_ids(x, self._geom, self.dims, self.cell)
+        cell_ids(x, np.ascontiguousarray(active), self._geom, self.dims, self.cell)
         counting_sort(x, self.cell, self.start, self.order, self.sorted_x)
         self._built = x
         return self
