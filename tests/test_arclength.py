@@ -119,3 +119,76 @@ def test_bad_arclength_input():
         PathMotion(c, duration=-1.0)
     with pytest.raises(ValueError, match="easing"):
         PathMotion(c, duration=1.0, easing="elastic")
+
+
+def test_numpy_scalars_are_accepted():
+    c = catmull_rom(POINTS)
+    for tol in (np.float32(1e-3), np.float64(1e-3), 1e-3):
+        assert ArcLength(c, tol=tol).error_bound <= 1e-3
+    for duration in (np.float32(2.0), np.int64(2), np.float64(2.0), 2):
+        pm = PathMotion(c, duration=duration, tol=np.float32(1e-3))
+        assert pm.duration == 2.0 and isinstance(pm.duration, float)
+    assert ArcLength(c, method="table", samples=np.int64(500)).table_size >= 7
+
+
+def test_sine_easings_reach_the_end_keys():
+    c = catmull_rom(POINTS)
+    for easing in ("sine-in", "sine-out", "sine-in-out"):
+        pm = PathMotion(c, duration=2.0, easing=easing)
+        assert pm.distance(0.0) == 0.0 and pm.distance(2.0) == pm.length
+        np.testing.assert_allclose(pm([0.0, 2.0]), POINTS[[0, -1]], atol=1e-14)
+
+
+def test_explicit_table_refuses_a_table_that_would_take_minutes():
+    import time
+
+    c = catmull_rom(POINTS)
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match="TABLE_LIMIT") as info:
+        ArcLength(c, method="table", tol=1e-5)
+    assert time.perf_counter() - t0 < 5.0
+    assert "hermite" in str(info.value) and "tol=1e-05" in str(info.value)
+    fast = ArcLength(c, method="hermite", tol=1e-5)  # the remedy it names works
+    assert fast.error_bound <= 1e-5
+
+
+@pytest.mark.parametrize(
+    "kwargs, exc, words",
+    [
+        ({"max_table": -1}, ValueError, ("max_table=-1",)),
+        ({"max_table": 0}, ValueError, ("max_table=0",)),
+        ({"max_table": 10.5}, TypeError, ("max_table=10.5",)),
+        ({"tol": np.nan}, ValueError, ("tol",)),
+        ({"tol": np.inf}, ValueError, ("tol",)),
+        ({"tol": "1e-3"}, TypeError, ("tol='1e-3'",)),
+        ({"tol": 1.5}, ValueError, ("tol=1.5",)),
+        ({"method": None}, ValueError, ("method=None",)),
+        ({"method": "table", "samples": -3}, ValueError, ("samples=-3",)),
+        ({"method": "table", "samples": 2.5}, TypeError, ("samples=2.5",)),
+        ({"method": "gauss", "samples": 100}, ValueError, ("samples=100", "method='table'")),
+    ],
+)
+def test_bad_arclength_arguments_are_named(kwargs, exc, words):
+    with pytest.raises(exc) as info:
+        ArcLength(catmull_rom(POINTS), **kwargs)
+    for w in words:
+        assert w in str(info.value), str(info.value)
+
+
+@pytest.mark.parametrize(
+    "kwargs, exc, words",
+    [
+        ({"duration": np.nan}, ValueError, ("duration",)),
+        ({"duration": 0.0}, ValueError, ("duration=0.0",)),
+        ({"duration": True}, TypeError, ("duration=True",)),
+        ({"duration": "3"}, TypeError, ("duration='3'",)),
+        ({"duration": 1.0, "easing": None}, ValueError, ("easing=None",)),
+        ({"duration": 1.0, "tol": -1e-3}, ValueError, ("tol=-0.001",)),
+    ],
+)
+def test_bad_path_motion_arguments_are_named(kwargs, exc, words):
+    with pytest.raises(exc) as info:
+        PathMotion(catmull_rom(POINTS), **kwargs)
+    for w in words:
+        assert w in str(info.value), str(info.value)
+    assert "np.float" not in str(info.value)

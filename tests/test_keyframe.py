@@ -171,3 +171,96 @@ def test_bad_input_leaves_arrays_unchanged():
     assert np.array_equal(times, t0) and np.array_equal(vals, v0)
     with pytest.raises(ValueError, match="easing"):
         ease("bounce", 0.5)
+
+
+# --- Kochanek-Bartels in the published convention (Kochanek and Bartels 1984, eq. 8-9) -------------------
+
+def _kb_published(P, T, C, B):
+    """Independent transcription of the paper: the source derivative TS_i (leaving key i) and the
+    destination derivative TD_i (arriving at key i), at interior keys 1..M-2."""
+    back, fwd = P[1:-1] - P[:-2], P[2:] - P[1:-1]
+    ts = (1 - T) * (1 + C) * (1 + B) / 2 * back + (1 - T) * (1 - C) * (1 - B) / 2 * fwd
+    td = (1 - T) * (1 - C) * (1 + B) / 2 * back + (1 - T) * (1 + C) * (1 - B) / 2 * fwd
+    return ts, td
+
+
+@pytest.mark.parametrize("tcb", [(0.0, 0.5, 0.0), (0.0, -0.7, 0.0), (0.3, 0.4, -0.6), (-0.5, -1.0, 1.0)])
+def test_kochanek_bartels_tangents_are_the_papers(tcb):
+    T, C, B = tcb
+    P = np.random.default_rng(3).normal(size=(6, 2))
+    kb = kochanek_bartels(P, tension=T, continuity=C, bias=B)
+    ts, td = _kb_published(P, T, C, B)
+    u = np.arange(1.0, 5.0)
+    # one-sided derivatives at the interior keys, from the segment that arrives and the one that leaves
+    arriving = kb.eval_local(np.arange(0, 4), np.ones(4), 1)
+    leaving = kb.eval_local(np.arange(1, 5), np.zeros(4), 1)
+    np.testing.assert_allclose(arriving, td, atol=1e-14)
+    np.testing.assert_allclose(leaving, ts, atol=1e-14)
+    np.testing.assert_allclose(kb(u), P[1:5], atol=1e-14)
+
+
+def test_kochanek_bartels_behaviour_table():
+    # the paper's figures: C = -1 makes corners (each segment a straight chord when T = B = 0),
+    # B = +1 points both tangents of a key along the chord before it (overshoot), B = -1 after it
+    P = np.array([[0.0, 0.0], [1.0, 1.0], [2.0, 0.0], [3.0, 1.0], [4.0, 0.0]])
+    s = np.linspace(0.0, 1.0, 11)
+    corners = kochanek_bartels(P, continuity=-1.0)
+    for j in range(1, 3):  # interior segments: the points lie on the chord P_j -> P_{j+1}
+        pts = corners.eval_local(np.full(11, j), s)
+        d, e = P[j + 1] - P[j], pts - P[j]
+        np.testing.assert_allclose(d[0] * e[:, 1] - d[1] * e[:, 0], 0.0, atol=1e-14)
+    smooth = kochanek_bartels(P, continuity=+1.0)
+    # C = +1 (inverted corners): a segment leaves along the chord before it and arrives along the one after
+    np.testing.assert_allclose(smooth.eval_local(np.array([1]), np.array([0.0]), 1)[0], P[1] - P[0], atol=1e-14)
+    np.testing.assert_allclose(smooth.eval_local(np.array([1]), np.array([1.0]), 1)[0], P[3] - P[2], atol=1e-14)
+    over = kochanek_bartels(P, bias=1.0)
+    np.testing.assert_allclose(over.eval_local(np.array([1]), np.array([0.0]), 1)[0], P[1] - P[0], atol=1e-14)
+    np.testing.assert_allclose(over.eval_local(np.array([0]), np.array([1.0]), 1)[0], P[1] - P[0], atol=1e-14)
+    under = kochanek_bartels(P, bias=-1.0)
+    np.testing.assert_allclose(under.eval_local(np.array([1]), np.array([0.0]), 1)[0], P[2] - P[1], atol=1e-14)
+
+
+def test_kochanek_bartels_per_key_parameters():
+    P = np.random.default_rng(4).normal(size=(5, 3))
+    C = np.array([0.0, 0.9, -0.4, 0.2, 0.0])
+    kb = kochanek_bartels(P, continuity=C)
+    ts, td = _kb_published(P, 0.0, C[1:-1, None], 0.0)
+    np.testing.assert_allclose(kb.eval_local(np.arange(1, 4), np.zeros(3), 1), ts, atol=1e-14)
+    np.testing.assert_allclose(kb.eval_local(np.arange(0, 3), np.ones(3), 1), td, atol=1e-14)
+
+
+@pytest.mark.parametrize("name", EASINGS)
+def test_easing_ends_are_exact(name):
+    assert ease(name, 0.0) == 0.0 and ease(name, 1.0) == 1.0
+    assert ease(name, -np.inf) == 0.0 and ease(name, np.inf) == 1.0
+    if name.endswith("in-out"):
+        assert ease(name, 0.5) == 0.5
+
+
+# --- bad input: every message names the argument ----------------------------------------------------
+
+@pytest.mark.parametrize(
+    "call, exc, words",
+    [
+        (lambda: ease("linear", np.nan), ValueError, ("x=", "NaN")),
+        (lambda: ease("sine-in", [0.0, np.nan, 1.0]), ValueError, ("x=", "NaN")),
+        (lambda: ease("quad-in", "half"), TypeError, ("x=",)),
+        (lambda: ease(None, 0.5), ValueError, ("easing=None",)),
+        (lambda: ease_derivative("cubic-out", np.nan), ValueError, ("NaN",)),
+        (lambda: catmull_rom([[0.0], [1.0], [3.0]], parameterization=None), TypeError, ("parameterization=None",)),
+        (lambda: catmull_rom([[0.0], [1.0]], parameterization=True), TypeError, ("parameterization=True",)),
+        (lambda: catmull_rom([[0.0], [1.0]], parameterization=np.nan), ValueError, ("parameterization",)),
+        (lambda: catmull_rom([[0.0], [1.0]], parameterization=1.5), ValueError, ("parameterization",)),
+        (lambda: Track([0.0, 1.0], [0.0, 1.0], parameterization=None), TypeError, ("parameterization=None",)),
+        (lambda: Track([0.0, 1.0], [0.0, 1.0], interpolation=None), ValueError, ("interpolation=None",)),
+        (lambda: kochanek_bartels([[0.0], [1.0]], continuity=np.nan), ValueError, ("continuity",)),
+        (lambda: kochanek_bartels([[0.0], [1.0], [2.0]], bias=[0.0, 0.5]), ValueError, ("bias",)),
+    ],
+)
+def test_bad_keyframe_input_names_the_argument(call, exc, words):
+    with pytest.raises(exc) as info:
+        call()
+    msg = str(info.value)
+    for w in words:
+        assert w in msg, msg
+    assert "np.float64" not in msg

@@ -40,7 +40,11 @@ from __future__ import annotations
 import numpy as np
 
 from tianim.keyframe.spline import PiecewiseCubic
-from tianim._checks import float_array
+from tianim._checks import check_choice, check_finite_scalar, check_int, float_array
+
+#: Most intervals an explicit ``method="table"`` builds to meet ``tol`` (about a second to build);
+#: beyond it ArcLength raises ValueError naming the cheaper methods instead of running for minutes.
+TABLE_LIMIT = 1_000_000
 
 _GL = {n: np.polynomial.legendre.leggauss(n) for n in (4, 16)}
 _METHODS = ("auto", "table", "hermite", "gauss")
@@ -77,7 +81,9 @@ class ArcLength:
         Relative speed tolerance (> 0), default 1e-4.
     method : {"auto", "table", "hermite", "gauss"}
     max_table : int
-        Largest table "auto" accepts (samples), default 50,000.
+        Largest table "auto" accepts (samples, >= 1), default 50,000. An explicit
+        ``method="table"`` is limited to :data:`TABLE_LIMIT` intervals instead: a
+        tolerance that needs more raises ValueError (use "hermite", "auto" or ``samples``).
     samples : int, optional
         With ``method="table"``: use exactly this many table intervals
         (distributed over segments in proportion to ``w_j sqrt(M_j / v_j)``)
@@ -95,13 +101,16 @@ class ArcLength:
                  max_table: int = 50_000, samples: int | None = None):
         if not isinstance(curve, PiecewiseCubic):
             raise TypeError(f"curve={curve!r} is not a PiecewiseCubic; build one with catmull_rom(...)")
-        if not (isinstance(tol, (int, float)) and np.isfinite(tol) and 0 < tol < 1):
+        tol = check_finite_scalar("tol", tol, lo=0.0, lo_open=True)
+        if not tol < 1:
             raise ValueError(f"tol={tol!r} must be a relative tolerance in (0, 1), e.g. 1e-4")
-        if method not in _METHODS:
-            raise ValueError(f"method={method!r} is unknown; use one of {_METHODS}")
-        if samples is not None and (method != "table" or int(samples) < len(curve.widths)):
-            raise ValueError(f"samples={samples!r} needs method='table' and at least one sample per segment "
-                             f"({len(curve.widths)})")
+        method = check_choice("method", method, _METHODS)
+        max_table = check_int("max_table", max_table, lo=1)
+        if samples is not None:
+            samples = check_int("samples", samples, lo=1, hi=TABLE_LIMIT)
+            if method != "table" or samples < len(curve.widths):
+                raise ValueError(f"samples={samples!r} needs method='table' and at least one sample per segment "
+                                 f"({len(curve.widths)})")
         self.curve = curve
         self.tol = float(tol)
         self.method = None
@@ -123,6 +132,11 @@ class ArcLength:
             if method in ("table", "hermite") and not finite:
                 raise ValueError("the curve has zero speed somewhere (a cusp), so no table meets tol; "
                                  "use method='gauss' or a centripetal parameterization")
+            if method == "table" and need.sum() > TABLE_LIMIT:
+                raise ValueError(
+                    f"method='table' needs about {int(min(need.sum(), 1e18)):,} intervals to meet tol={tol:g} "
+                    f"(more than TABLE_LIMIT={TABLE_LIMIT:,}, which would take minutes); use method='hermite' "
+                    "or 'auto' (the same tol in far fewer intervals), a larger tol, or samples=N")
             if method == "table" or (method == "auto" and finite and need.sum() <= max_table):
                 self._refine_table(need.astype(np.int64))
                 self.method = "table"
@@ -158,6 +172,9 @@ class ArcLength:
             if not bad.any():
                 return
             counts = np.where(bad, np.ceil(counts * self._seg_err / self.tol * 1.05), counts).astype(np.int64)
+            if counts.sum() > TABLE_LIMIT:
+                raise ValueError(f"method='table' needs more than TABLE_LIMIT={TABLE_LIMIT:,} intervals to meet "
+                                 f"tol={self.tol:g}; use method='hermite' or 'auto', a larger tol, or samples=N")
         raise RuntimeError(f"arc-length table did not meet tol={self.tol} (bound {self.error_bound}); use 'gauss'")
 
     # -- hermite table ----------------------------------------------------------------------------------

@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim._checks import float_array
+from tianim._checks import check_finite_scalar, float_array
 
 PARAMETERIZATIONS = {"uniform": 0.0, "centripetal": 0.5, "chordal": 1.0}
 
@@ -161,7 +161,11 @@ def _alpha(parameterization) -> float:
                 "or a number alpha in [0, 1]"
             )
         return PARAMETERIZATIONS[parameterization]
-    a = float(parameterization)
+    if isinstance(parameterization, bool) or parameterization is None or not isinstance(
+            parameterization, (int, float, np.integer, np.floating)):
+        raise TypeError(f"parameterization={parameterization!r} must be one of {sorted(PARAMETERIZATIONS)} "
+                        "or a number alpha in [0, 1]")
+    a = check_finite_scalar("parameterization", parameterization)
     if not 0.0 <= a <= 1.0:
         raise ValueError(f"parameterization alpha={a!r} must lie in [0, 1] (0 uniform, 0.5 centripetal, 1 chordal)")
     return a
@@ -204,13 +208,18 @@ def kochanek_bartels(points, tension=0.0, continuity=0.0, bias=0.0) -> Piecewise
     """Kochanek-Bartels (TCB) curve through ``points`` (M, d) on uniform knots 0..M-1.
 
     ``tension``, ``continuity``, ``bias``: scalars or one value per key (M,), each
-    in [-1, 1]. Tangents (Kochanek and Bartels 1984, eq. 8-9)::
+    in [-1, 1]. Tangents in the published convention (Kochanek and Bartels 1984,
+    eq. 8-9: the source derivative TS_i leaves key i, the destination derivative
+    TD_i arrives at it; the same as the ``splines`` package and Wikipedia)::
 
-        out_i = (1-T)(1+B)(1-C)/2 (P_i - P_{i-1}) + (1-T)(1-B)(1+C)/2 (P_{i+1} - P_i)
-        in_i  = (1-T)(1+B)(1+C)/2 (P_i - P_{i-1}) + (1-T)(1-B)(1-C)/2 (P_{i+1} - P_i)
+        out_i = TS_i = (1-T)(1+B)(1+C)/2 (P_i - P_{i-1}) + (1-T)(1-B)(1-C)/2 (P_{i+1} - P_i)
+        in_i  = TD_i = (1-T)(1+B)(1-C)/2 (P_i - P_{i-1}) + (1-T)(1-B)(1+C)/2 (P_{i+1} - P_i)
 
     with the same reflected phantom keys at the ends as :func:`catmull_rom`.
-    C = 0 keeps the curve C1; T = C = B = 0 is the uniform Catmull-Rom.
+    C = 0 keeps the curve C1; T = C = B = 0 is the uniform Catmull-Rom; C = -1
+    gives corners (each segment leaves along its own chord and arrives along it:
+    straight lines when T = B = 0), C = +1 inverted corners; T = 1 zero tangents;
+    B = +1 tangents along the chord before the key (overshoot), B = -1 after it.
     """
     pts = check_points(points)
     M = len(pts)
@@ -224,8 +233,8 @@ def kochanek_bartels(points, tension=0.0, continuity=0.0, bias=0.0) -> Piecewise
     T, C, B = tcb
     P, _ = _reflect_ends(pts, np.arange(M, dtype=np.float64))
     back, fwd = P[1:-1] - P[:-2], P[2:] - P[1:-1]
-    d_out = (1 - T) * (1 + B) * (1 - C) / 2 * back + (1 - T) * (1 - B) * (1 + C) / 2 * fwd
-    d_in = (1 - T) * (1 + B) * (1 + C) / 2 * back + (1 - T) * (1 - B) * (1 - C) / 2 * fwd
+    d_out = (1 - T) * (1 + B) * (1 + C) / 2 * back + (1 - T) * (1 - B) * (1 - C) / 2 * fwd
+    d_in = (1 - T) * (1 + B) * (1 - C) / 2 * back + (1 - T) * (1 - B) * (1 + C) / 2 * fwd
     return PiecewiseCubic.from_hermite(np.arange(M, dtype=np.float64), pts, d_out, d_in)
 
 

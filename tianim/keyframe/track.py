@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from tianim.keyframe.arclength import ArcLength
-from tianim.keyframe.easing import ease, ease_derivative
+from tianim.keyframe.easing import EASINGS, ease, ease_derivative
 from tianim.keyframe.spline import (
     PiecewiseCubic,
     catmull_rom,
@@ -26,7 +26,7 @@ from tianim.keyframe.spline import (
     linear,
     monotone_cubic,
 )
-from tianim._checks import float_array
+from tianim._checks import check_choice, check_finite_scalar, float_array
 
 INTERPOLATIONS = ("catmull-rom", "kochanek-bartels", "linear", "step")
 
@@ -60,8 +60,7 @@ class Track:
         v = check_points(values, "values")
         if len(v) != len(t):
             raise ValueError(f"values has {len(v)} keys but times has {len(t)}; pass one state per key time")
-        if interpolation not in INTERPOLATIONS:
-            raise ValueError(f"interpolation={interpolation!r} is unknown; use one of {INTERPOLATIONS}")
+        check_choice("interpolation", interpolation, INTERPOLATIONS)
         self.times = t
         self.values = v
         self.scalar = np.ndim(values) == 1
@@ -143,9 +142,8 @@ class PathMotion:
 
     def __init__(self, curve: PiecewiseCubic, duration: float, easing: str = "linear", tol: float = 1e-4,
                  method: str = "auto"):
-        if not (isinstance(duration, (int, float)) and np.isfinite(duration) and duration > 0):
-            raise ValueError(f"duration={duration!r} must be a positive number of seconds")
-        ease(easing, 0.0)  # validates the name
+        duration = check_finite_scalar("duration", duration, lo=0.0, lo_open=True)  # seconds
+        check_choice("easing", easing, EASINGS)
         self.arclength = ArcLength(curve, tol=tol, method=method)
         self.curve = curve
         self.duration = float(duration)
