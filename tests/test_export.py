@@ -48,7 +48,6 @@ def test_png_sequence_roundtrip(tmp_path):
     "path,size,match",
     [
         ("out.avi", None, "extension"),
-        ("no/such/dir/out.mp4", None, "does not exist"),
         ("out.mp4", (31, 24), "even"),
         ("out.mp4", (0, 24), "width"),
         ("out.gif", "640by480", "WIDTHxHEIGHT"),
@@ -57,6 +56,18 @@ def test_png_sequence_roundtrip(tmp_path):
 def test_bad_outputs_fail_early(tmp_path, path, size, match):
     with pytest.raises(ValueError, match=match):
         check_output(str(tmp_path / path), size)
+
+
+def test_missing_folders_are_created_and_a_file_parent_is_rejected(tmp_path):
+    res = export(_frames(2), str(tmp_path / "new" / "deeper" / "f.png"))
+    assert [os.path.basename(p) for p in res.paths] == ["f_0000.png", "f_0001.png"]
+    export(_frames(2), str(tmp_path / "other" / "out.gif"))
+    assert (tmp_path / "other" / "out.gif").is_file()
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(ValueError, match="not a directory"):
+        check_output(str(tmp_path / "afile" / "sub" / "out.mp4"))
+    assert not (tmp_path / "nothing").exists() and check_output(str(tmp_path / "nothing" / "x.mp4"))
+    assert not (tmp_path / "nothing").exists()  # checking creates nothing
 
 
 def test_directory_path_rejected(tmp_path):

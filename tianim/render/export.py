@@ -54,9 +54,10 @@ class OutputSpec:
 def check_output(path, size=None, fps: float = 24.0) -> OutputSpec:
     """Validate an output path, frame size and rate *before* any work is done.
 
-    Raises ValueError with the remedy for an unknown extension, a missing or
-    unwritable directory, a path that is a directory, a bad size (not positive
-    integers, odd for MP4) or a non-positive frame rate.
+    Raises ValueError with the remedy for an unknown extension, an unwritable
+    directory, a path that is a directory (or under a file), a bad size (not positive
+    integers, odd for MP4) or a non-positive frame rate. Missing parent folders are
+    fine: the writer creates them when the first frame is written.
     """
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path={path!r} must be a file name such as 'out.mp4', 'out.gif' or 'frames.png'")
@@ -79,9 +80,12 @@ def check_output(path, size=None, fps: float = 24.0) -> OutputSpec:
     if os.path.isdir(probe):
         raise ValueError(f"path={path!r} is a directory; give a file name inside it, e.g. {os.path.join(path, 'out' + ext)!r}")
     parent = os.path.dirname(os.path.abspath(probe))
-    if not os.path.isdir(parent):
-        raise ValueError(f"path={path!r}: directory {parent!r} does not exist; create it first")
-    if not os.access(parent, os.W_OK) or (os.path.exists(probe) and not os.access(probe, os.W_OK)):
+    existing = parent
+    while not os.path.exists(existing):  # the nearest existing folder must be writable
+        existing = os.path.dirname(existing)
+    if not os.path.isdir(existing):
+        raise ValueError(f"path={path!r}: {existing!r} is a file, not a directory; choose another folder")
+    if not os.access(existing, os.W_OK) or (os.path.exists(probe) and not os.access(probe, os.W_OK)):
         raise ValueError(f"path={path!r} is not writable; choose a directory you can write to")
     return OutputSpec(path, kind, float(fps), size)
 
@@ -138,10 +142,14 @@ class FrameWriter:
         self._writer = None
         self._bar = _progress(total, os.path.basename(self.spec.path)) if progress else None
 
+    def _makedirs(self):
+        os.makedirs(os.path.dirname(os.path.abspath(self.spec.frame_path(0))), exist_ok=True)
+
     def _open(self):
         import imageio.v2 as iio
 
         s = self.spec
+        self._makedirs()
         if s.kind == "mp4":
             self._writer = iio.get_writer(s.path, format="FFMPEG", mode="I", fps=s.fps, codec="libx264",
                                           quality=8, pixelformat="yuv420p", macro_block_size=1,
@@ -165,6 +173,8 @@ class FrameWriter:
             import imageio.v3 as iio3
 
             p = self.spec.frame_path(self.result.frames)
+            if not self.result.frames:
+                self._makedirs()
             iio3.imwrite(p, f)
             self.result.paths.append(p)
         else:
