@@ -20,7 +20,7 @@ def test_grid_normals_match_the_analytic_normal_of_a_paraboloid():
     g = _paraboloid(n, a)
     v = g.reshape(-1, 3)
     out = np.zeros_like(v)
-    K.grid_normals(v, 0, n, n, out)
+    K.kernels().grid_normals(v, 0, n, n, out)
     out /= np.linalg.norm(out, axis=1, keepdims=True)
     # y = a (x^2 + z^2): normal ~ (-2 a x, 1, -2 a z); central differences are exact for a quadratic
     ref = np.stack([-2 * a * v[:, 0], np.ones(len(v)), -2 * a * v[:, 2]], 1)

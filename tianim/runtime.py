@@ -1,4 +1,4 @@
-"""Taichi initialisation: once, lazily, respecting the user.
+"""Taichi initialisation: once, lazily, respecting the user, never crashing on a missing GPU.
 
 tianim never calls ``ti.init`` at import time. The first function that needs a
 kernel calls :func:`ensure_taichi`, which
@@ -7,46 +7,133 @@ kernel calls :func:`ensure_taichi`, which
   call): a second ``ti.init`` would destroy every live field and ndarray;
 * otherwise initialises it on the arch named by the ``arch`` argument of
   :func:`init`, else by the ``TIANIM_ARCH`` environment variable
-  (``cpu``, ``cuda``, ``vulkan``, ``metal``, ``gpu``), else on the CPU.
+  (``cpu``, ``cuda``, ``vulkan``, ``metal``, ``opengl``, ``gpu``), else on the CPU.
+
+A non-CPU arch is first tried in a child process (once per process, the answer
+cached): on a machine without the driver, ``ti.init`` itself can kill the process
+with a segmentation fault. When the child fails, tianim warns once, naming the
+arch and what failed, and runs on the CPU.
 
 Kernels are written so that results do not depend on the thread count
 (no atomics on the hot path), and tianim initialises Taichi with
 ``fast_math=False`` so that the same kernels give bit-identical results in
 every loop layout. The number of CPU threads can be set with
 ``TIANIM_NUM_THREADS`` (or ``init(num_threads=...)``).
+
+Taichi itself is reached through :mod:`tianim._ti` (``TIANIM_TAICHI`` picks
+``taichi`` or its fork ``quadrants``).
 """
 
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 import threading
+import warnings
 
-_ARCHES = ("cpu", "cuda", "vulkan", "metal", "opengl", "gpu")
+from tianim import _ti
+from tianim._checks import check_positive_int
+from tianim._ti import ConfigError
+
+#: Archs tianim accepts (argument ``arch`` of :func:`init`, or ``TIANIM_ARCH``).
+ARCHES = ("cpu", "cuda", "vulkan", "metal", "opengl", "gpu")
+#: Seconds a child process may take to try a GPU arch (import + ti.init + one kernel).
+PROBE_TIMEOUT_S = 120
+
 _lock = threading.Lock()
 _init_by_tianim: dict | None = None
+_probe_cache: dict[tuple[str, str], tuple[bool, str]] = {}
 
 
-def _ti():
-    import taichi as ti
-
-    return ti
+class ArchFallbackWarning(RuntimeWarning):
+    """The requested arch is not usable on this machine; tianim runs on the CPU instead."""
 
 
 def is_initialized() -> bool:
-    """True when Taichi has a live program (initialised by anyone)."""
-    ti = _ti()
+    """True when Taichi has a live program (initialised by anyone). Imports nothing new."""
+    if not _ti.loaded():
+        return False
+    ti = _ti.get()
     return ti.lang.impl.get_runtime().prog is not None
 
 
 def _resolve_arch(arch: str | None) -> str:
-    name = arch if arch is not None else os.environ.get("TIANIM_ARCH", "cpu")
-    name = str(name).strip().lower()
-    if name not in _ARCHES:
-        raise ValueError(
-            f"arch={name!r} is not a Taichi arch tianim knows; use one of {_ARCHES} "
-            "(argument `arch` of tianim.init or the TIANIM_ARCH environment variable)"
+    from_env = arch is None
+    raw = os.environ.get("TIANIM_ARCH", "") if from_env else arch
+    if not isinstance(raw, str):
+        raise TypeError(f"arch={raw!r} must be a string, one of {', '.join(ARCHES)}")
+    name = raw.strip().lower() or "cpu"
+    if name not in ARCHES:
+        where = f"TIANIM_ARCH={raw!r}" if from_env else f"arch={raw!r}"
+        raise ConfigError(
+            f"{where} is not an arch tianim knows; use one of {', '.join(ARCHES)}"
+            + (" (or unset TIANIM_ARCH for the CPU)" if from_env else "")
         )
     return name
+
+
+def _resolve_threads(num_threads) -> int | None:
+    if num_threads is not None:
+        return check_positive_int("num_threads", num_threads)
+    raw = os.environ.get("TIANIM_NUM_THREADS", "")
+    if not raw.strip():
+        return None
+    text = raw.strip()
+    if not text.isdigit() or int(text) < 1 or int(text) > 65536:
+        raise ConfigError(
+            f"TIANIM_NUM_THREADS={raw!r} is not a thread count; use a whole number from 1 to 65536, "
+            "e.g. TIANIM_NUM_THREADS=4 (or unset it for all cores)"
+        )
+    return int(text)
+
+
+def check_environment() -> None:
+    """Raise :class:`ConfigError` for a bad ``TIANIM_*`` variable, importing nothing.
+
+    The ``tianim`` command calls it first so that a typo is one line, not a traceback.
+    """
+    _ti.package_name()
+    _resolve_arch(None)
+    _resolve_threads(None)
+
+
+def probe_arch(name: str) -> tuple[bool, str]:
+    """Try arch ``name`` in a child process; ``(usable, what happened)``, cached per process.
+
+    The child imports Taichi, calls ``ti.init`` and runs one kernel; a crash there (a
+    segmentation fault without a driver) ends the child, not this process.
+    """
+    package = _ti.package_name()
+    key = (package, name)
+    if key in _probe_cache:
+        return _probe_cache[key]
+    env = dict(os.environ, TIANIM_TAICHI=package, TIANIM_VERBOSE="0")
+    try:
+        out = subprocess.run(
+            [sys.executable, "-m", "tianim._probe", name],
+            env=env, capture_output=True, text=True, timeout=PROBE_TIMEOUT_S,
+        )
+    except subprocess.TimeoutExpired:
+        result = (False, f"trying it took more than {PROBE_TIMEOUT_S} s")
+    except OSError as exc:  # no way to start a child: do not risk this process
+        result = (False, f"could not start a process to try it ({exc})")
+    else:
+        lines = [ln for ln in out.stdout.splitlines() if ln.startswith("ARCH ")]
+        if out.returncode < 0:
+            result = (False, f"ti.init crashed with signal {-out.returncode} (no working driver?)")
+        elif out.returncode != 0 or not lines:
+            err = [ln.strip() for ln in out.stderr.splitlines() if ln.strip()]
+            detail = err[-1] if err else f"exit status {out.returncode}"
+            result = (False, detail[:200])
+        else:
+            got = lines[-1].split()[1]
+            if got in ("x64", "arm64") and name != "cpu":
+                result = (False, f"Taichi found no {name} driver or device")
+            else:
+                result = (True, got)
+    _probe_cache[key] = result
+    return result
 
 
 def init(arch: str | None = None, num_threads: int | None = None, **ti_kwargs) -> dict:
@@ -57,7 +144,8 @@ def init(arch: str | None = None, num_threads: int | None = None, **ti_kwargs) -
     arch : str, optional
         ``"cpu"`` (default), ``"cuda"``, ``"vulkan"``, ``"metal"``, ``"opengl"``
         or ``"gpu"`` (the best GPU backend available). Falls back to the
-        ``TIANIM_ARCH`` environment variable.
+        ``TIANIM_ARCH`` environment variable. A GPU arch that does not work on
+        this machine gives one :class:`ArchFallbackWarning` and the CPU.
     num_threads : int, optional
         CPU threads for parallel loops (``cpu_max_num_threads``); falls back to
         ``TIANIM_NUM_THREADS``. Results are bit-identical for any value.
@@ -67,7 +155,8 @@ def init(arch: str | None = None, num_threads: int | None = None, **ti_kwargs) -
     Returns
     -------
     dict
-        ``{"arch": ..., "initialized_by": "tianim" | "user"}``.
+        ``{"arch": ..., "initialized_by": "tianim" | "user"}``, plus
+        ``"requested"`` and ``"fallback"`` when a GPU arch was replaced by the CPU.
 
     Calling this after Taichi is live (whoever initialised it) changes nothing
     and never re-initialises: that would destroy all existing Taichi data.
@@ -78,39 +167,48 @@ def init(arch: str | None = None, num_threads: int | None = None, **ti_kwargs) -
             if _init_by_tianim is not None:
                 return dict(_init_by_tianim)
             return {"arch": current_arch(), "initialized_by": "user"}
-        ti = _ti()
         name = _resolve_arch(arch)
-        if num_threads is None and os.environ.get("TIANIM_NUM_THREADS"):
-            num_threads = int(os.environ["TIANIM_NUM_THREADS"])
+        threads = _resolve_threads(num_threads)
+        info = {}
+        if name != "cpu":
+            ok, why = probe_arch(name)
+            if not ok:
+                where = f"arch={name!r}" if arch is not None else f"TIANIM_ARCH={name}"
+                warnings.warn(
+                    f"{where}: the {name} backend does not work on this machine ({why}); running on the CPU",
+                    ArchFallbackWarning, stacklevel=3,
+                )
+                info = {"requested": name, "fallback": why}
+                name = "cpu"
+        ti = _ti.get()
         kwargs = dict(fast_math=False, log_level=ti.WARN)
-        if num_threads is not None:
-            if int(num_threads) < 1:
-                raise ValueError(f"num_threads={num_threads!r} must be >= 1")
-            kwargs["cpu_max_num_threads"] = int(num_threads)
+        if threads is not None:
+            kwargs["cpu_max_num_threads"] = threads
         kwargs.update(ti_kwargs)
-        ti.init(arch=getattr(ti, name), **kwargs)
-        _init_by_tianim = {"arch": current_arch(), "initialized_by": "tianim"}
+        with _ti.quiet():
+            ti.init(arch=getattr(ti, name), **kwargs)
+        _init_by_tianim = {"arch": current_arch(), "initialized_by": "tianim", **info}
         return dict(_init_by_tianim)
 
 
 def ensure_taichi():
-    """Return the ``taichi`` module, initialising it on first need."""
+    """Return the Taichi module (see :mod:`tianim._ti`), initialising it on first need."""
     if not is_initialized():
         init()
-    return _ti()
+    return _ti.get()
 
 
 def current_arch() -> str:
     """Name of the arch Taichi runs on (``"x64"``, ``"arm64"``, ``"cuda"``...)."""
-    ti = _ti()
+    ti = _ti.get()
     return str(ti.lang.impl.current_cfg().arch).split(".")[-1]
 
 
 def num_threads() -> int | None:
-    """CPU threads Taichi uses for parallel loops (None on GPU archs)."""
-    ti = _ti()
+    """CPU threads Taichi uses for parallel loops (None before initialisation)."""
     if not is_initialized():
         return None
+    ti = _ti.get()
     n = ti.lang.impl.current_cfg().cpu_max_num_threads
     return int(n)
 
@@ -121,7 +219,7 @@ def compiled_kernel_count() -> int:
     Tests use it to show that creating another scene or environment compiles
     nothing new.
     """
-    ti = _ti()
     if not is_initialized():
         return 0
+    ti = _ti.get()
     return sum(len(k.compiled_kernels) for k in ti.lang.impl.get_runtime().kernels)

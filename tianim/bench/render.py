@@ -26,13 +26,13 @@ def _cloth(n):
 
 
 def _gui_reference(grid, scene, repeats):
-    import taichi as ti
-
+    from tianim import _ti
     from tianim.render import grid_faces, vertex_normals
 
     ny, nx = grid.shape[:2]
     v = grid.reshape(-1, 3)
     f = grid_faces(ny, nx)
+    ti = _ti.get()
     gui = ti.GUI("bench", res=(640, 480), show_gui=False, background_color=0xDDE6EE)
     cam = scene.camera
 

@@ -19,7 +19,10 @@ thread count.
 
 
 import numpy as np
-import taichi as ti
+
+from tianim import _ti
+
+ti = _ti.get()  # this module is imported only when a batched IK solve runs (tianim.kinematics.ik)
 
 f64 = ti.f64
 # work rows

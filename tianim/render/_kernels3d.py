@@ -30,9 +30,11 @@ sample to empty, so the buffer is ready for the next frame without a clear.
 All kernels take NumPy arrays, so a new scene or size compiles nothing new.
 """
 
+from types import SimpleNamespace
 
-import taichi as ti
+from tianim import _ti
 
+#: An empty sample of the visibility buffer (the largest key: every primitive is nearer).
 EMPTY = 0x7FFFFFFFFFFFFFFF
 #: An empty texel of a shadow map (the bits of +inf: nothing blocks the light).
 EMPTY_DEPTH = 0x7F800000
@@ -40,238 +42,257 @@ EMPTY_DEPTH = 0x7F800000
 MAX_PRIMITIVES = (1 << 24) - 1
 _ID_MASK = 0xFFFFFF
 
-f32a2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
-f32a1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
-i32a2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
-i32a1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
-i64a2 = ti.types.ndarray(dtype=ti.i64, ndim=2)
-u8a3 = ti.types.ndarray(dtype=ti.u8, ndim=3)
-u32a2 = ti.types.ndarray(dtype=ti.u32, ndim=2)
-f32a3 = ti.types.ndarray(dtype=ti.f32, ndim=3)
-
 #: Columns of the packed per-vertex attribute rows written by :func:`vertices`.
 ATTR_SCREEN, ATTR_NORMAL, ATTR_COLOR, ATTR_LIGHT, ATTR_HALF, ATTR_COLS = 0, 3, 6, 9, 12, 15
 #: Channels of the ground cache written by :func:`ground_cache`: ambient rgb, direct rgb, world point.
 GROUND_CHANNELS = 9
+#: View depth [m] below which a vertex counts as on the eye plane (1/z would overflow) ...
+EYE_PLANE_DEPTH = 1e-12
+#: ... and the inverse depth [1/m] such a vertex gets when it is not behind the eye.
+EYE_PLANE_INV_DEPTH = 1e12
+#: Length below which a normal or half vector is left unnormalised (avoids 0/0).
+NORMALIZE_EPS = 1e-20
+#: Edge slopes [px/px] below this are treated as vertical: the exact per-sample test decides.
+EDGE_SLOPE_EPS = 1e-6
+#: Triangles with a smaller doubled screen area [px^2] are degenerate and skipped.
+MIN_AREA = 1e-12
+#: Offsets of a row's first and last sample centre from a span's ends: half a pixel, widened by
+#: 1e-3 px against rounding (the exact edge test below them keeps shared edges watertight).
+SPAN_LO_OFFSET, SPAN_HI_OFFSET = 0.501, 0.499
+#: Margin [px] around a sphere's projected radius.
+SPHERE_PAD = 1.0
+#: Floor of cz^2 - r^2 [m^2] in a sphere's projected radius (an eye on the sphere's silhouette cone).
+SPHERE_SILHOUETTE_EPS = 1e-12
 
 
-@ti.func
-def _key(depth: ti.f32, ident: ti.i32, tag: ti.i32) -> ti.i64:
-    """(depth bits << 32) | (tag << 24) | ident; tag 0 for spheres, 1 + 2 (mesh % 127) + back for triangles."""
-    bits = ti.cast(ti.bit_cast(depth, ti.i32), ti.i64) << 32
-    return bits | (ti.cast(tag, ti.i64) << 24) | ti.cast(ident, ti.i64)
+@_ti.cached_kernels
+def kernels():
+    """The 3D rasterising kernels (built once per process): ``grid_normals``, ``vertices``,
+    ``raster_triangles``, ``raster_spheres``; the array types and the ``ti.func`` helpers
+    ``_key``, ``_depth``, ``_row3`` are in the namespace too (the shading pass uses them)."""
+    ti = _ti.get()
+    f32a2 = ti.types.ndarray(dtype=ti.f32, ndim=2)
+    f32a1 = ti.types.ndarray(dtype=ti.f32, ndim=1)
+    i32a2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32a1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+    i64a2 = ti.types.ndarray(dtype=ti.i64, ndim=2)
+    u8a3 = ti.types.ndarray(dtype=ti.u8, ndim=3)
+    u32a2 = ti.types.ndarray(dtype=ti.u32, ndim=2)
+    f32a3 = ti.types.ndarray(dtype=ti.f32, ndim=3)
 
+    @ti.func
+    def _key(depth: ti.f32, ident: ti.i32, tag: ti.i32) -> ti.i64:
+        """(depth bits << 32) | (tag << 24) | ident; tag 0 for spheres, 1 + 2 (mesh % 127) + back for triangles."""
+        bits = ti.cast(ti.bit_cast(depth, ti.i32), ti.i64) << 32
+        return bits | (ti.cast(tag, ti.i64) << 24) | ti.cast(ident, ti.i64)
 
-@ti.func
-def _depth(key: ti.i64) -> ti.f32:
-    return ti.bit_cast(ti.cast(key >> 32, ti.i32), ti.f32)
+    @ti.func
+    def _depth(key: ti.i64) -> ti.f32:
+        return ti.bit_cast(ti.cast(key >> 32, ti.i32), ti.f32)
 
+    @ti.func
+    def _write(buf: ti.template(), dmap: ti.template(), ortho: ti.template(), py, px, z, ident, tag):
+        """Keep the nearest: the key in ``buf`` (camera) or the depth bits in ``dmap`` (shadow map)."""
+        if ti.static(ortho):
+            d = ti.bit_cast(z, ti.i32)
+            if d < dmap[py, px]:  # a plain read first: most samples need no atomic
+                ti.atomic_min(dmap[py, px], d)
+        else:
+            k = _key(z, ident, tag)
+            if k < buf[py, px]:
+                ti.atomic_min(buf[py, px], k)
 
-@ti.func
-def _write(buf: ti.template(), dmap: ti.template(), ortho: ti.template(), py, px, z, ident, tag):
-    """Keep the nearest: the key in ``buf`` (camera) or the depth bits in ``dmap`` (shadow map)."""
-    if ti.static(ortho):
-        d = ti.bit_cast(z, ti.i32)
-        if d < dmap[py, px]:  # a plain read first: most samples need no atomic
-            ti.atomic_min(dmap[py, px], d)
-    else:
-        k = _key(z, ident, tag)
-        if k < buf[py, px]:
-            ti.atomic_min(buf[py, px], k)
+    @ti.func
+    def _row3(a: ti.template(), i, c0: ti.template()):
+        return ti.Vector([a[i, c0], a[i, c0 + 1], a[i, c0 + 2]])
 
+    @ti.kernel
+    def grid_normals(verts: f32a2, offset: ti.i32, ny: ti.i32, nx: ti.i32, normals: f32a2):
+        """Unnormalised normals of the grid ``verts[offset : offset + ny*nx]`` (row-major, index r*nx + c).
 
-@ti.func
-def _row3(a: ti.template(), i, c0: ti.template()):
-    return ti.Vector([a[i, c0], a[i, c0 + 1], a[i, c0 + 2]])
+        n = (x[r+1, c] - x[r-1, c]) x (x[r, c+1] - x[r, c-1]) (central differences,
+        one-sided on the border): the cross product of the two tangents of the
+        surface, oriented like the triangles of :func:`grid_faces`.
+        """
+        for i in range(ny * nx):
+            r, c = i // nx, i % nx
+            r0, r1 = ti.max(r - 1, 0), ti.min(r + 1, ny - 1)
+            c0, c1 = ti.max(c - 1, 0), ti.min(c + 1, nx - 1)
+            tr = _row3(verts, offset + r1 * nx + c, 0) - _row3(verts, offset + r0 * nx + c, 0)
+            tc = _row3(verts, offset + r * nx + c1, 0) - _row3(verts, offset + r * nx + c0, 0)
+            n = tr.cross(tc)
+            for k in ti.static(range(3)):
+                normals[offset + i, k] = n[k]
 
+    @ti.kernel
+    def vertices(verts: f32a2, normals: f32a2, colors: f32a2, cam: f32a2, lcam: f32a2, prm: f32a1, attr: f32a2):
+        """Pack per-vertex attributes ``attr`` (V, 12).
 
-@ti.kernel
-def grid_normals(verts: f32a2, offset: ti.i32, ny: ti.i32, nx: ti.i32, normals: f32a2):
-    """Unnormalised normals of the grid ``verts[offset : offset + ny*nx]`` (row-major, index r*nx + c).
+        verts, normals, colors: (V, 3) world positions [m], normals (any length), sRGB in [0, 1];
+        cam, lcam: (4, 3) rows right, up, forward, origin of the camera and of the light;
+        prm: [0] focal [px], [1] width, [2] height [px] of the sample grid, [3] shadow-map focal [px/m],
+        [4] shadow-map size [texels], [5:8] unit vector towards the light.
+        attr columns: 0-2 sample-grid x, y [px] and 1/depth [1/m] (Hartley & Zisserman eq. 6.1; -1 behind the eye),
+        3-5 unit normal, 6-8 linear colour (gamma 2), 9-11 shadow-map x, y [texels] and light depth [m],
+        12-14 the unit Blinn half vector (L + V)/|L + V| at the vertex (interpolated, it stands in for the
+        per-pixel one: Phong shading with per-vertex view vectors).
+        """
+        f, hw, hh, lf, hs = prm[0], 0.5 * prm[1], 0.5 * prm[2], prm[3], 0.5 * prm[4]
+        R, U, Fw, eye = _row3(cam, 0, 0), _row3(cam, 1, 0), _row3(cam, 2, 0), _row3(cam, 3, 0)
+        LR, LU, LF, lo = _row3(lcam, 0, 0), _row3(lcam, 1, 0), _row3(lcam, 2, 0), _row3(lcam, 3, 0)
+        Ld = ti.Vector([prm[5], prm[6], prm[7]])
+        for i in range(verts.shape[0]):
+            p = _row3(verts, i, 0)
+            d = p - eye
+            z = d.dot(Fw)
+            iz = -1.0
+            if ti.abs(z) >= EYE_PLANE_DEPTH:
+                iz = 1.0 / z
+            elif z >= 0.0:
+                iz = EYE_PLANE_INV_DEPTH
+            attr[i, 0] = hw + f * d.dot(R) * iz
+            attr[i, 1] = hh - f * d.dot(U) * iz
+            attr[i, 2] = ti.select(z > 0.0, iz, -1.0)
+            n = _row3(normals, i, 0).normalized(NORMALIZE_EPS)
+            c = _row3(colors, i, 0)
+            dl = p - lo
+            for k in ti.static(range(3)):
+                attr[i, 3 + k] = n[k]
+                attr[i, 6 + k] = c[k] * c[k]
+            attr[i, 9] = hs + lf * dl.dot(LR)
+            attr[i, 10] = hs - lf * dl.dot(LU)
+            attr[i, 11] = dl.dot(LF)
+            hv = (Ld - d.normalized(NORMALIZE_EPS)).normalized(NORMALIZE_EPS)
+            for k in ti.static(range(3)):
+                attr[i, 12 + k] = hv[k]
 
-    n = (x[r+1, c] - x[r-1, c]) x (x[r, c+1] - x[r, c-1]) (central differences,
-    one-sided on the border): the cross product of the two tangents of the
-    surface, oriented like the triangles of :func:`grid_faces`.
-    """
-    for i in range(ny * nx):
-        r, c = i // nx, i % nx
-        r0, r1 = ti.max(r - 1, 0), ti.min(r + 1, ny - 1)
-        c0, c1 = ti.max(c - 1, 0), ti.min(c + 1, nx - 1)
-        tr = _row3(verts, offset + r1 * nx + c, 0) - _row3(verts, offset + r0 * nx + c, 0)
-        tc = _row3(verts, offset + r * nx + c1, 0) - _row3(verts, offset + r * nx + c0, 0)
-        n = tr.cross(tc)
-        for k in ti.static(range(3)):
-            normals[offset + i, k] = n[k]
+    @ti.func
+    def _safe_inv(b):
+        r = 0.0
+        if ti.abs(b) > EDGE_SLOPE_EPS:
+            r = 1.0 / b
+        return r
 
+    @ti.func
+    def _clip_span(lo, hi, root, b):
+        """Intersect [lo, hi] with {X : b (X - root) >= 0}; |b| <= EDGE_SLOPE_EPS leaves it unchanged (the exact test decides)."""
+        if b > EDGE_SLOPE_EPS:
+            lo = ti.max(lo, root)
+        elif b < -EDGE_SLOPE_EPS:
+            hi = ti.min(hi, root)
+        return lo, hi
 
-@ti.kernel
-def vertices(verts: f32a2, normals: f32a2, colors: f32a2, cam: f32a2, lcam: f32a2, prm: f32a1, attr: f32a2):
-    """Pack per-vertex attributes ``attr`` (V, 12).
+    @ti.kernel
+    def raster_triangles(attr: f32a2, col: ti.i32, faces: i32a2, fmat: i32a1, ortho: ti.template(), near: ti.f32,
+                         buf: i64a2, dmap: i32a2):
+        """Write the nearest-triangle keys into ``buf`` (H, W), or (``ortho``) depths into ``dmap`` (H, W).
 
-    verts, normals, colors: (V, 3) world positions [m], normals (any length), sRGB in [0, 1];
-    cam, lcam: (4, 3) rows right, up, forward, origin of the camera and of the light;
-    prm: [0] focal [px], [1] width, [2] height [px] of the sample grid, [3] shadow-map focal [px/m],
-    [4] shadow-map size [texels], [5:8] unit vector towards the light.
-    attr columns: 0-2 sample-grid x, y [px] and 1/depth [1/m] (Hartley & Zisserman eq. 6.1; -1 behind the eye),
-    3-5 unit normal, 6-8 linear colour (gamma 2), 9-11 shadow-map x, y [texels] and light depth [m],
-    12-14 the unit Blinn half vector (L + V)/|L + V| at the vertex (interpolated, it stands in for the
-    per-pixel one: Phong shading with per-vertex view vectors).
-    """
-    f, hw, hh, lf, hs = prm[0], 0.5 * prm[1], 0.5 * prm[2], prm[3], 0.5 * prm[4]
-    R, U, Fw, eye = _row3(cam, 0, 0), _row3(cam, 1, 0), _row3(cam, 2, 0), _row3(cam, 3, 0)
-    LR, LU, LF, lo = _row3(lcam, 0, 0), _row3(lcam, 1, 0), _row3(lcam, 2, 0), _row3(lcam, 3, 0)
-    Ld = ti.Vector([prm[5], prm[6], prm[7]])
-    for i in range(verts.shape[0]):
-        p = _row3(verts, i, 0)
-        d = p - eye
-        z = d.dot(Fw)
-        iz = -1.0
-        if ti.abs(z) >= 1e-12:
-            iz = 1.0 / z
-        elif z >= 0.0:
-            iz = 1e12
-        attr[i, 0] = hw + f * d.dot(R) * iz
-        attr[i, 1] = hh - f * d.dot(U) * iz
-        attr[i, 2] = ti.select(z > 0.0, iz, -1.0)
-        n = _row3(normals, i, 0).normalized(1e-20)
-        c = _row3(colors, i, 0)
-        dl = p - lo
-        for k in ti.static(range(3)):
-            attr[i, 3 + k] = n[k]
-            attr[i, 6 + k] = c[k] * c[k]
-        attr[i, 9] = hs + lf * dl.dot(LR)
-        attr[i, 10] = hs - lf * dl.dot(LU)
-        attr[i, 11] = dl.dot(LF)
-        hv = (Ld - d.normalized(1e-20)).normalized(1e-20)
-        for k in ti.static(range(3)):
-            attr[i, 12 + k] = hv[k]
+        attr: (V, C) with screen x, y [px] in columns ``col``, ``col+1`` and in ``col+2`` the inverse
+        depth 1/z (perspective, ``ortho=False``: interpolated linearly, so depth is perspective-correct;
+        a triangle with a vertex nearer than ``near`` [m] is skipped) or the depth (``ortho=True``,
+        shadow maps: positive depths, stored as their float bits with an integer atomic min).
+        faces: (F, 3); fmat: (F,) mesh index of each face (for the tag of the key).
+        A sample at (px + 0.5, py + 0.5) is covered when its three barycentrics are >= 0.
+        """
+        H, W = buf.shape[0], buf.shape[1]
+        if ti.static(ortho):
+            H, W = dmap.shape[0], dmap.shape[1]
+        inear = 1.0 / near
+        for f in range(faces.shape[0]):
+            a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+            x0, y0, q0 = attr[a, col], attr[a, col + 1], attr[a, col + 2]
+            x1, y1, q1 = attr[b, col], attr[b, col + 1], attr[b, col + 2]
+            x2, y2, q2 = attr[c, col], attr[c, col + 1], attr[c, col + 2]
+            area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
+            visible = ti.static(ortho) or (ti.min(q0, q1, q2) > 0.0 and ti.max(q0, q1, q2) < inear)
+            if visible and ti.abs(area) > MIN_AREA:
+                xmin = ti.max(ti.cast(ti.floor(ti.min(x0, x1, x2) - 0.5), ti.i32), 0)
+                xmax = ti.min(ti.cast(ti.ceil(ti.max(x0, x1, x2) - 0.5), ti.i32), W - 1)
+                ymin = ti.max(ti.cast(ti.floor(ti.min(y0, y1, y2) - 0.5), ti.i32), 0)
+                ymax = ti.min(ti.cast(ti.ceil(ti.max(y0, y1, y2) - 0.5), ti.i32), H - 1)
+                inv = 1.0 / area
+                # y points down: counter-clockwise on screen (area > 0) faces away from the triangle normal
+                tag = 1 + 2 * (fmat[f] % 127) + ti.cast(area > 0.0, ti.i32)
+                # edge functions relative to vertex 0, times sign(area): e_k(X, Y) = k_k + bx_k X + by_k Y >= 0;
+                # on row Y each bounds X from one side: X >= -e/bx when bx > 0, X <= -e/bx when bx < 0
+                s = 1.0
+                if area < 0.0:
+                    s = -1.0
+                bx0, by0 = s * (y1 - y2), s * (x2 - x1)
+                bx1, by1 = s * (y2 - y0), s * (x0 - x2)
+                bx2, by2 = s * (y0 - y1), s * (x1 - x0)
+                k0 = s * area
+                ib0, ib1, ib2 = _safe_inv(bx0), _safe_inv(bx1), _safe_inv(bx2)
+                for py in range(ymin, ymax + 1):
+                    cy = py + 0.5
+                    Y = cy - y0
+                    lo, hi = ti.cast(xmin - x0 - 0.5, ti.f32), ti.cast(xmax - x0 + 0.5, ti.f32)
+                    lo, hi = _clip_span(lo, hi, -(k0 + by0 * Y) * ib0, bx0)
+                    lo, hi = _clip_span(lo, hi, -(by1 * Y) * ib1, bx1)
+                    lo, hi = _clip_span(lo, hi, -(by2 * Y) * ib2, bx2)
+                    # sample centres px + 0.5 in [x0 + lo, x0 + hi] (SPAN_*_OFFSET)
+                    pa = ti.max(ti.cast(ti.ceil(x0 + lo - SPAN_LO_OFFSET), ti.i32), xmin)
+                    pb = ti.min(ti.cast(ti.floor(x0 + hi - SPAN_HI_OFFSET), ti.i32), xmax)
+                    for px in range(pa, pb + 1):
+                        cx = px + 0.5
+                        w0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * inv
+                        w1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * inv
+                        w2 = 1.0 - w0 - w1
+                        if w0 >= 0.0 and w1 >= 0.0 and w2 >= 0.0:
+                            z = w0 * q0 + w1 * q1 + w2 * q2
+                            if ti.static(not ortho):
+                                z = 1.0 / z
+                            _write(buf, dmap, ortho, py, px, z, f, tag)
 
+    @ti.kernel
+    def raster_spheres(
+        cen: f32a2, rad: f32a1, focal: ti.f32, ortho: ti.template(), near: ti.f32, id_offset: ti.i32, buf: i64a2,
+        dmap: i32a2,
+    ):
+        """cen: (P, 3) view-space centres [m]; rad: (P,) radii [m]; buf: (H, W) keys, or (``ortho``) dmap: depths.
 
-@ti.func
-def _safe_inv(b):
-    r = 0.0
-    if ti.abs(b) > 1e-6:
-        r = 1.0 / b
-    return r
+        Perspective: the ray through a pixel is t (dx, dy, 1), so t is the depth of the hit.
+        Orthographic (shadow maps): pixel = focal * (x, y) + centre of the map, depth = z.
+        """
+        H, W = buf.shape[0], buf.shape[1]
+        if ti.static(ortho):
+            H, W = dmap.shape[0], dmap.shape[1]
+        ox, oy = 0.5 * W, 0.5 * H
+        ifocal = 1.0 / focal
+        for p in range(cen.shape[0]):
+            cx, cy, cz, r = cen[p, 0], cen[p, 1], cen[p, 2], rad[p]
+            if ti.static(ortho) or cz - r > near:
+                sx, sy, rp = 0.0, 0.0, 0.0
+                if ti.static(ortho):
+                    sx, sy, rp = ox + focal * cx, oy - focal * cy, focal * r
+                else:
+                    sx, sy = ox + focal * cx / cz, oy - focal * cy / cz
+                    rp = focal * r / ti.sqrt(ti.max(cz * cz - r * r, SPHERE_SILHOUETTE_EPS)) * (1.0 + r / cz)
+                xmin = ti.max(ti.cast(ti.floor(sx - rp - SPHERE_PAD), ti.i32), 0)
+                xmax = ti.min(ti.cast(ti.ceil(sx + rp + SPHERE_PAD), ti.i32), W - 1)
+                ymin = ti.max(ti.cast(ti.floor(sy - rp - SPHERE_PAD), ti.i32), 0)
+                ymax = ti.min(ti.cast(ti.ceil(sy + rp + SPHERE_PAD), ti.i32), H - 1)
+                c2 = cx * cx + cy * cy + cz * cz - r * r
+                for py in range(ymin, ymax + 1):
+                    dy = -(py + 0.5 - oy) * ifocal
+                    for px in range(xmin, xmax + 1):
+                        dx = (px + 0.5 - ox) * ifocal
+                        if ti.static(ortho):
+                            ex, ey = dx - cx, dy - cy
+                            h = r * r - ex * ex - ey * ey
+                            if h >= 0.0:
+                                _write(buf, dmap, ortho, py, px, cz - ti.sqrt(h), p + id_offset, 0)
+                        else:
+                            a = dx * dx + dy * dy + 1.0
+                            b = dx * cx + dy * cy + cz
+                            disc = b * b - a * c2
+                            if disc >= 0.0:
+                                t = (b - ti.sqrt(disc)) / a
+                                if t > near:
+                                    _write(buf, dmap, ortho, py, px, t, p + id_offset, 0)
 
-
-@ti.func
-def _clip_span(lo, hi, root, b):
-    """Intersect [lo, hi] with {X : b (X - root) >= 0}; |b| <= 1e-6 leaves it unchanged (the exact test decides)."""
-    if b > 1e-6:
-        lo = ti.max(lo, root)
-    elif b < -1e-6:
-        hi = ti.min(hi, root)
-    return lo, hi
-
-
-@ti.kernel
-def raster_triangles(attr: f32a2, col: ti.i32, faces: i32a2, fmat: i32a1, ortho: ti.template(), near: ti.f32,
-                     buf: i64a2, dmap: i32a2):
-    """Write the nearest-triangle keys into ``buf`` (H, W), or (``ortho``) depths into ``dmap`` (H, W).
-
-    attr: (V, C) with screen x, y [px] in columns ``col``, ``col+1`` and in ``col+2`` the inverse
-    depth 1/z (perspective, ``ortho=False``: interpolated linearly, so depth is perspective-correct;
-    a triangle with a vertex nearer than ``near`` [m] is skipped) or the depth (``ortho=True``,
-    shadow maps: positive depths, stored as their float bits with an integer atomic min).
-    faces: (F, 3); fmat: (F,) mesh index of each face (for the tag of the key).
-    A sample at (px + 0.5, py + 0.5) is covered when its three barycentrics are >= 0.
-    """
-    H, W = buf.shape[0], buf.shape[1]
-    if ti.static(ortho):
-        H, W = dmap.shape[0], dmap.shape[1]
-    inear = 1.0 / near
-    for f in range(faces.shape[0]):
-        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-        x0, y0, q0 = attr[a, col], attr[a, col + 1], attr[a, col + 2]
-        x1, y1, q1 = attr[b, col], attr[b, col + 1], attr[b, col + 2]
-        x2, y2, q2 = attr[c, col], attr[c, col + 1], attr[c, col + 2]
-        area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-        visible = ti.static(ortho) or (ti.min(q0, q1, q2) > 0.0 and ti.max(q0, q1, q2) < inear)
-        if visible and ti.abs(area) > 1e-12:
-            xmin = ti.max(ti.cast(ti.floor(ti.min(x0, x1, x2) - 0.5), ti.i32), 0)
-            xmax = ti.min(ti.cast(ti.ceil(ti.max(x0, x1, x2) - 0.5), ti.i32), W - 1)
-            ymin = ti.max(ti.cast(ti.floor(ti.min(y0, y1, y2) - 0.5), ti.i32), 0)
-            ymax = ti.min(ti.cast(ti.ceil(ti.max(y0, y1, y2) - 0.5), ti.i32), H - 1)
-            inv = 1.0 / area
-            # y points down: counter-clockwise on screen (area > 0) faces away from the triangle normal
-            tag = 1 + 2 * (fmat[f] % 127) + ti.cast(area > 0.0, ti.i32)
-            # edge functions relative to vertex 0, times sign(area): e_k(X, Y) = k_k + bx_k X + by_k Y >= 0;
-            # on row Y each bounds X from one side: X >= -e/bx when bx > 0, X <= -e/bx when bx < 0
-            s = 1.0
-            if area < 0.0:
-                s = -1.0
-            bx0, by0 = s * (y1 - y2), s * (x2 - x1)
-            bx1, by1 = s * (y2 - y0), s * (x0 - x2)
-            bx2, by2 = s * (y0 - y1), s * (x1 - x0)
-            k0 = s * area
-            ib0, ib1, ib2 = _safe_inv(bx0), _safe_inv(bx1), _safe_inv(bx2)
-            for py in range(ymin, ymax + 1):
-                cy = py + 0.5
-                Y = cy - y0
-                lo, hi = ti.cast(xmin - x0 - 0.5, ti.f32), ti.cast(xmax - x0 + 0.5, ti.f32)
-                lo, hi = _clip_span(lo, hi, -(k0 + by0 * Y) * ib0, bx0)
-                lo, hi = _clip_span(lo, hi, -(by1 * Y) * ib1, bx1)
-                lo, hi = _clip_span(lo, hi, -(by2 * Y) * ib2, bx2)
-                # sample centres px + 0.5 in [x0 + lo, x0 + hi], widened by 1e-3 px against rounding;
-                # the exact test below decides (shared edges stay watertight)
-                pa = ti.max(ti.cast(ti.ceil(x0 + lo - 0.501), ti.i32), xmin)
-                pb = ti.min(ti.cast(ti.floor(x0 + hi - 0.499), ti.i32), xmax)
-                for px in range(pa, pb + 1):
-                    cx = px + 0.5
-                    w0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * inv
-                    w1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * inv
-                    w2 = 1.0 - w0 - w1
-                    if w0 >= 0.0 and w1 >= 0.0 and w2 >= 0.0:
-                        z = w0 * q0 + w1 * q1 + w2 * q2
-                        if ti.static(not ortho):
-                            z = 1.0 / z
-                        _write(buf, dmap, ortho, py, px, z, f, tag)
-
-
-@ti.kernel
-def raster_spheres(
-    cen: f32a2, rad: f32a1, focal: ti.f32, ortho: ti.template(), near: ti.f32, id_offset: ti.i32, buf: i64a2,
-    dmap: i32a2,
-):
-    """cen: (P, 3) view-space centres [m]; rad: (P,) radii [m]; buf: (H, W) keys, or (``ortho``) dmap: depths.
-
-    Perspective: the ray through a pixel is t (dx, dy, 1), so t is the depth of the hit.
-    Orthographic (shadow maps): pixel = focal * (x, y) + centre of the map, depth = z.
-    """
-    H, W = buf.shape[0], buf.shape[1]
-    if ti.static(ortho):
-        H, W = dmap.shape[0], dmap.shape[1]
-    ox, oy = 0.5 * W, 0.5 * H
-    ifocal = 1.0 / focal
-    for p in range(cen.shape[0]):
-        cx, cy, cz, r = cen[p, 0], cen[p, 1], cen[p, 2], rad[p]
-        if ti.static(ortho) or cz - r > near:
-            sx, sy, rp = 0.0, 0.0, 0.0
-            if ti.static(ortho):
-                sx, sy, rp = ox + focal * cx, oy - focal * cy, focal * r
-            else:
-                sx, sy = ox + focal * cx / cz, oy - focal * cy / cz
-                rp = focal * r / ti.sqrt(ti.max(cz * cz - r * r, 1e-12)) * (1.0 + r / cz)
-            xmin = ti.max(ti.cast(ti.floor(sx - rp - 1.0), ti.i32), 0)
-            xmax = ti.min(ti.cast(ti.ceil(sx + rp + 1.0), ti.i32), W - 1)
-            ymin = ti.max(ti.cast(ti.floor(sy - rp - 1.0), ti.i32), 0)
-            ymax = ti.min(ti.cast(ti.ceil(sy + rp + 1.0), ti.i32), H - 1)
-            c2 = cx * cx + cy * cy + cz * cz - r * r
-            for py in range(ymin, ymax + 1):
-                dy = -(py + 0.5 - oy) * ifocal
-                for px in range(xmin, xmax + 1):
-                    dx = (px + 0.5 - ox) * ifocal
-                    if ti.static(ortho):
-                        ex, ey = dx - cx, dy - cy
-                        h = r * r - ex * ex - ey * ey
-                        if h >= 0.0:
-                            _write(buf, dmap, ortho, py, px, cz - ti.sqrt(h), p + id_offset, 0)
-                    else:
-                        a = dx * dx + dy * dy + 1.0
-                        b = dx * cx + dy * cy + cz
-                        disc = b * b - a * c2
-                        if disc >= 0.0:
-                            t = (b - ti.sqrt(disc)) / a
-                            if t > near:
-                                _write(buf, dmap, ortho, py, px, t, p + id_offset, 0)
+    return SimpleNamespace(
+        grid_normals=grid_normals, vertices=vertices, raster_triangles=raster_triangles,
+        raster_spheres=raster_spheres, _key=_key, _depth=_depth, _row3=_row3,
+        f32a1=f32a1, f32a2=f32a2, f32a3=f32a3, i32a1=i32a1, i32a2=i32a2, i64a2=i64a2, u8a3=u8a3, u32a2=u32a2,
+    )

@@ -6,342 +6,356 @@ once; ``ground_cache`` precomputes the ground's per-pixel shading for a fixed ca
 See :mod:`tianim.render._kernels3d` for the whole pipeline and its references.
 """
 
-import taichi as ti
+from types import SimpleNamespace
 
-from tianim.render._kernels3d import (
-    EMPTY, _ID_MASK, f32a2, f32a1, i32a2, i32a1, i64a2, u8a3, u32a2, f32a3, _depth, _row3,
-)
+from tianim import _ti
+from tianim.render import _kernels3d
+from tianim.render._kernels3d import EMPTY, _ID_MASK
 
-
-@ti.func
-def _lin(c):
-    # gamma 2 (close to sRGB's 2.2, and a multiply instead of a pow)
-    return c * c
-
-
-@ti.func
-def _light_frame(smap: ti.template(), lcam: ti.template(), lfocal, bias, bbox: ti.template()):
-    """(3, 6): columns 0-3 the affine map from a world point to shadow-map texel coordinates x, y
-    (texel centres at integers) and the light depth minus ``bias``; columns 4-5 of rows 0-1 the
-    range of the lower-left texel index of a bilinear lookup that can meet a non-empty texel
-    (``bbox``: [x0, x1, y0, y1] of the texels primitives cover); outside it a point is lit."""
-    Hs, Ws = smap.shape[0], smap.shape[1]
-    o = _row3(lcam, 3, 0)
-    r, u, f = _row3(lcam, 0, 0), _row3(lcam, 1, 0), _row3(lcam, 2, 0)
-    return ti.Matrix([[lfocal * r[0], lfocal * r[1], lfocal * r[2], 0.5 * Ws - 0.5 - lfocal * o.dot(r),
-                       ti.max(bbox[0] - 1.0, 0.0), ti.min(bbox[1], Ws - 2.0)],
-                      [-lfocal * u[0], -lfocal * u[1], -lfocal * u[2], 0.5 * Hs - 0.5 + lfocal * o.dot(u),
-                       ti.max(bbox[2] - 1.0, 0.0), ti.min(bbox[3], Hs - 2.0)],
-                      [f[0], f[1], f[2], -o.dot(f) - bias, 0.0, 0.0]])
+#: Hemisphere ambient: ambient * (HEMI_MEAN + HEMI_TILT * N.up), 1 for a normal facing up, 0.55 facing down.
+HEMI_MEAN, HEMI_TILT = 0.775, 0.225
+#: Blinn-Phong exponent 32 = 2**5, computed by this many squarings of N.H.
+SPECULAR_SQUARINGS = 5
+#: Depth [m] of a sample that meets nothing (near float32's largest value).
+FAR_DEPTH = 3.0e38
+#: A ground ray's up-component is at most -HORIZON_EPS: rays at or above the horizon meet the plane very far away.
+HORIZON_EPS = 1e-9
+#: Ray parameter beyond which the ground is treated as missed (it fades fully into the sky).
+GROUND_MISS_T = 1e30
+#: Bounds of a pixel's footprint on the ground, in checker cells: wider boxes average to 1/2
+#: anyway, and a zero width would divide by zero in the filtered checker.
+MAX_FOOTPRINT, MIN_FOOTPRINT = 1.0e3, 1e-3
+#: Length below which a shading normal is left unnormalised (avoids 0/0).
+SHADE_NORMALIZE_EPS = 1e-12
 
 
-@ti.func
-def _light_coords(P, lsh):
-    return ti.Vector([lsh[k, 0] * P[0] + lsh[k, 1] * P[1] + lsh[k, 2] * P[2] + lsh[k, 3] for k in ti.static(range(3))])
+@_ti.cached_kernels
+def kernels():
+    """The shading kernels (built once per process): ``ground_cache`` and ``resolve``."""
+    ti = _ti.get()
+    k3 = _kernels3d.kernels()
+    _depth, _row3 = k3._depth, k3._row3
+    f32a1, f32a2, f32a3, i32a1, i32a2 = k3.f32a1, k3.f32a2, k3.f32a3, k3.i32a1, k3.i32a2
+    i64a2, u8a3, u32a2 = k3.i64a2, k3.u8a3, k3.u32a2
 
+    @ti.func
+    def _lin(c):
+        # gamma 2 (close to sRGB's 2.2, and a multiply instead of a pow)
+        return c * c
 
-@ti.func
-def _shadow(l, lsh, smap: ti.template()):
-    """Fraction of light reaching a point with texel coordinates ``l`` (from :func:`_light_coords`):
-    a bilinear percentage-closer filter of 2x2 texels (Reeves, Salesin & Cook 1987)."""
-    lit = 1.0
-    Hs, Ws = smap.shape[0], smap.shape[1]
-    if Hs > 1:
-        fx, fy, lz = l[0], l[1], l[2]
-        ix, iy = ti.cast(ti.floor(fx), ti.i32), ti.cast(ti.floor(fy), ti.i32)
-        tx, ty = fx - ix, fy - iy
-        if lsh[0, 4] <= ix <= lsh[0, 5] and lsh[1, 4] <= iy <= lsh[1, 5]:  # texels with depths
-            s00 = ti.select(ti.bit_cast(smap[iy, ix], ti.f32) < lz, 0.0, 1.0)
-            s10 = ti.select(ti.bit_cast(smap[iy, ix + 1], ti.f32) < lz, 0.0, 1.0)
-            s01 = ti.select(ti.bit_cast(smap[iy + 1, ix], ti.f32) < lz, 0.0, 1.0)
-            s11 = ti.select(ti.bit_cast(smap[iy + 1, ix + 1], ti.f32) < lz, 0.0, 1.0)
-            lit = (s00 + (s10 - s00) * tx) * (1.0 - ty) + (s01 + (s11 - s01) * tx) * ty
-    return lit
+    @ti.func
+    def _light_frame(smap: ti.template(), lcam: ti.template(), lfocal, bias, bbox: ti.template()):
+        """(3, 6): columns 0-3 the affine map from a world point to shadow-map texel coordinates x, y
+        (texel centres at integers) and the light depth minus ``bias``; columns 4-5 of rows 0-1 the
+        range of the lower-left texel index of a bilinear lookup that can meet a non-empty texel
+        (``bbox``: [x0, x1, y0, y1] of the texels primitives cover); outside it a point is lit."""
+        Hs, Ws = smap.shape[0], smap.shape[1]
+        o = _row3(lcam, 3, 0)
+        r, u, f = _row3(lcam, 0, 0), _row3(lcam, 1, 0), _row3(lcam, 2, 0)
+        return ti.Matrix([[lfocal * r[0], lfocal * r[1], lfocal * r[2], 0.5 * Ws - 0.5 - lfocal * o.dot(r),
+                           ti.max(bbox[0] - 1.0, 0.0), ti.min(bbox[1], Ws - 2.0)],
+                          [-lfocal * u[0], -lfocal * u[1], -lfocal * u[2], 0.5 * Hs - 0.5 + lfocal * o.dot(u),
+                           ti.max(bbox[2] - 1.0, 0.0), ti.min(bbox[3], Hs - 2.0)],
+                          [f[0], f[1], f[2], -o.dot(f) - bias, 0.0, 0.0]])
 
+    @ti.func
+    def _light_coords(P, lsh):
+        return ti.Vector([lsh[k, 0] * P[0] + lsh[k, 1] * P[1] + lsh[k, 2] * P[2] + lsh[k, 3] for k in ti.static(range(3))])
 
-@ti.func
-def _ground(gcache: ti.template(), gy, gx, smap: ti.template(), lfocal, lsh):
-    """Colour of the ground at cache pixel (gy, gx): ambient + visibility x direct (linear RGB)."""
-    P = ti.Vector([gcache[gy, gx, 6], gcache[gy, gx, 7], gcache[gy, gx, 8]])
-    lit = _shadow(_light_coords(P, lsh), lsh, smap)
-    return ti.Vector([gcache[gy, gx, k] + lit * gcache[gy, gx, 3 + k] for k in ti.static(range(3))])
+    @ti.func
+    def _shadow(l, lsh, smap: ti.template()):
+        """Fraction of light reaching a point with texel coordinates ``l`` (from :func:`_light_coords`):
+        a bilinear percentage-closer filter of 2x2 texels (Reeves, Salesin & Cook 1987)."""
+        lit = 1.0
+        Hs, Ws = smap.shape[0], smap.shape[1]
+        if Hs > 1:
+            fx, fy, lz = l[0], l[1], l[2]
+            ix, iy = ti.cast(ti.floor(fx), ti.i32), ti.cast(ti.floor(fy), ti.i32)
+            tx, ty = fx - ix, fy - iy
+            if lsh[0, 4] <= ix <= lsh[0, 5] and lsh[1, 4] <= iy <= lsh[1, 5]:  # texels with depths
+                s00 = ti.select(ti.bit_cast(smap[iy, ix], ti.f32) < lz, 0.0, 1.0)
+                s10 = ti.select(ti.bit_cast(smap[iy, ix + 1], ti.f32) < lz, 0.0, 1.0)
+                s01 = ti.select(ti.bit_cast(smap[iy + 1, ix], ti.f32) < lz, 0.0, 1.0)
+                s11 = ti.select(ti.bit_cast(smap[iy + 1, ix + 1], ti.f32) < lz, 0.0, 1.0)
+                lit = (s00 + (s10 - s00) * tx) * (1.0 - ty) + (s01 + (s11 - s01) * tx) * ty
+        return lit
 
+    @ti.func
+    def _ground(gcache: ti.template(), gy, gx, smap: ti.template(), lfocal, lsh):
+        """Colour of the ground at cache pixel (gy, gx): ambient + visibility x direct (linear RGB)."""
+        P = ti.Vector([gcache[gy, gx, 6], gcache[gy, gx, 7], gcache[gy, gx, 8]])
+        lit = _shadow(_light_coords(P, lsh), lsh, smap)
+        return ti.Vector([gcache[gy, gx, k] + lit * gcache[gy, gx, 3 + k] for k in ti.static(range(3))])
 
-@ti.func
-def _shade(N, up, base, Hh, L, ambient, spec, lit):
-    """Hemisphere ambient + Lambert + Blinn-Phong (half vector Hh) in linear RGB; returns linear RGB."""
-    amb = ambient * (0.775 + 0.225 * N.dot(up))
-    ndl = N.dot(L)
-    h = ti.max(N.dot(Hh), 0.0)
-    h = h * h
-    h = h * h
-    h = h * h
-    h = h * h
-    h = h * h  # (N.H)^32
-    s = 0.0
-    if ndl > 0.0:
-        s = spec * h * lit
-    return base * (amb + (1.0 - ambient) * ti.max(ndl, 0.0) * lit) + ti.Vector([s, s, s])
+    @ti.func
+    def _shade(N, up, base, Hh, L, ambient, spec, lit):
+        """Hemisphere ambient + Lambert + Blinn-Phong (half vector Hh) in linear RGB; returns linear RGB."""
+        amb = ambient * (HEMI_MEAN + HEMI_TILT * N.dot(up))
+        ndl = N.dot(L)
+        h = ti.max(N.dot(Hh), 0.0)
+        for _ in ti.static(range(SPECULAR_SQUARINGS)):
+            h = h * h  # (N.H)^32 after five
+        s = 0.0
+        if ndl > 0.0:
+            s = spec * h * lit
+        return base * (amb + (1.0 - ambient) * ti.max(ndl, 0.0) * lit) + ti.Vector([s, s, s])
 
+    @ti.func
+    def _checker(u1, u2, w1, w2):
+        """Fraction of the second checker colour over a box of widths (w1, w2) cells centred at (u1, u2).
 
-@ti.func
-def _checker(u1, u2, w1, w2):
-    """Fraction of the second checker colour over a box of widths (w1, w2) cells centred at (u1, u2).
+        The box-filtered XOR of two square waves, integrated analytically
+        (Quilez, "filtered checkerboard"): exact 0/1 inside cells, 1/2 when the box is wide.
+        """
+        i1 = 2.0 * (ti.abs(ti.math.fract((u1 - 0.5 * w1) * 0.5) - 0.5) - ti.abs(ti.math.fract((u1 + 0.5 * w1) * 0.5) - 0.5)) / w1
+        i2 = 2.0 * (ti.abs(ti.math.fract((u2 - 0.5 * w2) * 0.5) - 0.5) - ti.abs(ti.math.fract((u2 + 0.5 * w2) * 0.5) - 0.5)) / w2
+        return 0.5 - 0.5 * i1 * i2
 
-    The box-filtered XOR of two square waves, integrated analytically
-    (Quilez, "filtered checkerboard"): exact 0/1 inside cells, 1/2 when the box is wide.
-    """
-    i1 = 2.0 * (ti.abs(ti.math.fract((u1 - 0.5 * w1) * 0.5) - 0.5) - ti.abs(ti.math.fract((u1 + 0.5 * w1) * 0.5) - 0.5)) / w1
-    i2 = 2.0 * (ti.abs(ti.math.fract((u2 - 0.5 * w2) * 0.5) - 0.5) - ti.abs(ti.math.fract((u2 + 0.5 * w2) * 0.5) - 0.5)) / w2
-    return 0.5 - 0.5 * i1 * i2
-
-
-@ti.func
-def _classify(key, d_up, ground_on, h):
-    """Surface class of one sample and its depth: -2 sky, -3 ground, 2**24 + tag for one side of
-    one mesh (all its triangles), the id (< 2**24) for a sphere."""
-    cls = -2
-    z = ti.f32(3.0e38)
-    if key == ti.i64(EMPTY):
-        if ground_on and d_up < 0.0:
-            cls = -3
-    else:
-        z = _depth(key)
-        if ground_on and z * d_up < -h:  # the ground plane is nearer: t_ground = h / -d_up < z
-            cls = -3
+    @ti.func
+    def _classify(key, d_up, ground_on, h):
+        """Surface class of one sample and its depth: -2 sky, -3 ground, 2**24 + tag for one side of
+        one mesh (all its triangles), the id (< 2**24) for a sphere."""
+        cls = -2
+        z = ti.f32(FAR_DEPTH)
+        if key == ti.i64(EMPTY):
+            if ground_on and d_up < 0.0:
+                cls = -3
         else:
-            tag = ti.cast((key >> 24) & 0xFF, ti.i32)
-            cls = ti.cast(key & _ID_MASK, ti.i32)
-            if tag != 0:
-                cls = (1 << 24) + tag
-    return cls, z
+            z = _depth(key)
+            if ground_on and z * d_up < -h:  # the ground plane is nearer: t_ground = h / -d_up < z
+                cls = -3
+            else:
+                tag = ti.cast((key >> 24) & 0xFF, ti.i32)
+                cls = ti.cast(key & _ID_MASK, ti.i32)
+                if tag != 0:
+                    cls = (1 << 24) + tag
+        return cls, z
 
+    @ti.func
+    def _pack(acc):
+        """Linear RGB (gamma 2) -> 24-bit sRGB-ish bytes r | g << 8 | b << 16."""
+        c = ti.Vector([ti.cast(ti.min(ti.sqrt(ti.max(acc[k], 0.0)), 1.0) * 255.0 + 0.5, ti.i32) for k in ti.static(range(3))])
+        return ti.cast(c[0] | (c[1] << 8) | (c[2] << 16), ti.u64)
 
-@ti.func
-def _pack(acc):
-    """Linear RGB (gamma 2) -> 24-bit sRGB-ish bytes r | g << 8 | b << 16."""
-    c = ti.Vector([ti.cast(ti.min(ti.sqrt(ti.max(acc[k], 0.0)), 1.0) * 255.0 + 0.5, ti.i32) for k in ti.static(range(3))])
-    return ti.cast(c[0] | (c[1] << 8) | (c[2] << 16), ti.u64)
+    @ti.kernel
+    def ground_cache(cam: f32a2, light: f32a1, params: f32a1, step: ti.f32, cache: f32a3):
+        """The ground's unshadowed shading per pixel, kept while the camera and ground stay the same.
 
-
-@ti.kernel
-def ground_cache(cam: f32a2, light: f32a1, params: f32a1, step: ti.f32, cache: f32a3):
-    """The ground's unshadowed shading per pixel, kept while the camera and ground stay the same.
-
-    cache: (H, W, 9) for an image of H x W pixels (or samples): ambient rgb A, direct rgb B
-    (linear; the pixel's colour is A + lit B with lit the shadow-map visibility) and the world
-    point P [m] where the pixel's centre ray meets the ground. The checker is box-filtered over
-    the pixel's footprint on the plane (Quilez, "filtered checkerboard"); ``step`` is the ray
-    step of one pixel (1 / focal [1/px], times ssaa for a multisampled pixel). The ground fades
-    into the sky with distance from its centre (smoothstep). params as in :func:`resolve`, with
-    [0] the focal length of this grid [px]. Rays that miss the plane get A = sky, B = 0.
-    """
-    H, W = cache.shape[0], cache.shape[1]
-    ifocal = 1.0 / params[0]
-    ambient = params[1]
-    gh, cell, fade = params[13], params[20], params[24]
-    gc1 = _lin(ti.Vector([params[14], params[15], params[16]]))
-    gc2 = _lin(ti.Vector([params[17], params[18], params[19]]))
-    gcen = ti.Vector([params[21], params[22], params[23]])
-    R, U, Fw, eye = _row3(cam, 0, 0), _row3(cam, 1, 0), _row3(cam, 2, 0), _row3(cam, 3, 0)
-    L = ti.Vector([light[0], light[1], light[2]])
-    upv = ti.Vector([params[25], params[26], params[27]])
-    e1 = ti.Vector([params[28], params[29], params[30]])
-    e2 = ti.Vector([params[31], params[32], params[33]])
-    h = eye.dot(upv) - gh
-    Rn, Un = R.dot(upv), U.dot(upv)
-    inv_cell = 1.0 / cell
-    inv_fade2 = 1.0 / (fade * fade)
-    gc_1, gc_2 = gcen.dot(e1), gcen.dot(e2)
-    g_dif = (1.0 - ambient) * ti.max(upv.dot(L), 0.0)
-    for y in range(H):
-        tt = (y + 0.5) / H
-        bg = ti.Vector([0.0, 0.0, 0.0])
-        for k in ti.static(range(3)):
-            bg[k] = _lin(params[5 + k] * (1.0 - tt) + params[8 + k] * tt)
-        for x in range(W):
-            dx = (x + 0.5 - 0.5 * W) * ifocal
-            dy = -(y + 0.5 - 0.5 * H) * ifocal
-            D = dx * R + dy * U + Fw
-            d_up = ti.min(D.dot(upv), -1e-9)
-            tg = h / -d_up
-            P = eye + tg * D
-            u1, u2 = P.dot(e1), P.dot(e2)
-            # footprint of one pixel on the plane: d(P)/d(ray) = t (I - D up^T / (D.up)) (ray/plane hit)
-            sx = tg * step * (R - (Rn / d_up) * D)
-            sy = tg * step * (U - (Un / d_up) * D)
-            w1 = ti.min((ti.abs(sx.dot(e1)) + ti.abs(sy.dot(e1))) * inv_cell, 1.0e3) + 1e-3
-            w2 = ti.min((ti.abs(sx.dot(e2)) + ti.abs(sy.dot(e2))) * inv_cell, 1.0e3) + 1e-3
-            m = _checker(u1 * inv_cell, u2 * inv_cell, w1, w2)
-            base = gc1 * (1.0 - m) + gc2 * m
-            f = ti.min(((u1 - gc_1) * (u1 - gc_1) + (u2 - gc_2) * (u2 - gc_2)) * inv_fade2, 1.0)
-            f = f * f * (3.0 - 2.0 * f)
-            if h <= 0.0 or tg > 1e30:
-                f = 1.0
-            A = base * ambient * (1.0 - f) + bg * f  # constant normal: Lambert needs no per-pixel vectors
-            B = base * g_dif * (1.0 - f)
+        cache: (H, W, 9) for an image of H x W pixels (or samples): ambient rgb A, direct rgb B
+        (linear; the pixel's colour is A + lit B with lit the shadow-map visibility) and the world
+        point P [m] where the pixel's centre ray meets the ground. The checker is box-filtered over
+        the pixel's footprint on the plane (Quilez, "filtered checkerboard"); ``step`` is the ray
+        step of one pixel (1 / focal [1/px], times ssaa for a multisampled pixel). The ground fades
+        into the sky with distance from its centre (smoothstep). params as in :func:`resolve`, with
+        [0] the focal length of this grid [px]. Rays that miss the plane get A = sky, B = 0.
+        """
+        H, W = cache.shape[0], cache.shape[1]
+        ifocal = 1.0 / params[0]
+        ambient = params[1]
+        gh, cell, fade = params[13], params[20], params[24]
+        gc1 = _lin(ti.Vector([params[14], params[15], params[16]]))
+        gc2 = _lin(ti.Vector([params[17], params[18], params[19]]))
+        gcen = ti.Vector([params[21], params[22], params[23]])
+        R, U, Fw, eye = _row3(cam, 0, 0), _row3(cam, 1, 0), _row3(cam, 2, 0), _row3(cam, 3, 0)
+        L = ti.Vector([light[0], light[1], light[2]])
+        upv = ti.Vector([params[25], params[26], params[27]])
+        e1 = ti.Vector([params[28], params[29], params[30]])
+        e2 = ti.Vector([params[31], params[32], params[33]])
+        h = eye.dot(upv) - gh
+        Rn, Un = R.dot(upv), U.dot(upv)
+        inv_cell = 1.0 / cell
+        inv_fade2 = 1.0 / (fade * fade)
+        gc_1, gc_2 = gcen.dot(e1), gcen.dot(e2)
+        g_dif = (1.0 - ambient) * ti.max(upv.dot(L), 0.0)
+        for y in range(H):
+            tt = (y + 0.5) / H
+            bg = ti.Vector([0.0, 0.0, 0.0])
             for k in ti.static(range(3)):
-                cache[y, x, k] = A[k]
-                cache[y, x, 3 + k] = B[k]
-                cache[y, x, 6 + k] = P[k]
-
-
-@ti.kernel
-def resolve(
-    buf: i64a2,
-    ssaa: ti.template(),
-    per_sample: ti.i32,
-    n_tri: ti.i32,
-    attr: f32a2,
-    faces: i32a2,
-    fmat: i32a1,
-    mats: f32a2,
-    sph_view: f32a2,
-    sph_col: f32a2,
-    cam: f32a2,
-    light: f32a1,
-    params: f32a1,
-    smap: i32a2,
-    lcam: f32a2,
-    gcache: f32a3,
-    out_words: u32a2,
-    out: u8a3,
-):
-    """Shade the samples of each output pixel into the (H, W, 3) uint8 image.
-
-    buf: (H*ssaa, W*ssaa) keys; ssaa: samples per pixel per axis (a compile-time constant,
-    so the samples of a pixel live in registers); attr: packed vertex rows (see :func:`vertices`);
-    cam: (4, 3) rows right, up, forward, eye; light: (3,) unit vector towards the light;
-    params: [0] focal of the sample grid [px], [1] ambient, [2] specular, [3] shadow bias [m],
-    [4] relative depth tolerance of a surface group, [5:8] sky top rgb, [8:11] sky bottom rgb,
-    [11] shadow-map focal [px/m], [12] ground on, [13] ground height [m], [14:17] and [17:20] checker rgb,
-    [20] checker cell [m], [21:24] ground centre, [24] ground fade radius [m], [25:28] up,
-    [28:31] and [31:34] ground axes, [34:38] x0, x1, y0, y1: the shadow-map texels that primitives
-    cover; mats: (M, 3) back-side rgb per material; smap: the shadow map (depth bits per texel,
-    (1, 1) for none); lcam: (4, 3) light-space basis rows and origin; sph_view, sph_col: (P, 3) view-space centres [m]
-    and colours of the spheres; gcache: the ground per pixel (per sample if ``per_sample``),
-    see :func:`ground_cache`.
-    The image goes to ``out_words`` (H, 3W/4) uint32, the bytes of an (H, W, 3) image, when it has
-    more than one row (one store per 4/3 pixels), else to ``out`` (H, W, 3); H, W = buf's shape / ssaa.
-    The samples of a pixel are grouped by :func:`_classify` (and, within a class, by depth
-    within ``params[4]`` relative); each group is shaded once at its first sample.
-    """
-    NS = ti.static(ssaa * ssaa)
-    Hs, Ws = buf.shape[0], buf.shape[1]
-    Ho, Wo = Hs // ssaa, Ws // ssaa
-    words = out_words.shape[0] > 1
-    ifocal = 1.0 / params[0]
-    ambient, spec, bias, tol = params[1], params[2], params[3], params[4]
-    lfocal = params[11]
-    R, U, Fw, eye = _row3(cam, 0, 0), _row3(cam, 1, 0), _row3(cam, 2, 0), _row3(cam, 3, 0)
-    L = ti.Vector([light[0], light[1], light[2]])
-    upv = ti.Vector([params[25], params[26], params[27]])
-    h = eye.dot(upv) - params[13]  # eye height above the ground
-    ground_on = params[12] > 0.5 and h > 0.0
-    Rn, Un, Fn = R.dot(upv), U.dot(upv), Fw.dot(upv)
-    lsh = _light_frame(smap, lcam, lfocal, bias, ti.Vector([params[34], params[35], params[36], params[37]]))
-    for y in range(Ho):  # parallel over rows, serial along a row (much faster than ndrange on CPU)
-        tt = (y + 0.5) / Ho
-        bg = ti.Vector([0.0, 0.0, 0.0])
-        for k in ti.static(range(3)):
-            bg[k] = _lin(params[5 + k] * (1.0 - tt) + params[8 + k] * tt)
-        bits = ti.u64(0)  # bytes waiting for a whole 32-bit word
-        nbits = 0
-        word = 0
-        # d(up . ray)/d(sample column) and the value at sample (0, 0) of this row's pixels
-        kx = Rn * ifocal
-        row_d = (0.5 - 0.5 * Ws) * kx - (y * ssaa + 0.5 - 0.5 * Hs) * Un * ifocal + Fn
-        for x in range(Wo):
-            keys = ti.Vector([buf[y * ssaa + s // ssaa, x * ssaa + s % ssaa] for s in ti.static(range(NS))], ti.i64)
-            d0 = row_d + (x * ssaa) * kx
-            dup = ti.Vector([d0 + (s % ssaa) * kx - (s // ssaa) * Un * ifocal for s in ti.static(range(NS))])
-            all_keys = keys[0]
-            for s in ti.static(range(1, NS)):
-                all_keys &= keys[s]
-            acc = ti.Vector([0.0, 0.0, 0.0])
-            if all_keys == ti.i64(EMPTY) and per_sample == 0:
-                # no primitive in this pixel: sky and ground only, the ground shaded once
-                ng = 0
-                if ground_on:
-                    for s in ti.static(range(NS)):
-                        if dup[s] < 0.0:
-                            ng += 1
-                acc = (NS - ng) * bg
-                if ng > 0:
-                    acc += ng * _ground(gcache, y, x, smap, lfocal, lsh)
-            else:
-                cls = ti.Vector([0] * NS, ti.i32)
-                zs = ti.Vector([0.0] * NS, ti.f32)
-                for s in ti.static(range(NS)):
-                    cls[s], zs[s] = _classify(keys[s], dup[s], ground_on, h)
-                mask = (1 << NS) - 1  # samples not yet accounted for
-                while mask != 0:
-                    # the first sample left, and the samples of its group (same class, depth within tol)
-                    j = 0
-                    for s in ti.static(range(NS - 1, -1, -1)):
-                        if (mask >> s) & 1 == 1:
-                            j = s
-                    key, c, z = ti.i64(0), 0, 0.0
-                    for s in ti.static(range(NS)):
-                        if s == j:
-                            key, c, z = keys[s], cls[s], zs[s]
-                    n = 0
-                    for s in ti.static(range(NS)):
-                        if (mask >> s) & 1 == 1:
-                            if s == j or (per_sample == 0 and cls[s] == c and (c < 0 or ti.abs(zs[s] - z) <= tol * z)):
-                                n += 1
-                                mask ^= 1 << s
-                    py, px = y * ssaa + j // ssaa, x * ssaa + j % ssaa
-                    col = bg
-                    if c == -3:
-                        gy, gx = y, x
-                        if per_sample != 0:
-                            gy, gx = py, px
-                        col = _ground(gcache, gy, gx, smap, lfocal, lsh)
-                    elif c >= 0:
-                        ident = ti.cast(key & ti.i64(_ID_MASK), ti.i32)
-                        dx = (px + 0.5 - 0.5 * Ws) * ifocal
-                        dy = -(py + 0.5 - 0.5 * Hs) * ifocal
-                        D = dx * R + dy * U + Fw  # world ray direction; the hit at t has view depth t
-                        P = eye + z * D
-                        if ident >= n_tri:
-                            q = ident - n_tri
-                            hv = ti.Vector([dx * z - sph_view[q, 0], dy * z - sph_view[q, 1], z - sph_view[q, 2]])
-                            N = (hv[0] * R + hv[1] * U + hv[2] * Fw).normalized(1e-12)
-                            lit = _shadow(_light_coords(P + N * bias, lsh), lsh, smap)
-                            Hh = (L - D.normalized()).normalized()
-                            col = _shade(N, upv, _lin(_row3(sph_col, q, 0)), Hh, L, ambient, spec, lit)
-                        else:
-                            a, b, cc = faces[ident, 0], faces[ident, 1], faces[ident, 2]
-                            x0, y0 = attr[a, 0], attr[a, 1]
-                            x1, y1 = attr[b, 0], attr[b, 1]
-                            x2, y2 = attr[cc, 0], attr[cc, 1]
-                            cx, cy = px + 0.5, py + 0.5
-                            p0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * attr[a, 2]
-                            p1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * attr[b, 2]
-                            p2 = ((x0 - cx) * (y1 - cy) - (x1 - cx) * (y0 - cy)) * attr[cc, 2]
-                            sw = 1.0 / (p0 + p1 + p2)  # perspective-correct barycentrics p_k / sum
-                            p0, p1, p2 = p0 * sw, p1 * sw, p2 * sw
-                            N = (p0 * _row3(attr, a, 3) + p1 * _row3(attr, b, 3) + p2 * _row3(attr, cc, 3)).normalized(1e-12)
-                            Hh = p0 * _row3(attr, a, 12) + p1 * _row3(attr, b, 12) + p2 * _row3(attr, cc, 12)
-                            base = ti.Vector([0.0, 0.0, 0.0])
-                            if (c - (1 << 24)) % 2 == 0:  # even tag: the side facing away from the normals
-                                N = -N
-                                base = _lin(_row3(mats, fmat[ident], 0))
-                            else:
-                                base = p0 * _row3(attr, a, 6) + p1 * _row3(attr, b, 6) + p2 * _row3(attr, cc, 6)
-                            lit = _shadow(_light_coords(P, lsh), lsh, smap)
-                            col = _shade(N, upv, base, Hh, L, ambient, spec, lit)
-                    acc += n * col
-            rgb = _pack(acc * (1.0 / NS))
-            if words:
-                bits |= rgb << ti.cast(nbits, ti.u64)
-                nbits += 24
-                if nbits >= 32:
-                    out_words[y, word] = ti.cast(bits & ti.u64(0xFFFFFFFF), ti.u32)
-                    word += 1
-                    bits >>= ti.u64(32)
-                    nbits -= 32
-            else:
+                bg[k] = _lin(params[5 + k] * (1.0 - tt) + params[8 + k] * tt)
+            for x in range(W):
+                dx = (x + 0.5 - 0.5 * W) * ifocal
+                dy = -(y + 0.5 - 0.5 * H) * ifocal
+                D = dx * R + dy * U + Fw
+                d_up = ti.min(D.dot(upv), -HORIZON_EPS)
+                tg = h / -d_up
+                P = eye + tg * D
+                u1, u2 = P.dot(e1), P.dot(e2)
+                # footprint of one pixel on the plane: d(P)/d(ray) = t (I - D up^T / (D.up)) (ray/plane hit)
+                sx = tg * step * (R - (Rn / d_up) * D)
+                sy = tg * step * (U - (Un / d_up) * D)
+                w1 = ti.min((ti.abs(sx.dot(e1)) + ti.abs(sy.dot(e1))) * inv_cell, MAX_FOOTPRINT) + MIN_FOOTPRINT
+                w2 = ti.min((ti.abs(sx.dot(e2)) + ti.abs(sy.dot(e2))) * inv_cell, MAX_FOOTPRINT) + MIN_FOOTPRINT
+                m = _checker(u1 * inv_cell, u2 * inv_cell, w1, w2)
+                base = gc1 * (1.0 - m) + gc2 * m
+                f = ti.min(((u1 - gc_1) * (u1 - gc_1) + (u2 - gc_2) * (u2 - gc_2)) * inv_fade2, 1.0)
+                f = f * f * (3.0 - 2.0 * f)
+                if h <= 0.0 or tg > GROUND_MISS_T:
+                    f = 1.0
+                A = base * ambient * (1.0 - f) + bg * f  # constant normal: Lambert needs no per-pixel vectors
+                B = base * g_dif * (1.0 - f)
                 for k in ti.static(range(3)):
-                    out[y, x, k] = ti.cast((rgb >> ti.u64(8 * k)) & ti.u64(0xFF), ti.u8)
+                    cache[y, x, k] = A[k]
+                    cache[y, x, 3 + k] = B[k]
+                    cache[y, x, 6 + k] = P[k]
+
+    @ti.kernel
+    def resolve(
+        buf: i64a2,
+        ssaa: ti.template(),
+        per_sample: ti.i32,
+        n_tri: ti.i32,
+        attr: f32a2,
+        faces: i32a2,
+        fmat: i32a1,
+        mats: f32a2,
+        sph_view: f32a2,
+        sph_col: f32a2,
+        cam: f32a2,
+        light: f32a1,
+        params: f32a1,
+        smap: i32a2,
+        lcam: f32a2,
+        gcache: f32a3,
+        out_words: u32a2,
+        out: u8a3,
+    ):
+        """Shade the samples of each output pixel into the (H, W, 3) uint8 image.
+
+        buf: (H*ssaa, W*ssaa) keys; ssaa: samples per pixel per axis (a compile-time constant,
+        so the samples of a pixel live in registers); attr: packed vertex rows (see :func:`vertices`);
+        cam: (4, 3) rows right, up, forward, eye; light: (3,) unit vector towards the light;
+        params: [0] focal of the sample grid [px], [1] ambient, [2] specular, [3] shadow bias [m],
+        [4] relative depth tolerance of a surface group, [5:8] sky top rgb, [8:11] sky bottom rgb,
+        [11] shadow-map focal [px/m], [12] ground on, [13] ground height [m], [14:17] and [17:20] checker rgb,
+        [20] checker cell [m], [21:24] ground centre, [24] ground fade radius [m], [25:28] up,
+        [28:31] and [31:34] ground axes, [34:38] x0, x1, y0, y1: the shadow-map texels that primitives
+        cover; mats: (M, 3) back-side rgb per material; smap: the shadow map (depth bits per texel,
+        (1, 1) for none); lcam: (4, 3) light-space basis rows and origin; sph_view, sph_col: (P, 3) view-space centres [m]
+        and colours of the spheres; gcache: the ground per pixel (per sample if ``per_sample``),
+        see :func:`ground_cache`.
+        The image goes to ``out_words`` (H, 3W/4) uint32, the bytes of an (H, W, 3) image, when it has
+        more than one row (one store per 4/3 pixels), else to ``out`` (H, W, 3); H, W = buf's shape / ssaa.
+        The samples of a pixel are grouped by :func:`_classify` (and, within a class, by depth
+        within ``params[4]`` relative); each group is shaded once at its first sample.
+        """
+        NS = ti.static(ssaa * ssaa)
+        Hs, Ws = buf.shape[0], buf.shape[1]
+        Ho, Wo = Hs // ssaa, Ws // ssaa
+        words = out_words.shape[0] > 1
+        ifocal = 1.0 / params[0]
+        ambient, spec, bias, tol = params[1], params[2], params[3], params[4]
+        lfocal = params[11]
+        R, U, Fw, eye = _row3(cam, 0, 0), _row3(cam, 1, 0), _row3(cam, 2, 0), _row3(cam, 3, 0)
+        L = ti.Vector([light[0], light[1], light[2]])
+        upv = ti.Vector([params[25], params[26], params[27]])
+        h = eye.dot(upv) - params[13]  # eye height above the ground
+        ground_on = params[12] > 0.5 and h > 0.0
+        Rn, Un, Fn = R.dot(upv), U.dot(upv), Fw.dot(upv)
+        lsh = _light_frame(smap, lcam, lfocal, bias, ti.Vector([params[34], params[35], params[36], params[37]]))
+        for y in range(Ho):  # parallel over rows, serial along a row (much faster than ndrange on CPU)
+            tt = (y + 0.5) / Ho
+            bg = ti.Vector([0.0, 0.0, 0.0])
+            for k in ti.static(range(3)):
+                bg[k] = _lin(params[5 + k] * (1.0 - tt) + params[8 + k] * tt)
+            bits = ti.u64(0)  # bytes waiting for a whole 32-bit word
+            nbits = 0
+            word = 0
+            # d(up . ray)/d(sample column) and the value at sample (0, 0) of this row's pixels
+            kx = Rn * ifocal
+            row_d = (0.5 - 0.5 * Ws) * kx - (y * ssaa + 0.5 - 0.5 * Hs) * Un * ifocal + Fn
+            for x in range(Wo):
+                keys = ti.Vector([buf[y * ssaa + s // ssaa, x * ssaa + s % ssaa] for s in ti.static(range(NS))], ti.i64)
+                d0 = row_d + (x * ssaa) * kx
+                dup = ti.Vector([d0 + (s % ssaa) * kx - (s // ssaa) * Un * ifocal for s in ti.static(range(NS))])
+                all_keys = keys[0]
+                for s in ti.static(range(1, NS)):
+                    all_keys &= keys[s]
+                acc = ti.Vector([0.0, 0.0, 0.0])
+                if all_keys == ti.i64(EMPTY) and per_sample == 0:
+                    # no primitive in this pixel: sky and ground only, the ground shaded once
+                    ng = 0
+                    if ground_on:
+                        for s in ti.static(range(NS)):
+                            if dup[s] < 0.0:
+                                ng += 1
+                    acc = (NS - ng) * bg
+                    if ng > 0:
+                        acc += ng * _ground(gcache, y, x, smap, lfocal, lsh)
+                else:
+                    cls = ti.Vector([0] * NS, ti.i32)
+                    zs = ti.Vector([0.0] * NS, ti.f32)
+                    for s in ti.static(range(NS)):
+                        cls[s], zs[s] = _classify(keys[s], dup[s], ground_on, h)
+                    mask = (1 << NS) - 1  # samples not yet accounted for
+                    while mask != 0:
+                        # the first sample left, and the samples of its group (same class, depth within tol)
+                        j = 0
+                        for s in ti.static(range(NS - 1, -1, -1)):
+                            if (mask >> s) & 1 == 1:
+                                j = s
+                        key, c, z = ti.i64(0), 0, 0.0
+                        for s in ti.static(range(NS)):
+                            if s == j:
+                                key, c, z = keys[s], cls[s], zs[s]
+                        n = 0
+                        for s in ti.static(range(NS)):
+                            if (mask >> s) & 1 == 1:
+                                if s == j or (per_sample == 0 and cls[s] == c and (c < 0 or ti.abs(zs[s] - z) <= tol * z)):
+                                    n += 1
+                                    mask ^= 1 << s
+                        py, px = y * ssaa + j // ssaa, x * ssaa + j % ssaa
+                        col = bg
+                        if c == -3:
+                            gy, gx = y, x
+                            if per_sample != 0:
+                                gy, gx = py, px
+                            col = _ground(gcache, gy, gx, smap, lfocal, lsh)
+                        elif c >= 0:
+                            ident = ti.cast(key & ti.i64(_ID_MASK), ti.i32)
+                            dx = (px + 0.5 - 0.5 * Ws) * ifocal
+                            dy = -(py + 0.5 - 0.5 * Hs) * ifocal
+                            D = dx * R + dy * U + Fw  # world ray direction; the hit at t has view depth t
+                            P = eye + z * D
+                            if ident >= n_tri:
+                                q = ident - n_tri
+                                hv = ti.Vector([dx * z - sph_view[q, 0], dy * z - sph_view[q, 1], z - sph_view[q, 2]])
+                                N = (hv[0] * R + hv[1] * U + hv[2] * Fw).normalized(SHADE_NORMALIZE_EPS)
+                                lit = _shadow(_light_coords(P + N * bias, lsh), lsh, smap)
+                                Hh = (L - D.normalized()).normalized()
+                                col = _shade(N, upv, _lin(_row3(sph_col, q, 0)), Hh, L, ambient, spec, lit)
+                            else:
+                                a, b, cc = faces[ident, 0], faces[ident, 1], faces[ident, 2]
+                                x0, y0 = attr[a, 0], attr[a, 1]
+                                x1, y1 = attr[b, 0], attr[b, 1]
+                                x2, y2 = attr[cc, 0], attr[cc, 1]
+                                cx, cy = px + 0.5, py + 0.5
+                                p0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * attr[a, 2]
+                                p1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * attr[b, 2]
+                                p2 = ((x0 - cx) * (y1 - cy) - (x1 - cx) * (y0 - cy)) * attr[cc, 2]
+                                sw = 1.0 / (p0 + p1 + p2)  # perspective-correct barycentrics p_k / sum
+                                p0, p1, p2 = p0 * sw, p1 * sw, p2 * sw
+                                N = (p0 * _row3(attr, a, 3) + p1 * _row3(attr, b, 3) + p2 * _row3(attr, cc, 3)).normalized(SHADE_NORMALIZE_EPS)
+                                Hh = p0 * _row3(attr, a, 12) + p1 * _row3(attr, b, 12) + p2 * _row3(attr, cc, 12)
+                                base = ti.Vector([0.0, 0.0, 0.0])
+                                if (c - (1 << 24)) % 2 == 0:  # even tag: the side facing away from the normals
+                                    N = -N
+                                    base = _lin(_row3(mats, fmat[ident], 0))
+                                else:
+                                    base = p0 * _row3(attr, a, 6) + p1 * _row3(attr, b, 6) + p2 * _row3(attr, cc, 6)
+                                lit = _shadow(_light_coords(P, lsh), lsh, smap)
+                                col = _shade(N, upv, base, Hh, L, ambient, spec, lit)
+                        acc += n * col
+                rgb = _pack(acc * (1.0 / NS))
+                if words:
+                    bits |= rgb << ti.cast(nbits, ti.u64)
+                    nbits += 24
+                    if nbits >= 32:
+                        out_words[y, word] = ti.cast(bits & ti.u64(0xFFFFFFFF), ti.u32)
+                        word += 1
+                        bits >>= ti.u64(32)
+                        nbits -= 32
+                else:
+                    for k in ti.static(range(3)):
+                        out[y, x, k] = ti.cast((rgb >> ti.u64(8 * k)) & ti.u64(0xFF), ti.u8)
+
+    return SimpleNamespace(ground_cache=ground_cache, resolve=resolve)

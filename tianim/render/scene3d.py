@@ -308,7 +308,7 @@ class Scene3D:
             if grid is None:
                 N[o:o + len(v)] = n
             else:
-                K.grid_normals(V, o, grid[0], grid[1], N)
+                K.kernels().grid_normals(V, o, grid[0], grid[1], N)
             o += len(v)
         BK = np.stack([m[4] for m in M]).astype(np.float32)
         if len(M) == 1:
@@ -343,26 +343,26 @@ class Scene3D:
         attr = np.empty((len(V), K.ATTR_COLS), np.float32)
         if len(V):
             prm = np.array([focal, W, H, lfocal, smap.shape[0], *self.light], np.float32)
-            K.vertices(V, N, C, cam, lcam, prm, attr)
+            K.kernels().vertices(V, N, C, cam, lcam, prm, attr)
 
         if len(F) + len(SR) > K.MAX_PRIMITIVES:
             raise ValueError(f"the scene has {len(F)} triangles and {len(SR)} spheres; at most "
                              f"{K.MAX_PRIMITIVES} in all can be rendered at once (split it, or use coarser meshes)")
         if len(F):
-            K.raster_triangles(attr, K.ATTR_SCREEN, F, FM, False, near, buf, self._no_smap)
+            K.kernels().raster_triangles(attr, K.ATTR_SCREEN, F, FM, False, near, buf, self._no_smap)
         if len(SR):
             sview = camera.to_view(SP).astype(np.float32)
-            K.raster_spheres(sview, SR, focal, False, near, len(F), buf, self._no_smap)
+            K.kernels().raster_spheres(sview, SR, focal, False, near, len(F), buf, self._no_smap)
         else:
             sview = np.zeros((0, 3), np.float32)
         bbox = [0.0] * 4
         if smap.shape[0] > 1:
             smap.fill(K.EMPTY_DEPTH)
             if len(F):
-                K.raster_triangles(attr, K.ATTR_LIGHT, F, FM, True, 0.0, self._no_buf, smap)
+                K.kernels().raster_triangles(attr, K.ATTR_LIGHT, F, FM, True, 0.0, self._no_buf, smap)
             if len(SR):
                 lview = ((SP - lcam[3]) @ lcam[:3].T.astype(np.float64)).astype(np.float32)
-                K.raster_spheres(lview, SR, lfocal, True, 0.0, 0, self._no_buf, smap)
+                K.kernels().raster_spheres(lview, SR, lfocal, True, 0.0, 0, self._no_buf, smap)
             # texels that can hold a depth: the scene's bounding box seen from the light
             corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
             t = 0.5 * smap.shape[0] + lfocal * ((corners - lcam[3]) @ lcam[:2].T.astype(np.float64)) * [1.0, -1.0]
@@ -370,7 +370,7 @@ class Scene3D:
                     np.ceil(t[:, 1].max()) + 1]
 
         params = self._params(focal, bias, lfocal, lo, hi, bbox)
-        S.resolve(buf, self.ssaa, int(self.per_sample), len(F), attr, F, FM, BK, sview, SC, cam,
+        S.kernels().resolve(buf, self.ssaa, int(self.per_sample), len(F), attr, F, FM, BK, sview, SC, cam,
                   self.light.astype(np.float32), params, smap, lcam, self._ground_pixels(camera, params),
                   *self._out_views(out))
         return out.copy()
@@ -416,7 +416,7 @@ class Scene3D:
             p = params.copy()
             p[0] = camera.focal(self.height * grid)
             cam = np.concatenate([camera.basis, np.asarray(camera.eye)[None]]).astype(np.float32)
-            S.ground_cache(cam, self.light.astype(np.float32), p, float(self.ssaa // grid) / p[0], cache)
+            S.kernels().ground_cache(cam, self.light.astype(np.float32), p, float(self.ssaa // grid) / p[0], cache)
             self._gcache = (key, cache)
         return self._gcache[1]
 

@@ -1,0 +1,164 @@
+"""The kernel layer's one door to Taichi: the only module of tianim that imports it.
+
+Every kernel module gets Taichi from here, never by ``import taichi``::
+
+    from tianim import _ti
+
+    @_ti.cached_kernels
+    def _build():                  # runs once per process, on first need
+        ti = _ti.get()
+        @ti.kernel
+        def k(a: ti.types.ndarray(dtype=ti.f32, ndim=1)): ...
+        return k
+
+so that importing tianim (or ``tianim.render``) loads no Taichi module, and the package can
+be swapped: ``TIANIM_TAICHI=quadrants`` selects ``quadrants``, the maintained fork of Taichi
+with the same API (Genesis), instead of ``taichi`` (the default).
+
+Taichi prints a banner (``[Taichi] version ...``) when it is imported; tianim keeps it quiet
+unless asked (``TIANIM_VERBOSE=1``, or :func:`set_verbose`, which ``tianim --verbose`` calls).
+Initialisation (``ti.init``, the arch, the threads) is :mod:`tianim.runtime`'s job.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import functools
+import importlib
+import io
+import os
+import sys
+import threading
+
+#: The environment variable that chooses the Taichi package.
+ENV_VAR = "TIANIM_TAICHI"
+#: Packages with Taichi's API that tianim can run on; the first is the default.
+PACKAGES = ("taichi", "quadrants")
+#: Taichi's own switch for the banner it prints at import.
+_BANNER_ENV = "ENABLE_TAICHI_HEADER_PRINT"
+
+_lock = threading.Lock()
+_module = None
+_verbose: bool | None = None
+
+
+class ConfigError(ValueError):
+    """A bad ``TIANIM_*`` setting of the kernel layer (one line, no traceback needed)."""
+
+
+def package_name() -> str:
+    """The Taichi package tianim uses: ``TIANIM_TAICHI`` (``taichi`` or ``quadrants``), default ``taichi``."""
+    raw = os.environ.get(ENV_VAR, "")
+    name = raw.strip().lower() or PACKAGES[0]
+    if name not in PACKAGES:
+        raise ConfigError(
+            f"{ENV_VAR}={raw!r} is not a Taichi package tianim knows; use one of {', '.join(PACKAGES)} "
+            f"(unset it for {PACKAGES[0]})"
+        )
+    return name
+
+
+def set_verbose(flag: bool) -> None:
+    """Show (True) or hide (False) Taichi's import banner; the default follows ``TIANIM_VERBOSE``."""
+    global _verbose
+    _verbose = bool(flag)
+
+
+def verbose() -> bool:
+    """Whether Taichi's banner and start-up lines are shown."""
+    if _verbose is not None:
+        return _verbose
+    return os.environ.get("TIANIM_VERBOSE", "").strip().lower() in ("1", "true", "yes", "on")
+
+
+def loaded() -> bool:
+    """True when the chosen Taichi package is imported (by tianim or by the user); imports nothing."""
+    try:
+        return package_name() in sys.modules
+    except ConfigError:
+        return False
+
+
+def _is_banner(line: str) -> bool:
+    """Taichi's own start-up lines: ``[Taichi] version ...`` and ``[Taichi] Starting on arch=...``."""
+    head, _, rest = line.partition("] ")
+    return head.startswith("[") and " " not in head and rest.startswith(("version ", "Starting on arch="))
+
+
+@contextlib.contextmanager
+def quiet():
+    """Drop Taichi's start-up lines printed inside the block (unless :func:`verbose`); keep the rest.
+
+    Used around ``ti.init``, which prints ``[Taichi] Starting on arch=...`` every time. Not used
+    around the import: Taichi decides at import, from ``sys.stdout``, whether kernels' prints are
+    buffered, so the import is silenced with Taichi's own switch instead.
+    """
+    if verbose():
+        yield
+        return
+    captured = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(captured):
+            yield
+    finally:
+        rest = [line for line in captured.getvalue().splitlines(keepends=True) if not _is_banner(line)]
+        if rest:
+            sys.stdout.write("".join(rest))
+
+
+def _import(name: str):
+    if verbose():
+        return importlib.import_module(name)
+    previous = os.environ.get(_BANNER_ENV)
+    os.environ[_BANNER_ENV] = "False"  # read once, when taichi/_lib/utils.py is imported
+    try:
+        return importlib.import_module(name)
+    finally:
+        if previous is None:
+            os.environ.pop(_BANNER_ENV, None)
+        else:
+            os.environ[_BANNER_ENV] = previous
+
+
+def get():
+    """The Taichi module (``taichi``, or ``quadrants`` under ``TIANIM_TAICHI=quadrants``), imported once.
+
+    Importing it does not initialise it: kernels that run call :func:`tianim.runtime.ensure_taichi`.
+    """
+    global _module
+    if _module is not None:
+        return _module
+    with _lock:
+        if _module is None:
+            name = package_name()
+            try:
+                _module = _import(name)
+            except ModuleNotFoundError as exc:
+                if exc.name != name:
+                    raise
+                hint = (
+                    f"pip install {name}" if name != PACKAGES[0]
+                    else f"pip install taichi, or set {ENV_VAR}=quadrants with quadrants installed"
+                )
+                chosen = f"{ENV_VAR}={name}" if os.environ.get(ENV_VAR) else f"the default ({name})"
+                raise ImportError(
+                    f"tianim needs the Taichi package {name!r} ({chosen}), which is not installed; {hint}"
+                ) from None
+    return _module
+
+
+def cached_kernels(build):
+    """Decorator of a kernel factory: ``build(*key)`` runs once per distinct key and process.
+
+    Defining the kernels inside the factory keeps Taichi out of import time; the cache keeps
+    the hundredth scene from compiling anything again (kernels take arrays as arguments).
+    """
+    return functools.lru_cache(maxsize=None)(build)
+
+
+def __getattr__(name: str):
+    """``_ti.kernel``, ``_ti.f32``, ...: attributes of the Taichi module, imported on first use."""
+    if name.startswith("_"):
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(get(), name)
+
