@@ -279,3 +279,186 @@ def test_3d_paths_agree_and_curvature_matches_finite_differences(monkeypatch):
     vec = solve_ik(chain, targets, rest=rest, tol=1e-8)  # vectorised NumPy
     assert loop.converged.all() and vec.converged.all()
     np.testing.assert_allclose(vec.q, loop.q, atol=1e-6)
+
+
+# -- joint limits: active-set DLS against SciPy's bounded least squares --------------------------------------------
+def _limit_targets(n, count, seed, lim=1.0):
+    """A chain with limits +-lim and targets reached only with one joint at its limit, plus targets outside
+    the limited workspace (the closest pose then has joints at their limits)."""
+    rng = np.random.default_rng(seed)
+    chain = PlanarChain(np.linspace(1.2, 0.8, n) / n, lower=-lim, upper=lim)
+    q = rng.uniform(-lim, lim, (count, n))
+    j = rng.integers(0, n, count)
+    q[np.arange(count), j] = np.where(rng.random(count) < 0.5, -lim, lim)
+    reach = chain.end_effector(q)
+    ang = rng.uniform(-np.pi, np.pi, count)
+    far = rng.uniform(0.3, 1.4, count)[:, None] * chain.reach * np.stack([np.cos(ang), np.sin(ang)], 1)
+    return chain, reach, far
+
+
+def _scipy_best(chain, target, starts):
+    from scipy.optimize import least_squares
+
+    best = np.inf
+    for x0 in starts:
+        sol = least_squares(lambda q: chain.end_effector(q) - target, np.clip(x0, chain.lower, chain.upper),
+                            bounds=(chain.lower, chain.upper), method="trf", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+        best = min(best, float(np.linalg.norm(sol.fun)))
+    return best
+
+
+@pytest.mark.parametrize("n", [2, 3, 5])
+def test_dls_with_active_limits_matches_scipy_bounded_least_squares(n):
+    pytest.importorskip("scipy")
+    chain, reach, far = _limit_targets(n, 11, seed=40 + n)
+    rng = np.random.default_rng(n)
+    for targets in (reach, far):
+        one = [solve_ik(chain, t, rest=False) for t in targets]
+        batch = solve_ik(chain, np.repeat(targets, 3, axis=0), rest=False)  # 33 targets: the Taichi kernel
+        for k, (t, r) in enumerate(zip(targets, one)):
+            assert r.stationary
+            assert np.all(r.q >= chain.lower) and np.all(r.q <= chain.upper)
+            # SciPy from our pose finds nothing better (a bound-constrained local optimum) ...
+            assert r.converged or r.residual <= _scipy_best(chain, t, [r.q]) + 1e-10
+            # ... and nothing better from 5 random starts either (same optimum to tolerance, or ours within tol)
+            best = _scipy_best(chain, t, rng.uniform(-1.0, 1.0, (5, n)))
+            assert r.residual <= max(best + 1e-9, 1e-6), (k, r.residual, best)
+            assert r.converged == (r.residual <= 1e-6)
+            np.testing.assert_array_equal(batch.q[3 * k], r.q)
+        if targets is reach:
+            assert all(r.converged for r in one)
+
+
+def test_dls_does_not_stall_at_joint_limits():
+    # clamping the unconstrained DLS step crawled here (200 iterations, residuals up to 1e-2); the active set
+    # solves for the free joints and converges in a few dozen
+    for n in (2, 3, 7):
+        chain, reach, _ = _limit_targets(n, 200, seed=n)
+        res = solve_ik(chain, reach, rest=False, restarts=0)  # the first attempt alone
+        single = [solve_ik(chain, t, rest=False, restarts=0) for t in reach[:31]]
+        assert res.converged.all(), (n, res.residual.max())
+        assert res.iterations.max() < 60, res.iterations.max()
+        assert all(r.converged for r in single)
+
+
+def test_unreachable_targets_are_stationary_not_converged():
+    chain = PlanarChain([0.5, 0.4, 0.3], lower=-1.0, upper=1.0)
+    targets = np.array([[2.0, 0.1], [-0.5, -0.1], [0.0, -1.19]])  # out of reach, behind the base, beyond a limit
+    res = solve_ik(chain, targets)
+    assert not res.converged.any() and res.stationary.all()
+    early = solve_ik(chain, targets, max_iter=1, restarts=0)
+    assert not early.converged.any() and not early.stationary.all()
+
+
+# -- a target's answer depends on itself only ------------------------------------------------------------------------
+def _mixed_targets(chain, count, seed):
+    """Targets over a disc 10% larger than the reach: reachable, limit-bound and unreachable ones (restarts)."""
+    rng = np.random.default_rng(seed)
+    r = chain.reach * np.sqrt(rng.uniform(0, 1.1**2, count))
+    a = rng.uniform(-np.pi, np.pi, count)
+    return chain.base + np.stack([r * np.cos(a), r * np.sin(a)], 1)
+
+
+@pytest.mark.parametrize("rest", [None, False])
+def test_batched_equals_one_by_one_bit_for_bit(rest):
+    # the Taichi kernel mirrors the plain-float path operation for operation and restarts draw one sequence
+    # from the seed: batched (kernel) and one-by-one (plain floats) answers are bit-identical
+    chain = PlanarChain(np.linspace(1.2, 0.8, 7) / 7, lower=-2.5, upper=2.5)
+    targets = _mixed_targets(chain, 120, seed=9)
+    batch = solve_ik(chain, targets, rest=rest)
+    assert (~batch.converged).sum() > 10  # restarts were used
+    one = [solve_ik(chain, t, rest=rest) for t in targets]
+    np.testing.assert_array_equal(batch.q, np.array([r.q for r in one]))
+    np.testing.assert_array_equal(batch.residual, np.array([r.residual for r in one]))
+    np.testing.assert_array_equal(batch.converged, np.array([r.converged for r in one]))
+    loop = solve_ik(chain, targets[:20], rest=rest)  # a small batch: the plain-float path, target by target
+    np.testing.assert_array_equal(loop.q, batch.q[:20])
+
+
+@pytest.mark.parametrize("path", ["kernel", "numpy", "serial"])
+def test_identical_targets_identical_poses_and_batch_composition_irrelevant(path, monkeypatch):
+    import tianim.kinematics.ik as ik
+
+    if path == "numpy":
+        monkeypatch.setattr(ik, "KERNEL_MIN_BATCH", 10**9)
+        monkeypatch.setattr(ik, "LOOP_MAX_BATCH", 0)
+    chain = _serial7() if path == "serial" else PlanarChain(np.linspace(1.2, 0.8, 7) / 7, lower=-2.5, upper=2.5)
+    if path == "serial":
+        monkeypatch.setattr(ik, "LOOP_MAX_BATCH", 0)  # vectorised NumPy for the 3D chain
+        targets = np.array([[0.3, 0.2, 1.6], [0.1, 0.0, 0.5], [2.0, 0.0, 0.0], [0.2, -0.3, 0.9]])
+    else:
+        targets = _mixed_targets(chain, 40, seed=2)
+    hard = targets[np.argmax(solve_ik(chain, targets).residual)]  # the worst target: every restart used
+    same = solve_ik(chain, np.repeat(hard[None], 40, axis=0))
+    assert len(np.unique(same.q, axis=0)) == 1
+    mixed = np.concatenate([targets, hard[None]])
+    a = solve_ik(chain, np.concatenate([mixed, mixed[:5]]))
+    perm = np.random.default_rng(0).permutation(len(mixed))
+    b = solve_ik(chain, np.concatenate([mixed[perm], targets[::-1]]))
+    np.testing.assert_array_equal(a.q[: len(mixed)][perm], b.q[: len(mixed)])
+    np.testing.assert_array_equal(a.q[-6:-5], same.q[:1])
+
+
+# -- bad input ---------------------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("kwargs, exc, words", [
+    ({"max_iter": -5}, ValueError, ["max_iter", "-5"]),
+    ({"max_iter": 0}, ValueError, ["max_iter", "0"]),
+    ({"max_iter": "100"}, TypeError, ["max_iter", "'100'"]),
+    ({"max_iter": 2.5}, TypeError, ["max_iter", "2.5"]),
+    ({"restarts": -1}, ValueError, ["restarts", "-1"]),
+    ({"restarts": True}, TypeError, ["restarts", "True"]),
+    ({"tol": np.inf}, ValueError, ["tol", "inf"]),
+    ({"tol": 0.0}, ValueError, ["tol", "0.0"]),
+    ({"tol": -1e-6}, ValueError, ["tol", "-1e-06"]),
+    ({"tol": "1e-6"}, TypeError, ["tol", "'1e-6'"]),
+    ({"seed": "x"}, TypeError, ["seed", "'x'"]),
+    ({"seed": -3}, ValueError, ["seed", "-3"]),
+    ({"method": None}, ValueError, ["method", "None"]),
+])
+def test_bad_solver_options_name_the_argument_and_change_nothing(kwargs, exc, words):
+    chain = _chain(3)
+    target = np.array([0.3, 0.2])
+    q0 = np.array([0.1, 0.2, 0.3])
+    with pytest.raises(exc) as info:
+        solve_ik(chain, target, q0=q0, **kwargs)
+    msg = str(info.value)
+    for w in words:
+        assert w in msg, msg
+    assert "np.float64" not in msg and "np.int64" not in msg
+    np.testing.assert_array_equal(target, [0.3, 0.2])
+    np.testing.assert_array_equal(q0, [0.1, 0.2, 0.3])
+
+
+def test_numpy_scalars_are_valid_options():
+    chain = _chain(3)
+    target = _targets(chain, 1, seed=3)[0]
+    ref = solve_ik(chain, target, tol=1e-6, max_iter=200, restarts=4, seed=1)
+    alt = solve_ik(chain, target, tol=np.float32(1e-6), max_iter=np.int64(200), restarts=np.int32(4), seed=np.uint8(1))
+    np.testing.assert_allclose(alt.q, ref.q, atol=1e-6)
+    sol, ok = two_link_ik(np.int64(1), np.float32(0.5), [1.2, 0.3])
+    np.testing.assert_array_equal(sol, two_link_ik(1.0, 0.5, [1.2, 0.3])[0])
+
+
+@pytest.mark.parametrize("l1, l2, exc, words", [
+    (np.inf, 1.0, ValueError, ["l1", "inf"]),
+    (1.0, -0.5, ValueError, ["l2", "-0.5"]),
+    ("1", 1.0, TypeError, ["l1", "'1'"]),
+    (np.float64(0.0), 1.0, ValueError, ["l1=0.0"]),
+])
+def test_bad_two_link_lengths(l1, l2, exc, words):
+    with pytest.raises(exc) as info:
+        two_link_ik(l1, l2, [0.5, 0.5])
+    for w in words:
+        assert w in str(info.value), str(info.value)
+
+
+@pytest.mark.parametrize("lower, upper, words", [
+    (np.inf, None, ["lower[0]=inf", "no range"]),
+    (None, -np.inf, ["upper[0]=-inf", "no range"]),
+    ([-1.0, np.inf, -1.0], np.inf, ["lower[1]=inf"]),
+])
+def test_infinite_limit_on_the_wrong_side_is_rejected(lower, upper, words):
+    with pytest.raises(ValueError) as info:
+        PlanarChain([0.5, 0.4, 0.3], lower=lower, upper=upper)
+    for w in words:
+        assert w in str(info.value), str(info.value)

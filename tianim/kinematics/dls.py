@@ -9,10 +9,20 @@ or m) per step, so the answer stays near the start pose (no wrapped angles). The
 ``|e| <= tol``, or at a stationary point of ``|e|^2`` (``|J^T e|`` negligible: the
 least-squares closest pose of an unreachable target), or when lam blows up.
 
+Joint limits (an active set, as in bound-constrained Levenberg-Marquardt): each
+iteration holds at its limit every joint that sits there with the descent direction
+``(J^T e)_i`` pointing outward, solves the damped step for the free joints only (for
+the full-Hessian step the reduced matrix keeps its O(n) structure), and projects the
+updated pose onto the limits. The stationarity test uses that projected gradient, so a
+pose held by its limits stops as the first-order (KKT) point of
+``min |e|^2, lower <= q <= upper`` instead of crawling along a clamped direction.
+
 The null-space phase for redundant chains is :mod:`tianim.kinematics.nullspace`.
 """
 
 from __future__ import annotations
+
+from math import sqrt
 
 import numpy as np
 
@@ -60,22 +70,45 @@ def dls_planar_single(chain, target, q0, tol: float, iters: int):
     newton, slow = False, 0
     while k < iters and r2 > tol2:
         k += 1
+        # active set: a joint at a limit whose descent direction (J^T e)_i points outward is held there
         a = b = c = 0.0
-        g0 = g1 = 0.0
-        for i in range(n):
-            u, v = dx[i], dy[i]
-            a += v * v
-            b -= u * v
-            c += u * u
-        # stationary point of |e|^2: |J^T e|^2 tiny against |J|^2 |e|^2
         gg = 0.0
-        for i in range(n):
-            g = -dy[i] * e0 + dx[i] * e1
-            gg += g * g
+        if limited:
+            free = [True] * n
+            for i in range(n):
+                g = -dy[i] * e0 + dx[i] * e1
+                if (g < 0.0 and q[i] <= lo[i]) or (g > 0.0 and q[i] >= hi[i]):
+                    free[i] = False
+                else:
+                    u, v = dx[i], dy[i]
+                    a += v * v
+                    b -= u * v
+                    c += u * u
+                    gg += g * g
+        else:
+            free = None
+            for i in range(n):
+                u, v = dx[i], dy[i]
+                a += v * v
+                b -= u * v
+                c += u * u
+                g = -v * e0 + u * e1
+                gg += g * g
+        # stationary point of |e|^2 on the box: projected gradient |J_F^T e|^2 tiny against |J_F|^2 |e|^2
         if gg <= (_GRAD_TOL * _GRAD_TOL) * (a + c) * r2:
             break
         if newton:
-            qn = _newton_lm_step(dx, dy, e0, e1, lam2)
+            if free is None:
+                qn = _newton_lm_step(dx, dy, e0, e1, lam2)
+            else:  # the reduced Hessian keeps the structure W[i, j] = v[max(i, j)] on the free joints
+                fi = [i for i in range(n) if free[i]]
+                qf = _newton_lm_step([dx[i] for i in fi], [dy[i] for i in fi], e0, e1, lam2)
+                if qf is not None:
+                    qn = [0.0] * n
+                    for j, i in enumerate(fi):
+                        qn[i] = qf[j]
+                else:
+                    qn = None
             if qn is None:  # (J^T J + W + lam^2 I) is singular or gives no descent: damp more
                 lam2 *= 10.0
                 if lam2 > lam_max:
@@ -87,14 +120,17 @@ def dls_planar_single(chain, target, q0, tol: float, iters: int):
             det = a * c - b * b
             g0 = (c * e0 - b * e1) / det
             g1 = (a * e1 - b * e0) / det
-            qn = [-dy[i] * g0 + dx[i] * g1 for i in range(n)]
+            if free is None:
+                qn = [-dy[i] * g0 + dx[i] * g1 for i in range(n)]
+            else:
+                qn = [-dy[i] * g0 + dx[i] * g1 if free[i] else 0.0 for i in range(n)]
         big = max(max(qn), -min(qn))
         clamped = big > _MAX_STEP
         if clamped:
             f = _MAX_STEP / big
             qn = [v * f for v in qn]
         qn = [q[i] + qn[i] for i in range(n)]
-        if limited:
+        if limited:  # projection onto the box
             qn = [min(max(v, lo[i]), hi[i]) for i, v in enumerate(qn)]
         xn, yn, dxn, dyn = fk_tail_sums(L, bx, by, qn)
         f0, f1 = tx - xn, ty - yn
@@ -107,7 +143,7 @@ def dls_planar_single(chain, target, q0, tol: float, iters: int):
         lam2 = _adapt(lam2, better, lam_min)
         if lam2 > lam_max:
             break
-    return q, r2**0.5, k
+    return q, sqrt(r2), k
 
 
 def _adapt(lam2: float, accepted: bool, lam_min: float) -> float:
@@ -200,20 +236,24 @@ def dls_serial_single(chain, target, q0, tol: float, iters: int):
     while k < iters and r2 > tol2:
         k += 1
         a00 = a01 = a02 = a11 = a12 = a22 = gg = 0.0
+        free = [True] * n
         for i in range(n):
             u, v, w = J0[i], J1[i], J2[i]
+            g = u * e0 + v * e1 + w * e2
+            if limited and ((g < 0.0 and q[i] <= lo[i]) or (g > 0.0 and q[i] >= hi[i])):
+                free[i] = False  # active set: held at its limit (the descent direction points outward)
+                continue
             a00 += u * u
             a01 += u * v
             a02 += u * w
             a11 += v * v
             a12 += v * w
             a22 += w * w
-            g = u * e0 + v * e1 + w * e2
             gg += g * g
         if gg <= (_GRAD_TOL * _GRAD_TOL) * (a00 + a11 + a22) * r2:
             break
         y0, y1, y2 = _solve_sym3(a00 + lam2, a01, a02, a11 + lam2, a12, a22 + lam2, e0, e1, e2)
-        dq = [J0[i] * y0 + J1[i] * y1 + J2[i] * y2 for i in range(n)]
+        dq = [J0[i] * y0 + J1[i] * y1 + J2[i] * y2 if free[i] else 0.0 for i in range(n)]
         big = max(max(dq), -min(dq))
         if big > _MAX_STEP:
             dq = [v * (_MAX_STEP / big) for v in dq]
@@ -230,7 +270,7 @@ def dls_serial_single(chain, target, q0, tol: float, iters: int):
             lam2 = _adapt(lam2, False, lam_min)
             if lam2 > lam_max:
                 break
-    return q, r2**0.5, k
+    return q, sqrt(r2), k
 
 
 # -- batched task phase (vectorised over targets, any chain with _fk_jac) ----------------------------------------
@@ -284,15 +324,27 @@ def dls_batch(chain, tgt: np.ndarray, q: np.ndarray, tol: float, iters: int):
                                                                 J[keep], lam2[keep], itw[keep], slow[keep],
                                                                 newton[keep])
             active = np.ones(len(rows), dtype=bool)
-        JJt = J @ np.swapaxes(J, 1, 2)
-        g = np.einsum("bij,bi->bj", J, ew)
+        g = np.einsum("bij,bi->bj", J, ew)  # J^T e, the descent direction of |e|^2 / 2
+        Jf, fixed = J, None
+        if limited:  # active set: joints at a limit whose descent direction points outward are held there
+            fixed = ((g < 0.0) & (qw <= lo)) | ((g > 0.0) & (qw >= hi))
+            if fixed.any():
+                Jf = np.where(fixed[:, None, :], 0.0, J)
+                g = np.where(fixed, 0.0, g)
+            else:
+                fixed = None
+        JJt = Jf @ np.swapaxes(Jf, 1, 2)
         trace = np.trace(JJt, axis1=1, axis2=2)
         stationary = np.einsum("bi,bi->b", g, g) <= (_GRAD_TOL * _GRAD_TOL) * trace * r2
         active &= ~stationary
-        dq = np.einsum("bij,bi->bj", J, _solve_small(JJt + lam2[:, None, None] * eye, ew))
+        dq = np.einsum("bij,bi->bj", Jf, _solve_small(JJt + lam2[:, None, None] * eye, ew))
         valid = np.ones(len(rows), dtype=bool)
         if planar and newton.any():
             dqn, okn = _newton_lm_batch(J, ew, lam2)
+            if fixed is not None:
+                red = newton & fixed.any(axis=1)
+                if red.any():
+                    dqn[red], okn[red] = _newton_lm_reduced(J[red], ew[red], lam2[red], fixed[red])
             dq = np.where(newton[:, None], dqn, dq)
             valid = ~newton | okn
         big = np.abs(dq).max(axis=1)
@@ -315,6 +367,28 @@ def dls_batch(chain, tgt: np.ndarray, q: np.ndarray, tol: float, iters: int):
         active &= (r2 > tol2) & (lam2 <= _LAM_MAX * s2)
     q[rows], r2_all[rows], it_all[rows] = qw, r2, itw
     return q, np.sqrt(r2_all), it_all
+
+
+def _newton_lm_reduced(J: np.ndarray, e: np.ndarray, lam2: np.ndarray, fixed: np.ndarray):
+    """:func:`_newton_lm_batch` on the free joints only (``fixed`` (B, n) held at their limits), by a dense
+    solve: ``(J^T J + W + lam^2 I)_FF dq_F = (J^T e)_F``, ``dq`` = 0 on the fixed joints."""
+    B, _, n = J.shape
+    dx, dy = J[:, 1, :], -J[:, 0, :]
+    v = e[:, 0, None] * dx + e[:, 1, None] * dy
+    idx = np.maximum.outer(np.arange(n), np.arange(n))
+    H = np.swapaxes(J, 1, 2) @ J + v[:, idx] + lam2[:, None, None] * np.eye(n)
+    g = np.einsum("bij,bi->bj", J, e)
+    keep = ~fixed
+    both = keep[:, :, None] & keep[:, None, :]
+    H = np.where(both, H, 0.0) + np.where(fixed[:, :, None], np.eye(n), 0.0)
+    rhs = np.where(keep, g, 0.0)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        try:
+            dq = np.linalg.solve(H, rhs[..., None])[..., 0]
+        except np.linalg.LinAlgError:
+            return np.zeros((B, n)), np.zeros(B, dtype=bool)
+        ok = np.all(np.isfinite(dq), axis=1) & (np.einsum("bi,bi->b", dq, rhs) > 0)
+    return np.where(ok[:, None], dq, 0.0), ok
 
 
 def _newton_lm_batch(J: np.ndarray, e: np.ndarray, lam2: np.ndarray):

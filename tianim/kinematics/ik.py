@@ -12,7 +12,15 @@ the correct ones.) The solvers here therefore
   solution set; ``rest = q0`` is least motion; Liegeois 1977),
 * return the least-squares closest pose of an unreachable target with its
   residual and ``converged = False``, instead of oscillating,
-* respect joint limits by projection (clamping) after every update.
+* respect joint limits: DLS by an active set (a joint at a limit whose descent direction
+  points outward is held there, the step is solved for the others, and the updated pose
+  is projected onto the limits), so it converges at the same rate with limits active as
+  without; JT, CCD and FABRIK by projection (clamping) after every update,
+* answer each target independently of the other targets of the call: the random
+  restart poses are one sequence drawn from ``seed`` alone, the same for every target,
+  and every attempt of a call takes the same code path, so identical targets give
+  identical poses and a target's answer depends only on itself, ``q0``, ``rest``,
+  ``seed`` and the options.
 
 All solvers take one target, shape (task_dim,), or a batch, (B, task_dim): JT, CCD
 and FABRIK vectorise over the batch in NumPy; DLS picks the fastest path for the
@@ -48,7 +56,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tianim._checks import float_array, joint_vector
+from tianim._checks import check_choice, check_finite_scalar, check_int, float_array, joint_vector
 from tianim.kinematics.dls import dls_batch, dls_planar_single, dls_serial_single
 from tianim.kinematics.nullspace import ITERS as POLISH_ITERS
 from tianim.kinematics.nullspace import KERNEL_CONSTANTS, polish
@@ -67,14 +75,23 @@ class IKResult:
 
     q : joint coordinates, shape (B, n) (or (n,) for a single target)
     residual : |target - end effector|, shape (B,) (or scalar), task units
-    converged : residual <= tol, shape (B,) (or scalar bool)
-    iterations : iterations used by the last attempt, shape (B,)
+    converged : ``residual <= tol``, shape (B,) (or scalar bool). It means exactly that: an
+        unreachable target (or one that the joint limits keep out of reach) is never
+        ``converged``, even at its exact closest pose; see ``stationary``.
+    iterations : iterations used by the returned attempt, shape (B,)
+    stationary : first-order optimality of the bound-constrained least squares
+        ``min |target - f(q)|^2, lower <= q <= upper``: ``converged``, or the projected
+        gradient (``J^T e`` without the components of joints at a limit that point outward)
+        satisfies ``|P J^T e| <= 1e-8 |J|_F |e|``, shape (B,) (or scalar bool). For an
+        unreachable target it tells a closest pose (a local one: a constrained least squares
+        can have several) from an attempt that ran out of iterations.
     """
 
     q: np.ndarray
     residual: np.ndarray
     converged: np.ndarray
     iterations: np.ndarray
+    stationary: np.ndarray
 
 
 def two_link_ik(l1: float, l2: float, target) -> tuple[np.ndarray, np.ndarray]:
@@ -97,9 +114,8 @@ def two_link_ik(l1: float, l2: float, target) -> tuple[np.ndarray, np.ndarray]:
         counter-clockwise), ``q[..., 1, :]`` has ``q2 <= 0``.
     reachable : ndarray of bool, shape (...)
     """
-    for name, v in (("l1", l1), ("l2", l2)):
-        if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v > 0):
-            raise ValueError(f"{name}={v!r} must be a positive link length in metres")
+    l1 = check_finite_scalar("l1", l1, lo=0.0, lo_open=True)
+    l2 = check_finite_scalar("l2", l2, lo=0.0, lo_open=True)
     t = _check_target(target, 2)
     x, y = t[..., 0], t[..., 1]
     c2 = (x * x + y * y - l1 * l1 - l2 * l2) / (2 * l1 * l2)
@@ -148,24 +164,30 @@ def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max
         ``False``: none, the first pose found within ``tol``). Default (None):
         ``"q0"`` for a redundant chain, none otherwise.
     restarts : int
-        Targets not reached are retried from random poses inside the limits
-        (generator seeded with ``seed``, so results are reproducible); the
-        attempt with the smallest residual is returned. A planar chain without
-        limits skips the retries of a target whose residual already equals its
-        distance to the reachable annulus (the proven closest point).
+        Targets not reached are retried from random poses inside the limits, at
+        most ``restarts`` times; the attempt with the smallest residual is
+        returned. Restart k starts every target that needs it from the same pose,
+        the k-th of one sequence drawn from ``seed`` (uniform inside the limits,
+        ``[-pi, pi]`` for an unlimited joint), so a target's answer does not depend
+        on the other targets of the call. A planar chain without limits skips the
+        retries of a target whose residual already equals its distance to the
+        reachable annulus (the proven closest point).
     seed : int
+        Seed (>= 0) of the restart sequence.
 
     Returns
     -------
     IKResult
     """
     _check_chain(chain)
-    if method not in METHODS:
-        raise ValueError(f"method={method!r} is unknown; use one of {METHODS}")
+    method = check_choice("method", method, METHODS)
     if method == "fabrik" and not isinstance(chain, PlanarChain):
         raise ValueError("method='fabrik' supports PlanarChain only; use 'ccd' or 'dls' for 3D chains")
-    if not (isinstance(tol, (int, float)) and tol > 0):
-        raise ValueError(f"tol={tol!r} must be a positive distance in metres")
+    tol = check_finite_scalar("tol", tol, lo=0.0, lo_open=True)
+    if max_iter is not None:
+        max_iter = check_int("max_iter", max_iter, lo=1)
+    restarts = check_int("restarts", restarts, lo=0)
+    seed = check_int("seed", seed, lo=0, hi=None)
     m, n = chain.task_dim, chain.n
     tgt = _check_target(target, m)
     single = tgt.ndim == 1
@@ -194,7 +216,11 @@ def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max
     else:
         rest_arr = None
     iters = max_iter if max_iter is not None else _DEFAULT_ITERS[method]
-    step = {"dls": _dls, "jt": _jt, "ccd": _ccd, "fabrik": _fabrik}[method]
+    if method == "dls":  # one path for every attempt of the call, chosen from the whole batch
+        path = _dls_path(chain, B)
+        step = lambda *a: _dls(*a, path=path)  # noqa: E731
+    else:
+        step = {"jt": _jt, "ccd": _ccd, "fabrik": _fabrik}[method]
 
     q, res, it = step(chain, tgt, q_init, tol, iters, rest_arr)
     if restarts > 0 and np.any(res > tol):
@@ -203,18 +229,34 @@ def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max
         hi = np.where(np.isfinite(chain.upper), chain.upper, np.pi)
         floor = _residual_floor(chain, tgt) + 1e-9 * chain.reach
         for _ in range(restarts):
+            qr = rng.uniform(lo, hi)  # restart k's pose: the k-th draw, whichever targets need it
             todo = np.nonzero((res > tol) & (res > floor))[0]
             if todo.size == 0:
                 break
-            qr = rng.uniform(lo, hi, size=(todo.size, n))
             rr = None if rest_arr is None else rest_arr[todo]
-            q2, res2, it2 = step(chain, tgt[todo], qr, tol, iters, rr)
+            q2, res2, it2 = step(chain, tgt[todo], np.repeat(qr[None], todo.size, axis=0), tol, iters, rr)
             better = res2 < res[todo]
             q[todo[better]], res[todo[better]], it[todo[better]] = q2[better], res2[better], it2[better]
     conv = res <= tol
+    stat = conv.copy()
+    if not conv.all():
+        stat[~conv] = _stationary(chain, q[~conv], tgt[~conv])
     if single:
-        return IKResult(q[0], res[0], bool(conv[0]), it[0])
-    return IKResult(q, res, conv, it)
+        return IKResult(q[0], res[0], bool(conv[0]), it[0], bool(stat[0]))
+    return IKResult(q, res, conv, it, stat)
+
+
+def _stationary(chain, q: np.ndarray, tgt: np.ndarray) -> np.ndarray:
+    """First-order optimality (B,) of ``min |tgt - f(q)|^2`` on the joint-limit box: the projected
+    gradient ``P J^T e`` (components of joints at a limit that point outward removed) is
+    ``<= 1e-8 |J|_F |e|``."""
+    end, J = chain._fk_jac(q)
+    e = tgt - end
+    g = np.einsum("bij,bi->bj", J, e)
+    out = ((g < 0.0) & (q <= chain.lower)) | ((g > 0.0) & (q >= chain.upper))
+    g = np.where(out, 0.0, g)
+    scale = np.sqrt(np.einsum("bij,bij->b", J, J) * np.einsum("bi,bi->b", e, e))
+    return np.sqrt(np.einsum("bi,bi->b", g, g)) <= 1e-8 * scale
 
 
 def _residual_floor(chain, tgt: np.ndarray) -> np.ndarray:
@@ -242,15 +284,26 @@ def _residual(chain, q, tgt):
     return e, np.sqrt(np.einsum("bi,bi->b", e, e)), jac
 
 
-def _dls(chain, tgt, q, tol, iters, rest):
-    """Task phase (plain floats per target for small batches, the Taichi kernel for large planar ones,
-    else vectorised NumPy), then the
+def _dls_path(chain, B: int) -> str:
+    """The DLS path for a call with B targets: "loop" (plain floats, target by target), "kernel" (one
+    Taichi launch, planar chains) or "numpy" (vectorised)."""
+    planar = isinstance(chain, PlanarChain)
+    loopable = planar or isinstance(chain, SerialChain)
+    if loopable and (B == 1 or B <= LOOP_MAX_BATCH) and (B < KERNEL_MIN_BATCH or not planar):
+        return "loop"
+    if planar and B >= KERNEL_MIN_BATCH:
+        return "kernel"
+    return "numpy"
+
+
+def _dls(chain, tgt, q, tol, iters, rest, path=None):
+    """Task phase on ``path`` (:func:`_dls_path`; default: chosen from len(q)), then the
     null-space polish when a secondary objective is set (:mod:`tianim.kinematics.nullspace`)."""
     polishing = rest is not None and chain.n > chain.task_dim
     planar = isinstance(chain, PlanarChain)
-    single = dls_planar_single if planar else dls_serial_single if isinstance(chain, SerialChain) else None
-    if single is not None and (len(q) == 1 or len(q) <= LOOP_MAX_BATCH) and (len(q) < KERNEL_MIN_BATCH
-                                                                              or not planar):
+    path = _dls_path(chain, len(q)) if path is None else path
+    if path == "loop":
+        single = dls_planar_single if planar else dls_serial_single
         qs, rs, its = [], [], []
         for b in range(len(q)):
             qb, rb, kb = single(chain, tgt[b], q[b], tol, iters)
@@ -261,7 +314,7 @@ def _dls(chain, tgt, q, tol, iters, rest):
             rs.append(rb)
             its.append(kb)
         return np.array(qs, dtype=np.float64), np.array(rs, dtype=np.float64), np.array(its, dtype=np.int64)
-    if planar and len(q) >= KERNEL_MIN_BATCH:
+    if path == "kernel":
         from tianim.kinematics.ik_kernel import solve_planar_batch
         from tianim.runtime import ensure_taichi
 
@@ -270,7 +323,7 @@ def _dls(chain, tgt, q, tol, iters, rest):
                                   KERNEL_CONSTANTS)
     q, r, it = dls_batch(chain, tgt, q, tol, iters)
     if polishing:
-        q, r = polish(chain, tgt, q, rest, tol)
+        q, r = polish(chain, tgt, q, rest, tol, vectorised=True)
     return q, r, it
 
 

@@ -1,14 +1,16 @@
 """Taichi kernel: batched DLS IK on a planar chain, task phase plus null-space polish, one target per thread.
 
-The body follows :func:`tianim.kinematics.dls.dls_planar_single` (adaptive-damping
-DLS, trust region, stop at ``tol``, full-Hessian LM after slow progress) and
+The body mirrors :func:`tianim.kinematics.dls.dls_planar_single` (adaptive-damping
+DLS with an active set at the joint limits, trust region, stop at ``tol``,
+full-Hessian LM on the free joints after slow progress) and
 :func:`tianim.kinematics.nullspace._polish_planar_one` (SQP step by the O(n)
 structured solve ``H = U (S S^T + D) U^T``, feasible-point backtracking with
-Gauss-Newton restoration, Lagrangian comparison inside the residual band), in
-float64 throughout. Where the structured solve is unavailable (a pivot ~0 or a
-singular Schur complement) or the step's tangential curvature is not positive,
-the step is the projected gradient ``-N (q - rest)`` (the NumPy path would use a
-dense KKT solve there; both are globalised, so only the iteration count differs).
+Gauss-Newton restoration, Lagrangian comparison inside the residual band, the
+projected gradient ``-N (q - rest)`` where the structured solve is unavailable or
+the step's tangential curvature is not positive) operation for operation, in
+float64 throughout (``fast_math=False``: no reassociation or contraction), so a
+target solved here and the same target solved alone in plain floats agree bit for
+bit (tests/test_ik.py checks it).
 
 Chain-independent: joint loops run over the arrays' runtime length, so one
 compiled kernel serves every link count. Constants that are not exact in float32
@@ -27,6 +29,7 @@ ti = _ti.get()  # this module is imported only when a batched IK solve runs (tia
 f64 = ti.f64
 # work rows
 _Q, _QT, _DX, _DY, _DXT, _DYT, _G, _W, _PIV, _HG, _H0, _H1, _DQ, _PG, _Z, _SUF = range(16)
+_FREE, _CX, _CY = _PG, _HG, _SUF  # task phase only: free-joint mask, packed tail sums of the free joints
 NROWS = 16
 
 
@@ -167,23 +170,43 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
         # ---- task phase: adaptive-damping DLS (full-Hessian LM after slow progress) ----
         while k < ipar[0] and r2 > tol2 and stop == 0:
             k += 1
-            a, bb, c = _gram(work, b, n, _DX, _DY, ti.f64(0.0))
+            # active set: a joint at a limit whose descent direction (J^T e)_i points outward is held there;
+            # the free joints' tail sums are packed into rows _CX, _CY (nf of them)
+            a = ti.f64(0.0)
+            bb = ti.f64(0.0)
+            c = ti.f64(0.0)
             gg = ti.f64(0.0)
+            nf = 0
             for i in range(n):
-                gi = -work[b, _DY, i] * e0 + work[b, _DX, i] * e1
-                gg += gi * gi
+                u = work[b, _DX, i]
+                v = work[b, _DY, i]
+                gi = -v * e0 + u * e1
+                fr = 1
+                if gi < 0.0 and work[b, _Q, i] <= lo[i]:
+                    fr = 0
+                if gi > 0.0 and work[b, _Q, i] >= hi[i]:
+                    fr = 0
+                work[b, _FREE, i] = ti.cast(fr, f64)
+                if fr == 1:
+                    a += v * v
+                    bb -= u * v
+                    c += u * u
+                    gg += gi * gi
+                    work[b, _CX, nf] = u
+                    work[b, _CY, nf] = v
+                    nf += 1
             valid = 1
             if gg <= prm[4] * (a + c) * r2:
                 stop = 1
                 valid = 0
-            elif newton == 1:  # full-Hessian LM step (dls._newton_lm_step)
-                for i in range(n):
-                    work[b, _W, i] = e0 * work[b, _DX, i] + e1 * work[b, _DY, i]
+            elif newton == 1:  # full-Hessian LM step on the free joints (dls._newton_lm_step)
+                for i in range(nf):
+                    work[b, _W, i] = e0 * work[b, _CX, i] + e1 * work[b, _CY, i]
                 prevp = ti.f64(1.0)
-                for kk in range(n):
+                for kk in range(nf):
                     t = lam2 + work[b, _W, kk]
-                    if kk < n - 1:
-                        t += lam2 - work[b, _W, kk + 1]
+                    if kk < nf - 1:
+                        t = lam2 * 2.0 + work[b, _W, kk] - work[b, _W, kk + 1]
                     if kk > 0:
                         t -= lam2 * lam2 / prevp
                     if not (ti.abs(t) > prm[13]):
@@ -192,17 +215,19 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
                     work[b, _PIV, kk] = t
                     prevp = t
                 if valid == 1:
-                    _solve_h(work, b, n, _DY, ti.f64(-1.0), _H0, lam2)
-                    _solve_h(work, b, n, _DX, ti.f64(1.0), _H1, lam2)
-                    c00 = ti.f64(1.0)
+                    _solve_h(work, b, nf, _CY, ti.f64(-1.0), _H0, lam2)
+                    _solve_h(work, b, nf, _CX, ti.f64(1.0), _H1, lam2)
+                    c00 = ti.f64(0.0)
                     c01 = ti.f64(0.0)
                     c10 = ti.f64(0.0)
-                    c11 = ti.f64(1.0)
-                    for i in range(n):
-                        c00 -= work[b, _DY, i] * work[b, _H0, i]
-                        c01 -= work[b, _DY, i] * work[b, _H1, i]
-                        c10 += work[b, _DX, i] * work[b, _H0, i]
-                        c11 += work[b, _DX, i] * work[b, _H1, i]
+                    c11 = ti.f64(0.0)
+                    for i in range(nf):
+                        c00 -= work[b, _CY, i] * work[b, _H0, i]
+                        c01 -= work[b, _CY, i] * work[b, _H1, i]
+                        c10 += work[b, _CX, i] * work[b, _H0, i]
+                        c11 += work[b, _CX, i] * work[b, _H1, i]
+                    c00 += 1.0
+                    c11 += 1.0
                     dc = c00 * c11 - c01 * c10
                     if not (ti.abs(dc) > prm[13]):
                         valid = 0
@@ -210,10 +235,14 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
                         w0 = (c11 * e0 - c01 * e1) / dc
                         w1 = (c00 * e1 - c10 * e0) / dc
                         descent = ti.f64(0.0)
+                        j = 0
                         for i in range(n):
-                            d = w0 * work[b, _H0, i] + w1 * work[b, _H1, i]
+                            d = ti.f64(0.0)
+                            if work[b, _FREE, i] != 0.0:
+                                d = w0 * work[b, _H0, j] + w1 * work[b, _H1, j]
+                                descent += d * (-work[b, _DY, i] * e0 + work[b, _DX, i] * e1)
+                                j += 1
                             work[b, _DQ, i] = d
-                            descent += d * (-work[b, _DY, i] * e0 + work[b, _DX, i] * e1)
                         if not (descent > 0.0):
                             valid = 0
                 if valid == 0:
@@ -227,7 +256,10 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
                 g0 = (c * e0 - bb * e1) / det
                 g1 = (a * e1 - bb * e0) / det
                 for i in range(n):
-                    work[b, _DQ, i] = -work[b, _DY, i] * g0 + work[b, _DX, i] * g1
+                    d = ti.f64(0.0)
+                    if work[b, _FREE, i] != 0.0:
+                        d = -work[b, _DY, i] * g0 + work[b, _DX, i] * g1
+                    work[b, _DQ, i] = d
             if valid == 1:
                 big = ti.f64(0.0)
                 for i in range(n):
@@ -285,7 +317,7 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
                     for kk in range(n):
                         t = 1.0 + work[b, _W, kk]
                         if kk < n - 1:
-                            t += 1.0 - work[b, _W, kk + 1]
+                            t = 2.0 + work[b, _W, kk] - work[b, _W, kk + 1]
                         if kk > 0:
                             t -= 1.0 / prevp
                         if ti.abs(t) <= prm[9]:
@@ -302,16 +334,18 @@ def planar_dls(L: ti.types.ndarray(dtype=f64, ndim=1), base: ti.types.ndarray(dt
                         A00 = ti.f64(0.0)
                         A01 = ti.f64(0.0)
                         A11 = ti.f64(0.0)
-                        r0 = e0
-                        r1 = e1
+                        s0 = ti.f64(0.0)
+                        s1 = ti.f64(0.0)
                         for i in range(n):
                             j0 = -work[b, _DY, i]
                             j1 = work[b, _DX, i]
                             A00 += j0 * work[b, _H0, i]
                             A01 += j0 * work[b, _H1, i]
                             A11 += j1 * work[b, _H1, i]
-                            r0 += j0 * work[b, _HG, i]
-                            r1 += j1 * work[b, _HG, i]
+                            s0 += j0 * work[b, _HG, i]
+                            s1 += j1 * work[b, _HG, i]
+                        r0 = e0 + s0
+                        r1 = e1 + s1
                         dA = A00 * A11 - A01 * A01
                         if ti.abs(dA) > prm[10] * (A00 * A00 + A11 * A11):
                             l0 = (A11 * r0 - A01 * r1) / dA

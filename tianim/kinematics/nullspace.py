@@ -30,6 +30,8 @@ Joint limits are applied by clipping each trial pose.
 
 from __future__ import annotations
 
+from math import sqrt
+
 import numpy as np
 
 from tianim.kinematics import dls
@@ -152,28 +154,11 @@ def _tangential_curvature_ok(dq: list, w: list, J0: list, J1: list, a: float, b:
     return quad >= 1e-3 * _dot(dt, dt)
 
 
-def _kkt_dense(J0, J1, g, e0, e1, w, pg, a, b, c) -> list:
-    """The SQP step by a dense (n + 2)-square solve, with the tangential-curvature check (H indefinite)."""
-    n = len(g)
-    J = np.array([J0, J1])
-    H = np.eye(n) + np.asarray(w)[np.maximum.outer(np.arange(n), np.arange(n))]
-    K = np.zeros((n + 2, n + 2))
-    K[:n, :n], K[:n, n:], K[n:, :n] = H, -J.T, J
-    try:
-        dq = np.linalg.solve(K, np.concatenate([-np.asarray(g), [e0, e1]]))[:n]
-    except np.linalg.LinAlgError:
-        return [-v for v in pg]
-    v0, v1 = J @ dq
-    det = a * c - b * b
-    dt = dq - ((c * v0 - b * v1) / det) * J[0] - ((a * v1 - b * v0) / det) * J[1]
-    if not (float(dt @ H @ dt) >= 1e-3 * float(dt @ dt)) or not np.all(np.isfinite(dq)):
-        return [-v for v in pg]
-    return dq.tolist()
-
-
 def _polish_planar_one(chain, target, q, rest, tol: float, iters: int):
     """:func:`polish` for one pose of a PlanarChain in plain floats: the SQP step by the O(n) structured
-    solve of :func:`_factor_h` (dense fallback where H is indefinite); ~10x cheaper than the batched path."""
+    solve of :func:`_factor_h` (the projected gradient where that solve is unavailable or the tangential
+    curvature is not positive); ~10x cheaper than the batched path. The Taichi kernel
+    (:mod:`tianim.kinematics.ik_kernel`) mirrors it operation for operation: the two agree bit for bit."""
     L, bx, by, lo, hi, limited = plain_constants(chain)
     tx, ty = float(target[0]), float(target[1])
     rs = [float(v) for v in rest]
@@ -196,7 +181,7 @@ def _polish_planar_one(chain, target, q, rest, tol: float, iters: int):
 
     qa = [float(v) for v in q]
     e0, e1, J0, J1, a, b, c = fkj(qa)
-    r = (e0 * e0 + e1 * e1) ** 0.5
+    r = sqrt(e0 * e0 + e1 * e1)
     if r > tol:
         return np.array(qa), r
     g = [v - w for v, w in zip(qa, rs)]
@@ -206,19 +191,19 @@ def _polish_planar_one(chain, target, q, rest, tol: float, iters: int):
         u0, u1 = _dot(J0, g), _dot(J1, g)
         mu0, mu1 = (c * u0 - b * u1) / det, (a * u1 - b * u0) / det
         pg = [v - mu0 * j0 - mu1 * j1 for v, j0, j1 in zip(g, J0, J1)]  # N (q - rest)
-        if _dot(pg, pg) ** 0.5 <= _PTOL * (1.0 + (2 * phi) ** 0.5):
+        if sqrt(_dot(pg, pg)) <= _PTOL * (1.0 + sqrt(2.0 * phi)):
             break
         w = [mu0 * j1 - mu1 * j0 for j0, j1 in zip(J0, J1)]  # H = I + w[max(i, j)]
         piv = _factor_h(w)
-        if piv is None:
-            dq = _kkt_dense(J0, J1, g, e0, e1, w, pg, a, b, c)
+        if piv is None:  # H ~singular: the projected gradient (as the kernel; the step is globalised below)
+            dq = [-v for v in pg]
         else:  # Schur complement: (J H^-1 J^T) lam = e + J H^-1 g, dq = H^-1 (J^T lam - g)
             hg, h0, h1 = _solve_h(piv, g), _solve_h(piv, J0), _solve_h(piv, J1)
             A00, A01, A11 = _dot(J0, h0), _dot(J0, h1), _dot(J1, h1)
             r0, r1 = e0 + _dot(J0, hg), e1 + _dot(J1, hg)
             dA = A00 * A11 - A01 * A01
             if abs(dA) <= 1e-12 * (A00 * A00 + A11 * A11):
-                dq = _kkt_dense(J0, J1, g, e0, e1, w, pg, a, b, c)
+                dq = [-v for v in pg]
             else:
                 l0, l1 = (A11 * r0 - A01 * r1) / dA, (A00 * r1 - A01 * r0) / dA
                 dq = [l0 * x0 + l1 * x1 - xg for x0, x1, xg in zip(h0, h1, hg)]
@@ -235,17 +220,17 @@ def _polish_planar_one(chain, target, q, rest, tol: float, iters: int):
             if limited:
                 qt = [min(max(v, lo[i]), hi[i]) for i, v in enumerate(qt)]
             f0, f1, K0, K1, at, bt, ct = fkj(qt)
-            rt = (f0 * f0 + f1 * f1) ** 0.5
+            rt = sqrt(f0 * f0 + f1 * f1)
             for _ in range(_RESTORE):
                 if rt <= rtol:
                     break
                 qt = pinv_step(qt, f0, f1, K0, K1, at, bt, ct)
                 f0, f1, K0, K1, at, bt, ct = fkj(qt)
-                rt = (f0 * f0 + f1 * f1) ** 0.5
+                rt = sqrt(f0 * f0 + f1 * f1)
             gt = [v - w for v, w in zip(qt, rs)]
             phit = 0.5 * _dot(gt, gt)
             # phi is only known to |mu| (r + rt) off the manifold: inside that band compare Lagrangians
-            noise = 2.0 * (mu0 * mu0 + mu1 * mu1) ** 0.5 * (r + rt)
+            noise = 2.0 * sqrt(mu0 * mu0 + mu1 * mu1) * (r + rt)
             if rt <= tol and (phit < phi - noise or (abs(phit - phi) <= noise
                                                     and phit + mu0 * f0 + mu1 * f1 < phi + mu0 * e0 + mu1 * e1)):
                 qa, g, phi, r, e0, e1, J0, J1, a, b, c = qt, gt, phit, rt, f0, f1, K0, K1, at, bt, ct
@@ -325,19 +310,21 @@ def _polish_serial_one(chain, target, q, rest, tol: float, iters: int):
     return qa, r
 
 
-def polish(chain, tgt: np.ndarray, q: np.ndarray, rest: np.ndarray, tol: float, iters: int = ITERS):
+def polish(chain, tgt: np.ndarray, q: np.ndarray, rest: np.ndarray, tol: float, iters: int = ITERS,
+           vectorised: bool = False):
     """Polish poses q (B, n) that meet ``tol`` toward ``argmin |q - rest|`` on ``f(q) = tgt`` (B, m).
 
     Returns (q (B, n), residual (B,)). Rows that start with a residual above ``tol``
     are returned unchanged. Works for any chain; vectorised over rows (one target
-    on a planar chain costs about 40 us per iteration, 3-6 iterations typical).
+    on a planar chain costs about 40 us per iteration, 3-6 iterations typical). A single row takes
+    the plain-float path unless ``vectorised`` (so that every row of a vectorised solve takes one path).
     """
     B, n = q.shape
     m = tgt.shape[1]
-    if B == 1 and hasattr(chain, "lengths") and m == 2:
+    if B == 1 and not vectorised and hasattr(chain, "lengths") and m == 2:
         q1, r1 = _polish_planar_one(chain, tgt[0], q[0], rest[0], tol, iters)
         return q1[None], np.array([r1])
-    if B == 1 and hasattr(chain, "_fk_jac_plain"):
+    if B == 1 and not vectorised and hasattr(chain, "_fk_jac_plain"):
         q1, r1 = _polish_serial_one(chain, tgt[0], q[0], rest[0], tol, iters)
         return q1[None], np.array([r1])
     lo, hi = chain.lower, chain.upper
