@@ -7,6 +7,10 @@ this file only dispatches, so that adding a benchmark or a demo never touches it
 * ``tianim bench NAME [...]``    -> ``tianim.bench.NAME`` (``tianim bench --list``)
 * ``tianim demo [...]``          -> :mod:`tianim.gallery.cli`
 * ``tianim chart [...]``         -> :mod:`tianim.bench.chart`
+
+``tianim --verbose COMMAND`` shows Taichi's start-up banner (hidden by default). A bad
+``TIANIM_ARCH``, ``TIANIM_NUM_THREADS`` or ``TIANIM_TAICHI`` is reported in one line
+(exit status 2), before anything runs.
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 import sys
+import warnings
 
 _COMMANDS = {
     "info": "tianim.info",
@@ -21,13 +26,22 @@ _COMMANDS = {
     "chart": "tianim.bench.chart",
 }
 
-_USAGE = """usage: tianim COMMAND [ARGS]
+#: Benchmarks that moved out of ``tianim bench``, and where they are now.
+_MOVED = {"envs": "python -m envs.bench (it lives with the environments: tianim never imports gymnasium)"}
+
+_USAGE = """usage: tianim [--verbose] COMMAND [ARGS]
+
+options:
+  --verbose            show Taichi's start-up banner
 
 commands:
   info                 versions, Taichi arch and threads
   bench NAME [...]     run a benchmark (tianim bench --list)
   demo NAME --out FILE render a demo to a file (tianim demo --list)
   chart [...]          charts from benchmark JSON files
+
+environment: TIANIM_ARCH (cpu, cuda, vulkan, metal, opengl, gpu; a GPU that does not
+work falls back to the CPU), TIANIM_NUM_THREADS, TIANIM_TAICHI (taichi or quadrants)
 """
 
 
@@ -48,6 +62,9 @@ def _bench(argv: list[str]) -> int:
         print("usage: tianim bench NAME [--json PATH] [...]\n\nbenchmarks: " + ", ".join(names))
         return 0
     name = argv[0]
+    if name in _MOVED:
+        print(f"tianim bench: the {name!r} benchmark moved: run {_MOVED[name]}", file=sys.stderr)
+        return 2
     if name not in names:
         print(f"tianim bench: unknown benchmark {name!r}; choose one of {names}", file=sys.stderr)
         return 2
@@ -55,19 +72,48 @@ def _bench(argv: list[str]) -> int:
     return int(mod.main(argv[1:]) or 0)
 
 
+def _one_line_fallback_warnings(runtime) -> None:
+    """Show the CPU-fallback warning as one ``tianim: warning: ...`` line (others unchanged)."""
+    original = warnings.formatwarning
+
+    def formatwarning(message, category, filename, lineno, line=None):
+        if issubclass(category, runtime.ArchFallbackWarning):
+            return f"tianim: warning: {message}\n"
+        return original(message, category, filename, lineno, line)
+
+    warnings.formatwarning = formatwarning
+
+
+def _run(cmd: str, rest: list[str]) -> int:
+    if cmd == "bench":
+        return _bench(rest)
+    mod = importlib.import_module(_COMMANDS[cmd])
+    return int(mod.main(rest) or 0)
+
+
 def main(argv: list[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in ("-v", "--verbose"):
+        from tianim import _ti
+
+        _ti.set_verbose(True)
+        argv = argv[1:]
     if not argv or argv[0] in ("-h", "--help"):
         print(_USAGE)
         return 0
     cmd, rest = argv[0], argv[1:]
-    if cmd == "bench":
-        return _bench(rest)
-    if cmd not in _COMMANDS:
+    if cmd != "bench" and cmd not in _COMMANDS:
         print(f"tianim: unknown command {cmd!r}\n\n{_USAGE}", file=sys.stderr)
         return 2
-    mod = importlib.import_module(_COMMANDS[cmd])
-    return int(mod.main(rest) or 0)
+    from tianim import runtime
+
+    _one_line_fallback_warnings(runtime)
+    try:
+        runtime.check_environment()
+        return _run(cmd, rest)
+    except runtime.ConfigError as exc:  # a bad TIANIM_* value: one line, no traceback
+        print(f"tianim: error: {exc}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":  # pragma: no cover

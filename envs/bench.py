@@ -1,4 +1,4 @@
-"""``tianim bench envs``: environment steps per second, single and batched, against MuJoCo.
+"""``python -m envs.bench``: environment steps per second, single and batched, against MuJoCo.
 
 Measures, with pre-generated actions and medians over ``--repeats``:
 
@@ -9,15 +9,20 @@ Measures, with pre-generated actions and medians over ``--repeats``:
 * ``mujoco_reacher_steps_per_s`` (``gym.make("Reacher-v5")`` measured the same way
   in the same run, when mujoco is installed) and ``ratio_vs_mujoco``.
 
-This benchmark drives the Gymnasium environments of the ``envs`` package, so it
-imports gymnasium and ``envs`` inside :func:`main` (the ``tianim`` library itself
-never does; the benchmark is a tool layered above both).
+It lives with the environments (it was ``tianim bench envs``): it drives them through
+Gymnasium, and the ``tianim`` library never imports gymnasium or ``envs``
+(docs/architecture.md, layers). Options as for every ``tianim bench``: ``--json PATH``,
+``--repeats N``, ``--quick``; and ``--num-envs N``.
 """
 
 from __future__ import annotations
 
+import sys
+
+import gymnasium as gym
 import numpy as np
 
+import envs  # noqa: F401  (registers the environments)
 from tianim.bench.common import median_time, parser, print_table, write_json
 
 
@@ -50,12 +55,9 @@ def _vector_rate(venv, steps: int, repeats: int, seed: int = 0) -> float:
 
 def main(argv: list[str] | None = None) -> int:
     p = parser("envs", __doc__.splitlines()[0])
+    p.prog = "python -m envs.bench"
     p.add_argument("--num-envs", type=int, default=4096, help="copies for the batched ArmReach (default 4096)")
     args = p.parse_args(argv)
-    import gymnasium as gym
-
-    import envs  # noqa: F401  (registers the environments)
-
     quick = args.quick
     repeats = 2 if quick else args.repeats
     single_steps = 2000 if quick else 20000
@@ -112,3 +114,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"ratio_vs_mujoco (ArmReach single / Reacher-v5): {summary['ratio_vs_mujoco']:.2f}")
     write_json(args.json, summary, rows=rows)
     return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
