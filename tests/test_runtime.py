@@ -5,6 +5,8 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
+
 
 def run(code, **env):
     full_env = dict(os.environ, **env)
@@ -47,3 +49,147 @@ def test_lazy_init_uses_TIANIM_ARCH_and_rejects_unknown_arch():
     assert out.stdout.strip().splitlines()[-1] in ("True x64", "True arm64")
     bad = run("import tianim.runtime as rt; rt.init()", TIANIM_ARCH="tpu")
     assert bad.returncode != 0 and "TIANIM_ARCH" in bad.stderr and "'tpu'" in bad.stderr
+
+
+# ------------------------------------------------------------------ arch probe, env values, quiet start
+
+
+def tianim_cmd(*args, **env):
+    full_env = dict(os.environ, **env)
+    return subprocess.run([sys.executable, "-m", "tianim", *args], env=full_env, capture_output=True, text=True,
+                          timeout=600)
+
+
+@pytest.mark.parametrize("arch", ["gpu", "opengl", "cuda", "vulkan"])
+def test_unusable_gpu_arch_falls_back_to_cpu_with_one_warning(arch):
+    import tianim.runtime as rt
+
+    ok, _ = rt.probe_arch(arch)
+    if ok:
+        pytest.skip(f"{arch} works on this machine")
+    out = run("""
+        import warnings
+        import numpy as np
+        import tianim.runtime as rt
+        from tianim.render import Canvas2D
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            Canvas2D(8, 8).discs(np.zeros((1, 2))).image()
+            Canvas2D(8, 8).discs(np.zeros((1, 2))).image()
+            started = rt.init()
+        msgs = [str(w.message) for w in caught if issubclass(w.category, rt.ArchFallbackWarning)]
+        print(len(msgs), started["arch"], started["requested"])
+        print(msgs[0])
+    """, TIANIM_ARCH=arch)
+    assert out.returncode == 0, (out.returncode, out.stderr[-2000:])  # no signal exit
+    count, got, requested = out.stdout.strip().splitlines()[-2].split()
+    assert count == "1" and got in ("x64", "arm64") and requested == arch
+    msg = out.stdout.strip().splitlines()[-1]
+    assert f"TIANIM_ARCH={arch}" in msg and "CPU" in msg
+
+
+def test_probe_is_cached_per_process():
+    out = run("""
+        import time
+        import tianim.runtime as rt
+        first = rt.probe_arch("opengl")
+        t = time.perf_counter()
+        again = rt.probe_arch("opengl")
+        print(first == again, time.perf_counter() - t < 0.01)
+    """)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "True True"
+
+
+def test_cli_gpu_fallback_is_one_line():
+    import tianim.runtime as rt
+
+    if rt.probe_arch("gpu")[0]:
+        pytest.skip("a GPU works on this machine")
+    out = tianim_cmd("info", TIANIM_ARCH="gpu")
+    assert out.returncode == 0, out.stderr
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("tianim: warning: TIANIM_ARCH=gpu"), out.stderr
+    assert "arch_fallback" in out.stdout
+
+
+@pytest.mark.parametrize(
+    "var, value, accepted",
+    [
+        ("TIANIM_ARCH", "cpuu", "cpu, cuda, vulkan, metal, opengl, gpu"),
+        ("TIANIM_ARCH", "tpu", "cpu, cuda"),
+        ("TIANIM_NUM_THREADS", "abc", "1 to 65536"),
+        ("TIANIM_NUM_THREADS", "0", "1 to 65536"),
+        ("TIANIM_NUM_THREADS", "-2", "1 to 65536"),
+        ("TIANIM_NUM_THREADS", "2.5", "1 to 65536"),
+        ("TIANIM_TAICHI", "taichy", "taichi, quadrants"),
+    ],
+)
+@pytest.mark.parametrize("command", [("info",), ("demo", "--list"), ("bench", "--list")])
+def test_bad_environment_value_is_one_line_from_the_cli(var, value, accepted, command):
+    out = tianim_cmd(*command, **{var: value})
+    assert out.returncode == 2, (out.returncode, out.stdout, out.stderr)
+    assert "Traceback" not in out.stderr
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1, out.stderr
+    assert var in lines[0] and repr(value) in lines[0] and accepted in lines[0], lines[0]
+
+
+def test_bad_num_threads_from_python_names_the_variable():
+    out = run("import tianim.runtime as rt; rt.init()", TIANIM_NUM_THREADS="abc")
+    assert out.returncode != 0 and "TIANIM_NUM_THREADS='abc'" in out.stderr
+    out = run("""
+        import tianim.runtime as rt
+        try:
+            rt.init(num_threads=2**40)
+        except ValueError as e:
+            print(e)
+    """)
+    assert "num_threads=1099511627776" in out.stdout
+
+
+def test_num_threads_from_environment():
+    out = run("import tianim.runtime as rt; rt.init(); print(rt.num_threads())", TIANIM_NUM_THREADS="1")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "1"
+
+
+def test_missing_taichi_package_is_a_clear_error():
+    import importlib.util
+
+    if importlib.util.find_spec("quadrants") is not None:
+        pytest.skip("quadrants is installed here")
+    out = tianim_cmd("info", TIANIM_TAICHI="quadrants")
+    assert out.returncode == 2 and "Traceback" not in out.stderr
+    assert "TIANIM_TAICHI=quadrants" in out.stderr and "pip install quadrants" in out.stderr
+    out = run("""
+        import tianim.render, tianim._ti as t
+        try:
+            t.get()
+        except ImportError as e:
+            print(type(e).__name__, e)
+    """, TIANIM_TAICHI="quadrants")
+    assert "MissingTaichiError" in out.stdout and "not installed" in out.stdout
+
+
+@pytest.mark.parametrize("command", [("--help",), ("demo", "--list"), ("bench", "--list"), ("info",)])
+def test_no_taichi_banner_unless_verbose(command):
+    out = tianim_cmd(*command)
+    assert out.returncode == 0, out.stderr
+    assert "[Taichi]" not in out.stdout + out.stderr
+
+
+def test_verbose_shows_the_banner():
+    out = tianim_cmd("--verbose", "info")
+    assert out.returncode == 0, out.stderr
+    assert "[Taichi] version" in out.stdout
+
+
+def test_banner_switch_is_not_left_in_the_environment():
+    out = run("""
+        import os, tianim._ti as t
+        t.get()
+        print(os.environ.get("ENABLE_TAICHI_HEADER_PRINT"))
+    """)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip().splitlines()[-1] == "None"

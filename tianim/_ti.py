@@ -25,6 +25,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import importlib
+import importlib.util
 import io
 import os
 import sys
@@ -43,7 +44,11 @@ _verbose: bool | None = None
 
 
 class ConfigError(ValueError):
-    """A bad ``TIANIM_*`` setting of the kernel layer (one line, no traceback needed)."""
+    """A bad ``TIANIM_*`` setting (one line, no traceback needed): the ``tianim`` command prints it."""
+
+
+class MissingTaichiError(ConfigError, ImportError):
+    """The chosen Taichi package (``taichi`` or ``quadrants``) is not installed."""
 
 
 def package_name() -> str:
@@ -120,6 +125,22 @@ def _import(name: str):
             os.environ[_BANNER_ENV] = previous
 
 
+def _missing(name: str) -> MissingTaichiError:
+    if os.environ.get(ENV_VAR, "").strip():
+        chosen = f"{ENV_VAR}={os.environ[ENV_VAR]} selects {name!r}"
+    else:
+        chosen = f"tianim runs on {name!r} by default"
+    hint = f"pip install {name}" if name != PACKAGES[0] else f"pip install taichi (or set {ENV_VAR}=quadrants)"
+    return MissingTaichiError(f"{chosen}, which is not installed; {hint}")
+
+
+def check_installed() -> None:
+    """Raise :class:`MissingTaichiError` when the chosen package cannot be found (imports nothing)."""
+    name = package_name()
+    if name not in sys.modules and importlib.util.find_spec(name) is None:
+        raise _missing(name)
+
+
 def get():
     """The Taichi module (``taichi``, or ``quadrants`` under ``TIANIM_TAICHI=quadrants``), imported once.
 
@@ -136,14 +157,7 @@ def get():
             except ModuleNotFoundError as exc:
                 if exc.name != name:
                     raise
-                hint = (
-                    f"pip install {name}" if name != PACKAGES[0]
-                    else f"pip install taichi, or set {ENV_VAR}=quadrants with quadrants installed"
-                )
-                chosen = f"{ENV_VAR}={name}" if os.environ.get(ENV_VAR) else f"the default ({name})"
-                raise ImportError(
-                    f"tianim needs the Taichi package {name!r} ({chosen}), which is not installed; {hint}"
-                ) from None
+                raise _missing(name) from None
     return _module
 
 

@@ -13,24 +13,28 @@ def collect() -> dict:
     from importlib import metadata
 
     import tianim
-    from tianim import runtime
+    from tianim import _ti, runtime
 
     versions = {}
-    for pkg in ("taichi", "numpy", "gymnasium", "imageio", "imageio-ffmpeg", "scipy", "matplotlib"):
+    for pkg in ("taichi", "quadrants", "numpy", "gymnasium", "imageio", "imageio-ffmpeg", "scipy", "matplotlib"):
         try:
             versions[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
             versions[pkg] = None
-    runtime.ensure_taichi()
+    started = runtime.init()
     return {
         "tianim": tianim.__version__,
         "python": sys.version.split()[0],
         "platform": platform.platform(),
         "cpu_count": os.cpu_count(),
         "versions": versions,
+        "taichi_package": _ti.package_name(),
         "taichi_arch": runtime.current_arch(),
         "taichi_threads": runtime.num_threads(),
+        "arch_fallback": started.get("fallback"),
         "TIANIM_ARCH": os.environ.get("TIANIM_ARCH"),
+        "TIANIM_NUM_THREADS": os.environ.get("TIANIM_NUM_THREADS"),
+        "TIANIM_TAICHI": os.environ.get("TIANIM_TAICHI"),
     }
 
 
@@ -43,7 +47,7 @@ def main(argv: list[str]) -> int:
     for key, val in info.items():
         if key == "versions":
             for pkg, ver in val.items():
-                print(f"  {pkg:<15} {ver}")
+                print(f"  {pkg:<17} {ver}")
         else:
-            print(f"{key:<15} {val}")
+            print(f"{key:<19} {val}")
     return 0

@@ -34,7 +34,7 @@ import warnings
 
 from tianim import _ti
 from tianim._checks import check_positive_int
-from tianim._ti import ConfigError
+from tianim._ti import ConfigError, MissingTaichiError  # noqa: F401  (re-exported)
 
 #: Archs tianim accepts (argument ``arch`` of :func:`init`, or ``TIANIM_ARCH``).
 ARCHES = ("cpu", "cuda", "vulkan", "metal", "opengl", "gpu")
@@ -92,8 +92,9 @@ def check_environment() -> None:
     """Raise :class:`ConfigError` for a bad ``TIANIM_*`` variable, importing nothing.
 
     The ``tianim`` command calls it first so that a typo is one line, not a traceback.
+    A missing Taichi package is :class:`MissingTaichiError` (a ConfigError).
     """
-    _ti.package_name()
+    _ti.check_installed()
     _resolve_arch(None)
     _resolve_threads(None)
 
