@@ -1,4 +1,5 @@
-"""cloth: a square cloth drapes over a sphere and slides onto the ground (the README's main job)."""
+"""cloth: a square cloth hangs from two corners, swings against a sphere, is let go, and drapes over
+the sphere onto the ground (the README's main job)."""
 
 from __future__ import annotations
 
@@ -8,29 +9,41 @@ import tianim.physics as tp
 from tianim.render import Scene3D
 from tianim.timeline import Simulation, Timeline
 
-TITLE = "a cloth draping over a sphere onto the ground"
-FRAMES = 120
+TITLE = "a cloth swinging from two corners, let go, draping over a sphere onto the ground"
+FRAMES = 96  # 4 s at 24 fps: the swing, the release at 2 s, the drape
+RELEASE = 2.0  # s: the pinned corners are let go here (the swing has mostly died down)
 
 
 def frames(width: int, height: int, n_frames: int, fps: float, n: int = 40):
-    """Yield (height, width, 3) uint8 frames of an n x n cloth falling on a sphere and the ground."""
+    """Yield (height, width, 3) uint8 frames of an n x n cloth: pinned at the two corners of its back
+    edge, it swings down and brushes the sphere; at RELEASE seconds (or halfway through a shorter
+    video) the corners are released and it falls onto the sphere and the ground."""
     sphere = tp.Sphere(center=(0.0, 0.35, 0.0), radius=0.3, friction=0.6)
     model = tp.cloth(nx=n, ny=n, size=(1.2, 1.2), total_mass=0.3, stiffness=(800.0, 300.0, 20.0),
-                     damping=(0.02, 0.01, 0.002), medium_damping=2e-4, origin=(-0.6, 0.9, -0.6), pins="none",
-                     colliders=[tp.Ground(height=0.0, friction=0.5), sphere])
+                     damping=(0.02, 0.01, 0.002), medium_damping=2e-4, origin=(-0.6, 1.1, -0.1),
+                     pins="top-corners", colliders=[tp.Ground(height=0.0, friction=0.5), sphere])
     state = model.state(batch=1, dtype=np.float32)
     sim = Simulation(tp.plan_steps(model, 1.0 / fps, methods="symplectic_euler"), state)
+    release = min(RELEASE, 0.5 * n_frames / fps)
+    pins = np.nonzero(state.pinned[0])[0]
+
+    def cloth_at(t):
+        if t >= release and state.pinned[0, pins].any():
+            state.release(pins)
+        return sim(t)
+
     scene = Scene3D(width, height)
+    # frame the whole story: the cloth as it starts (its highest) and the sphere and ground it ends on
     scene.ground(0.0, cell=0.15)
     scene.sphere(sphere.center, sphere.radius * 0.985, color="orange")
     scene.surface(model.positions.reshape(n, n, 3), color="#3f7fc7", back_color="#f0c05a")
-    scene.frame(azimuth=30.0, elevation=28.0, margin=0.95)
+    scene.frame(azimuth=210.0, elevation=24.0, margin=0.95)
 
     def draw(x, t):
         scene.clear()
         scene.ground(0.0, cell=0.15)
-        scene.sphere(sphere.center, sphere.radius * 0.985, color="orange")
+        scene.sphere(sphere.center, sphere.radius * 0.985, color="orange")  # a hair inside the collider
         scene.surface(x.reshape(n, n, 3), color="#3f7fc7", back_color="#f0c05a")
         return scene.render()
 
-    yield from Timeline(frames=n_frames, fps=fps).render(sim, draw)
+    yield from Timeline(frames=n_frames, fps=fps).render(cloth_at, draw)
