@@ -101,3 +101,29 @@ def test_scene3d_bad_input():
         Scene3D(10, 10).surface(np.zeros((3, 3)))
     with pytest.raises(ValueError, match="up"):
         Scene3D(10, 10, up=(1, 1, 0))
+
+
+@pytest.mark.parametrize(
+    "kw, exc, words",
+    [
+        (dict(per_sample="no"), TypeError, ["per_sample", "'no'"]),
+        (dict(shadows=1), TypeError, ["shadows", "1"]),
+        (dict(ssaa=2.0), ValueError, ["ssaa=2.0"]),
+        (dict(ssaa=2**40), ValueError, ["ssaa=1099511627776"]),
+        (dict(shadow_size=np.float64(256.0)), ValueError, ["shadow_size=256.0"]),
+        (dict(ambient=np.float64(1.5)), ValueError, ["ambient=1.5"]),
+        (dict(ambient="x"), TypeError, ["ambient", "'x'"]),
+    ],
+)
+def test_scene3d_option_checks_name_argument_and_value(kw, exc, words):
+    with pytest.raises(exc) as info:
+        Scene3D(10, 10, **kw)
+    for w in words:
+        assert w in str(info.value)
+    assert "np.float" not in str(info.value)
+
+
+def test_scene3d_accepts_numpy_scalars():
+    sc = Scene3D(np.int64(16), np.int32(12), ssaa=np.int64(1), shadow_size=np.int64(64), ambient=np.float32(0.3),
+                 per_sample=np.bool_(False))
+    assert (sc.width, sc.height, sc.ssaa) == (16, 12, 1)

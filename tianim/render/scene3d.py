@@ -17,6 +17,7 @@ no window, display or GPU. Kernels take arrays, so new scenes compile nothing.
 
 from __future__ import annotations
 
+import numbers
 import sys
 
 import numpy as np
@@ -25,7 +26,7 @@ from tianim.render import _kernels3d as K
 from tianim.render import _shade3d as S
 from tianim.render.camera import Camera
 from tianim.render.colors import rgb, rgb_array
-from tianim._checks import check_size, points_array
+from tianim._checks import check_bool, check_finite_scalar, check_size, fmt, points_array
 from tianim.runtime import ensure_taichi
 
 _GRID_FACES: dict = {}
@@ -114,14 +115,17 @@ class Scene3D:
         self.width, self.height = check_size(width, height)
         if camera is not None and not isinstance(camera, Camera):
             raise TypeError(f"camera={camera!r} must be a tianim.render.Camera or None (auto framing)")
-        if int(ssaa) != ssaa or not 1 <= int(ssaa) <= 4:
-            raise ValueError(f"ssaa={ssaa!r} must be an integer in 1..4 (samples per pixel per axis)")
+        if isinstance(ssaa, (bool, np.bool_)) or not isinstance(ssaa, (numbers.Integral, np.integer)) \
+                or not 1 <= int(ssaa) <= 4:
+            raise ValueError(f"ssaa={fmt(ssaa)} must be an integer in 1..4 (samples per pixel per axis)")
+        per_sample = check_bool("per_sample", per_sample)
+        shadows = check_bool("shadows", shadows)
         if shadow_size is None:  # about one texel per pixel over the scene: 512 at 640x480
             shadow_size = int(np.clip(64 * round(0.8 * max(self.width, self.height) / 64), 256, 2048))
-        if isinstance(shadow_size, bool) or int(shadow_size) != shadow_size or not 16 <= int(shadow_size) <= 8192:
-            raise ValueError(f"shadow_size={shadow_size!r} must be an integer in 16..8192 (texels per side)")
-        if not 0.0 <= float(ambient) <= 1.0:
-            raise ValueError(f"ambient={ambient!r} must be in [0, 1]")
+        if isinstance(shadow_size, (bool, np.bool_)) or not isinstance(shadow_size, (numbers.Integral, np.integer)) \
+                or not 16 <= int(shadow_size) <= 8192:
+            raise ValueError(f"shadow_size={fmt(shadow_size)} must be an integer in 16..8192 (texels per side)")
+        check_finite_scalar("ambient", ambient, lo=0.0, hi=1.0)
         up = np.asarray(up, dtype=np.float64)
         axis = int(np.argmax(np.abs(up)))
         if up.shape != (3,) or np.count_nonzero(up) != 1 or up[axis] <= 0:
