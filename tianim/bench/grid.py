@@ -5,7 +5,8 @@ N = 100,000 and 1,000,000 (``--quick``: 20,000). For each N the neighbour sets o
 are checked equal (as sorted (i, j) pair keys) before anything is timed; times are medians over
 ``--repeats`` (cKDTree at 1 M: at most 2). Methods, each timed build + query:
 
-* ``tianim`` - :class:`tianim.spatial.NeighbourGrid`, float64 and float32 positions, Taichi CPU;
+* ``tianim`` - :class:`tianim.spatial.NeighbourGrid`, float64 and float32 positions, Taichi CPU
+  (build + query into its (N, K) neighbour buffer; ``csr_s``: the extra time of NumPy CSR lists);
 * ``ckdtree_ball`` - ``scipy.spatial.cKDTree(x).query_ball_point(x, r, workers=-1)`` (all cores);
 * ``ckdtree_pairs`` - ``cKDTree(x).query_pairs(r, output_type="ndarray")`` (one core, each pair once);
 * ``numpy_cells`` - a vectorised NumPy cell list (sort by cell id, 27 offset passes).
@@ -110,9 +111,10 @@ def run_size(n, repeats, seed=0):
     # --- timed
     slow = min(repeats, 2) if n >= 500_000 else repeats
     row = {"n_points": n, "radius": r, "mean_neighbours": float(counts.mean())}
-    row["tianim_f32_s"] = median_time(lambda: tianim_query(grids[np.float32], x32, r), repeats=repeats)
-    row["tianim_f64_s"] = median_time(lambda: tianim_query(grids[np.float64], x64, r), repeats=repeats)
     g = grids[np.float32]
+    row["tianim_f32_s"] = median_time(lambda: g.build(x32).query(r), repeats=repeats)
+    row["tianim_f64_s"] = median_time(lambda: grids[np.float64].build(x64).query(r), repeats=repeats)
+    row["csr_s"] = median_time(lambda: g.query(r).csr(), repeats=repeats) - median_time(lambda: g.query(r), repeats=repeats)
     row["build_f32_s"] = median_time(lambda: g.build(x32), repeats=repeats)
     row["query_f32_s"] = median_time(lambda: g.query(r), repeats=repeats)
     row["ckdtree_ball_s"] = median_time(lambda: _ckd_ball(x64[0], r), repeats=slow, warmup=0)
@@ -131,7 +133,7 @@ def main(argv=None) -> int:
     sizes = [20_000] if args.quick else [100_000, 1_000_000]
     rows = [run_size(n, repeats) for n in sizes]
     print("tianim bench grid: build + query, neighbour sets checked equal first (seconds, medians)")
-    print_table(rows, ["n_points", "mean_neighbours", "tianim_f32_s", "tianim_f64_s", "build_f32_s", "query_f32_s",
+    print_table(rows, ["n_points", "mean_neighbours", "tianim_f32_s", "tianim_f64_s", "build_f32_s", "query_f32_s", "csr_s",
                        "ckdtree_ball_s", "ckdtree_pairs_s", "numpy_cells_s", "speedup_vs_ckdtree", "speedup_vs_numpy"])
     last = rows[-1]
     summary = {

@@ -1,0 +1,278 @@
+"""Particle systems against closed forms, conservation laws and determinism; bad input."""
+
+import hashlib
+import math
+import os
+import subprocess
+import sys
+import textwrap
+import warnings
+
+import numpy as np
+import pytest
+
+from tianim.particles import (BoxEmitter, CurlNoise, DiscEmitter, Drag, Granular, ParticleSystem, PointEmitter,
+                              SphereEmitter, Vortex, Attractor, curl_noise)
+from tianim.physics import Ground
+
+
+def one_particle(v0, forces=(), colliders=(), gravity=(0, -9.81, 0), life=100.0):
+    """A pool holding one live particle at (0, 1, 0) with velocity v0, float64."""
+    ps = ParticleSystem(4, forces=list(forces), colliders=list(colliders), gravity=gravity, dtype=np.float64)
+    ps.alive[0, 0] = 1
+    ps.x[0, 0] = (0, 1, 0)
+    ps.v[0, 0] = v0
+    ps.lifetime[0, 0] = life
+    return ps
+
+
+@pytest.mark.parametrize("rate, fps", [(7.3, 24), (100.0, 30), (33.33, 25)])
+def test_emission_counts_are_exact_over_time(rate, fps):
+    em = PointEmitter(rate=rate, bursts=((0.5, 17), (1.25, 3)), lifetime=100)
+    ps = ParticleSystem(10_000, emitters=[em])
+    frames = 3 * fps
+    total = sum(int(ps.step(1 / fps).born[0]) for _ in range(frames))
+    assert total == math.floor(rate * frames / fps + 1e-9) + 20 == int(ps.n_alive[0])
+
+
+def test_birth_times_are_spread_evenly_within_frames():
+    em = PointEmitter(rate=1000.0)
+    t = em._birth_times(0.0, 1 / 24)
+    assert len(t) == 41 and np.all(np.diff(t) > 0) and t[0] > 0 and t[-1] <= 1 / 24
+    ks = np.sort((t - 0) * 24)  # uniform on [0, 1]: Kolmogorov-Smirnov distance
+    assert np.max(np.abs(ks - (np.arange(1, 42) / 41))) < 0.05
+
+
+def test_ballistic_flight_matches_the_closed_form():
+    ps = one_particle((1.0, 5.0, 0.0))
+    for _ in range(100):
+        ps.step(0.001, substeps=10)
+    t = ps.t
+    exact = np.array([t, 1 + 5 * t - 0.5 * 9.81 * t * t, 0])
+    assert np.allclose(ps.x[0, 0], exact, atol=1e-3 * t + 1e-5)
+
+
+def test_linear_drag_decays_toward_the_wind_with_time_constant_1_over_k():
+    k, w = 2.0, np.array([1.0, 0.0, -0.5])
+    ps = one_particle((3.0, 0.0, 0.0), forces=[Drag(linear=k, wind=tuple(w))], gravity=(0, 0, 0))
+    for _ in range(100):
+        ps.step(0.01, substeps=20)
+    expected = w + (np.array([3.0, 0, 0]) - w) * np.exp(-k * ps.t)
+    assert np.allclose(ps.v[0, 0], expected, rtol=2e-3, atol=1e-4)
+
+
+def test_quadratic_drag_reaches_terminal_speed():
+    ps = one_particle((0.0, 0.0, 0.0), forces=[Drag(quadratic=0.4)])
+    for _ in range(200):
+        ps.step(0.02, substeps=10)
+    assert abs(-ps.v[0, 0, 1] - math.sqrt(9.81 / 0.4)) < 1e-3
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_curl_noise_is_divergence_free(dim):
+    noise = CurlNoise(amplitude=2.0, scale=0.7, seed=3)
+    x = np.random.default_rng(0).uniform(-2, 2, (200, dim))
+    eps, div = 1e-5, 0.0
+    for a in range(dim):
+        e = np.zeros(dim)
+        e[a] = eps
+        div = div + (curl_noise(x + e, noise)[:, a] - curl_noise(x - e, noise)[:, a]) / (2 * eps)
+    scale = np.abs(curl_noise(x, noise)).mean() / 0.7
+    assert np.max(np.abs(div)) < 1e-6 * scale and scale > 0.1
+
+
+def test_kernel_applies_the_curl_noise_field():
+    noise = CurlNoise(amplitude=1.5, scale=0.5, seed=2)
+    ps = one_particle((0, 0, 0), forces=[noise], gravity=(0, 0, 0))
+    x0 = ps.x[0, 0].copy()
+    ps.step(1e-6)
+    assert np.allclose(ps.v[0, 0] / 1e-6, curl_noise(x0[None], noise)[0], rtol=1e-6)
+
+
+def test_bounce_keeps_e_squared_of_the_kinetic_energy():
+    e = 0.6
+    ps = one_particle((0.0, -3.0, 0.0), colliders=[(Ground(restitution=e), "bounce")], gravity=(0, 0, 0))
+    for _ in range(60):
+        ps.step(0.01, substeps=4)
+    assert np.isclose(ps.v[0, 0, 1], 3.0 * e)
+
+
+def test_friction_stops_a_slider_after_v2_over_2_mu_g():
+    mu, v0 = 0.4, 2.0
+    ps = one_particle((v0, 0.0, 0.0), colliders=[(Ground(height=1.0, friction=mu), "bounce")])
+    for _ in range(100):
+        ps.step(0.01, substeps=20)
+    assert abs(ps.x[0, 0, 0] - v0 ** 2 / (2 * mu * 9.81)) < 0.01
+
+
+def test_stick_and_kill_modes():
+    ps = ParticleSystem(100, emitters=[PointEmitter(bursts=((0.01, 50),), position=(0, 1, 0), speed=(1, 2), cone=0.5,
+                                                    direction=(0, -1, 0), lifetime=10)],
+                        colliders=[(Ground(), "stick")], seed=1)
+    for _ in range(30):
+        ps.step(1 / 24)
+    assert np.all(ps.alive[0][ps.alive[0] > 0] == 2) and ps.n_alive[0] == 50 and np.all(ps.v[0][ps.alive[0] > 0] == 0)
+    ps = ParticleSystem(100, emitters=[PointEmitter(bursts=((0.01, 50),), position=(0, 1, 0), lifetime=10)],
+                        colliders=[(Ground(), "kill")], seed=1)
+    killed = sum(int(ps.step(1 / 24).killed[0]) for _ in range(30))
+    assert killed == 50 and ps.n_alive[0] == 0
+
+
+def test_particles_die_at_birth_plus_lifetime_and_slots_are_reused_in_order():
+    ps = ParticleSystem(8, emitters=[PointEmitter(bursts=((0.1, 5), (0.3, 3), (0.4, 2)), lifetime=0.25)],
+                        gravity=(0, 0, 0))
+    alive_at = []
+    for _ in range(45):
+        ps.step(0.01)
+        alive_at.append(int(ps.n_alive[0]))
+    assert alive_at[9] == 5 and alive_at[29] == 8  # t = 0.10, 0.30
+    assert alive_at[33] == 8 and alive_at[35] == 3  # the first five die at 0.35 (to one step)
+    assert alive_at[39] == 5 and np.flatnonzero(ps.alive[0]).tolist() == [0, 1, 5, 6, 7]  # lowest free slots
+
+
+def test_pool_overflow_is_counted_and_warned():
+    ps = ParticleSystem(10, emitters=[PointEmitter(bursts=((0.01, 25),))])
+    with pytest.warns(RuntimeWarning, match="15 births dropped"):
+        stats = ps.step(0.02)
+    assert stats.dropped[0] == 15 and ps.overflow[0] == 15 and ps.n_alive[0] == 10
+
+
+def _fountain(seeds, batch):
+    return ParticleSystem(2000, emitters=[DiscEmitter(rate=800, radius=0.1, speed=(3, 4), cone=0.2, lifetime=1.5,
+                                                      lifetime_variance=0.3),
+                                          SphereEmitter(center=(1, 1, 0), radius=0.2, rate=100, lifetime=1)],
+                          forces=[Drag(linear=0.2, quadratic=0.05), CurlNoise(seed=1), Vortex((0, 0, 0)),
+                                  Attractor((0, 2, 0), strength=0.5)],
+                          colliders=[(Ground(restitution=0.5, friction=0.3), "bounce")],
+                          batch=batch, seeds=seeds)
+
+
+def test_a_batch_equals_separate_runs_bit_for_bit():
+    both = _fountain([5, 9], 2)
+    one = [_fountain([s], 1) for s in (5, 9)]
+    for _ in range(20):
+        both.step(1 / 24, 2)
+        for p in one:
+            p.step(1 / 24, 2)
+    for b in range(2):
+        assert np.array_equal(both.x[b], one[b].x[0]) and np.array_equal(both.alive[b], one[b].alive[0])
+
+
+_THREAD_SCRIPT = textwrap.dedent("""
+    import hashlib, numpy as np
+    from tianim.particles import ParticleSystem, BoxEmitter, Granular, CurlNoise
+    from tianim.physics import Ground
+    ps = ParticleSystem(3000, emitters=[BoxEmitter(lower=(-0.3, 0.2, -0.3), upper=(0.3, 0.8, 0.3), bursts=((0.001, 1500),),
+                        lifetime=100)], forces=[CurlNoise()], colliders=[Ground(restitution=0.3, friction=0.5)],
+                        granular=Granular(radius=0.02, stiffness=2e3, mass=0.01), batch=2, seed=3)
+    for _ in range(5):
+        ps.step(1 / 240, 5)
+    print(hashlib.sha256(ps.x.tobytes() + ps.v.tobytes() + ps.alive.tobytes()).hexdigest())
+""")
+
+
+def test_bit_identical_with_one_and_two_threads():
+    digests = []
+    for threads in ("1", "2"):
+        env = dict(os.environ, TIANIM_NUM_THREADS=threads, TIANIM_ARCH="cpu")
+        out = subprocess.run([sys.executable, "-c", _THREAD_SCRIPT], env=env, capture_output=True, text=True, check=True)
+        digests.append(out.stdout.strip().splitlines()[-1])
+    assert digests[0] == digests[1]
+
+
+def _pair(e):
+    g = Granular(radius=0.05, mass=0.1, stiffness=1e3, restitution=e, friction=0.0)
+    ps = ParticleSystem(2, granular=g, gravity=(0, 0, 0), dtype=np.float64)
+    ps.alive[0] = 1
+    ps.lifetime[0] = 1e9
+    ps.x[0] = [[-0.2, 0.0, 0.0], [0.2, 0.01, 0.0]]
+    ps.v[0] = [[1.0, 0.0, 0.0], [-0.5, 0.0, 0.0]]
+    return ps, g
+
+
+@pytest.mark.parametrize("e", [0.3, 0.8])
+def test_dem_head_on_pair_conserves_momentum_and_gives_restitution(e):
+    ps, g = _pair(e)
+    ps.x[0, 1, 1] = 0.0  # head on
+    p0 = ps.v[0].sum(axis=0).copy()
+    h = g.contact_time() / 200
+    for _ in range(int(0.4 / h) // 10):
+        ps.step(10 * h, substeps=10)
+    assert np.allclose(ps.v[0].sum(axis=0), p0, atol=1e-12)
+    rel_after = ps.v[0, 1, 0] - ps.v[0, 0, 0]
+    assert abs(rel_after / 1.5 - e) < 0.02
+
+
+def test_dem_pile_settles_without_exploding_or_drifting():
+    g = Granular(radius=0.02, mass=0.01, stiffness=2e3, restitution=0.3, friction=0.5, tangential_damping=20.0)
+    ps = ParticleSystem(400, colliders=[Ground(restitution=0.1, friction=0.5)], granular=g, seed=2, dtype=np.float64,
+                        domain=((-0.4, -0.1, -0.4), (0.4, 0.4, 0.4)))
+    rng = np.random.default_rng(2)
+    lat = np.stack(np.meshgrid(*[np.arange(6)] * 3, indexing="ij"), -1).reshape(-1, 3)[:200] * 2.4 * g.radius
+    ps.x[0, :200] = lat - [0.06, -0.03, 0.06] + rng.uniform(-0.002, 0.002, (200, 3))
+    ps.alive[0, :200] = 1
+    ps.lifetime[0, :200] = 1e9
+    h = g.contact_time() / 20
+    for _ in range(400):  # 4 s
+        ps.step(40 * h, substeps=40)
+    x, v = ps.x[0][ps.alive[0] > 0], ps.v[0][ps.alive[0] > 0]
+    assert len(x) == 200
+    assert np.max(np.linalg.norm(v, axis=1)) < 0.05  # at rest
+    d = np.linalg.norm(x[:, None] - x[None], axis=-1) + np.eye(200)
+    assert np.max(2 * g.radius - d) < 0.1 * g.radius  # overlaps below 10 % of a radius
+    assert np.all(x[:, 1] >= 0) and np.all(x[:, 1] < 0.35)  # colliders act on centres
+    assert abs(x[:, 0].mean()) < 0.02 and abs(x[:, 2].mean()) < 0.02
+
+
+def test_attributes_over_life_follow_a_track():
+    from tianim.keyframe import Track
+
+    ps = ParticleSystem(10, emitters=[PointEmitter(bursts=((0.0001, 3),), lifetime=2.0)], gravity=(0, 0, 0))
+    ps.step(0.5)
+    size = Track([0, 1], [[1.0], [0.0]], interpolation="linear")
+    s = ps.attribute(size)
+    assert np.allclose(s[0, :3, 0], 1 - 0.5 / 2, atol=1e-4)
+
+
+@pytest.mark.parametrize("kwargs, exc, match", [
+    (dict(capacity=0), ValueError, "capacity"),
+    (dict(capacity=1 << 30), ValueError, "capacity"),
+    (dict(capacity=2.5), TypeError, "capacity"),
+    (dict(emitters=[PointEmitter(rate=-1)]), ValueError, "rate"),
+    (dict(emitters=[PointEmitter(lifetime=-1)]), ValueError, "lifetime"),
+    (dict(emitters=[PointEmitter(lifetime_variance=1.5)]), ValueError, "lifetime_variance"),
+    (dict(emitters=[PointEmitter(speed=(2, 1))]), ValueError, "speed"),
+    (dict(emitters=[PointEmitter(position=(0, float("nan"), 0))]), ValueError, "position"),
+    (dict(emitters=[PointEmitter(position=(0, 0))]), ValueError, "2D"),
+    (dict(emitters=[PointEmitter(cone=4.0)]), ValueError, "cone"),
+    (dict(emitters=[PointEmitter(bursts=((0.1, -3),))]), ValueError, "bursts"),
+    (dict(emitters=[SphereEmitter(radius=-1)]), ValueError, "radius"),
+    (dict(emitters=[BoxEmitter(lower=(0, 0, 0), upper=(1, -1, 1))]), ValueError, "upper"),
+    (dict(emitters=[DiscEmitter(normal=(0, 0, 0))]), ValueError, "normal"),
+    (dict(emitters=["fountain"]), TypeError, "emitters"),
+    (dict(forces=[Drag(linear=-1)]), ValueError, "linear"),
+    (dict(forces=["wind"]), TypeError, "force"),
+    (dict(forces=[CurlNoise(scale=0)]), ValueError, "scale"),
+    (dict(forces=[CurlNoise(), CurlNoise()]), ValueError, "one CurlNoise"),
+    (dict(colliders=[(Ground(), "explode")]), ValueError, "mode"),
+    (dict(colliders=[Ground(restitution=2.0)]), ValueError, "restitution"),
+    (dict(colliders=["floor"]), TypeError, "collider"),
+    (dict(granular=Granular(radius=-0.1)), ValueError, "radius"),
+    (dict(granular=Granular(radius=0.1, restitution=0.0)), ValueError, "restitution"),
+    (dict(dtype=np.int32), TypeError, "dtype"),
+    (dict(gravity=(0, 1)), ValueError, "gravity"),
+    (dict(batch=2, seeds=[1]), ValueError, "seeds"),
+])
+def test_bad_input_names_the_argument(kwargs, exc, match):
+    with pytest.raises(exc, match=match):
+        ParticleSystem(**{"capacity": 10, **kwargs})
+
+
+def test_bad_step_changes_nothing():
+    ps = ParticleSystem(10, emitters=[PointEmitter(rate=50)])
+    ps.step(0.1)
+    x, t = ps.x.copy(), ps.t
+    for dt, sub in ((-0.1, 1), (float("nan"), 1), (0.1, 0)):
+        with pytest.raises(ValueError):
+            ps.step(dt, sub)
+    assert np.array_equal(ps.x, x) and ps.t == t

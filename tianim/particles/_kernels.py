@@ -1,0 +1,199 @@
+"""Taichi kernels of particle systems: the per-particle step (forces, symplectic Euler, colliders,
+ageing) and DEM contact accelerations gathered over neighbour lists. Cached factories, one variant
+per float type and dimension; no atomics (each thread writes only its own particle), so results are
+bit-identical for any thread count.
+
+Particle status (``alive``): 0 dead (a free slot), 1 flying, 2 stuck to a collider.
+Events written per step (``event``): 0 none, 1 died of age, 2 killed by a collider, 3 stuck.
+"""
+
+from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.physics.model import PLANE
+from tianim.particles.forces import ATTRACTOR, CURL, DRAG, VORTEX
+
+BOUNCE, STICK, KILL = 0, 1, 2
+
+
+@cached_variants
+def particle_kernels(real_name: str, dim: int):
+    """``step`` and ``dem_accel`` for ``real_name`` positions in ``dim`` D."""
+    t = kernel_types(real_name, dim)
+    ti, real, vec = t.ti, t.real, t.vec
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    real2d = ti.types.ndarray(dtype=real, ndim=2)
+
+    @ti.func
+    def curl(x, fr, noise: ti.template()):
+        """Curl-noise acceleration (forces.curl_noise): fr = the force row [CURL, amplitude, scale, ...]."""
+        y = x / fr[2]
+        g = ti.Matrix.zero(real, 3, 3)  # g[c, a] = d psi_c / d y_a
+        for m in range(noise.shape[0]):
+            arg = ti.cast(0, real)
+            for a in ti.static(range(dim)):
+                arg += noise[m, a] * y[a]
+            for c in ti.static(range(3)):
+                w = noise[m, 6 + c] * ti.cos(arg + noise[m, 3 + c])
+                for a in ti.static(range(dim)):
+                    g[c, a] += w * noise[m, a]
+        u = ti.Vector.zero(real, dim)
+        if ti.static(dim == 2):
+            u[0] = g[2, 1]
+            u[1] = -g[2, 0]
+        else:
+            u[0] = g[2, 1] - g[1, 2]
+            u[1] = g[0, 2] - g[2, 0]
+            u[2] = g[1, 0] - g[0, 1]
+        return fr[1] * u
+
+    @ti.func
+    def accel(x, v, forces: ti.template(), noise: ti.template(), b, i):
+        a = ti.Vector.zero(real, dim)
+        for f in range(forces.shape[0]):
+            kind = ti.cast(forces[f, 0], ti.i32)
+            c = ti.Vector.zero(real, dim)
+            w = ti.Vector.zero(real, dim)
+            for k in ti.static(range(dim)):
+                c[k] = forces[f, 3 + k]
+                w[k] = forces[f, 6 + k]
+            if kind == DRAG:
+                rel = v - w
+                a += -forces[f, 1] * rel - forces[f, 2] * rel.norm() * rel
+            elif kind == ATTRACTOR:
+                d = c - x
+                s2 = d.dot(d) + forces[f, 2] * forces[f, 2]
+                a += forces[f, 1] * d / (s2 * ti.sqrt(s2))
+            elif kind == VORTEX:
+                d = x - c
+                if ti.static(dim == 3):
+                    dp = d - d.dot(w) * w
+                    a += forces[f, 1] * w.cross(dp) / (dp.dot(dp) + forces[f, 2] * forces[f, 2])
+                else:
+                    a += forces[f, 1] * ti.Vector([-d[1], d[0]]) / (d.dot(d) + forces[f, 2] * forces[f, 2])
+            elif kind == CURL:
+                fr = ti.Vector([forces[f, 0], forces[f, 1], forces[f, 2]])
+                a += curl(x, fr, noise)
+        return a
+
+    @ti.func
+    def collide(xi, vi, coll: ti.template(), modes: ti.template(), g_norm, h):
+        """Collider response as tianim.physics.contact (restitution, Coulomb friction as an impulse,
+        e = 0 below the resting speed 2 |g| h), plus the modes: returns (x, v, event)."""
+        event = 0
+        v_rest = 2 * g_norm * h
+        for c in range(coll.shape[0]):
+            vec_c = ti.Vector.zero(real, dim)
+            for a in ti.static(range(dim)):
+                vec_c[a] = coll[c, 4 + a]
+            n = vec_c
+            phi = ti.cast(0, real)
+            if coll[c, 0] == PLANE:
+                phi = xi.dot(n) - coll[c, 3]
+            else:
+                d = xi - vec_c
+                dist = d.norm()
+                phi = dist - coll[c, 3]
+                n = ti.Vector.zero(real, dim)
+                if dist > 0:
+                    n = d / dist
+                else:
+                    n[dim - 1] = 1
+            if phi < 0 and event == 0:
+                if modes[c] == KILL:
+                    event = 2
+                else:
+                    xi -= phi * n
+                    if modes[c] == STICK:
+                        vi = ti.Vector.zero(real, dim)
+                        event = 3
+                    else:
+                        vn = vi.dot(n)
+                        if vn < 0:
+                            e = coll[c, 1]
+                            if -vn <= v_rest:
+                                e = 0
+                            dvn = -(1 + e) * vn
+                            vt = vi - vn * n
+                            vt_norm = vt.norm()
+                            scale = ti.cast(0, real)
+                            if vt_norm > coll[c, 2] * dvn:
+                                scale = 1 - coll[c, 2] * dvn / vt_norm
+                            vi = scale * vt - e * vn * n
+        return xi, vi, event
+
+    @ti.kernel
+    def step(x: t.vec_arr, v: t.vec_arr, age: real2d, life: real2d, alive: t.mask_arr, event: t.mask_arr,
+             extra: t.vec_arr, use_extra: ti.i32, g: t.real_arr, forces: real2d, noise: real2d,
+             coll: real2d, modes: t.int_arr, h: real, substeps: ti.i32):
+        """``substeps`` symplectic-Euler steps of h [s] for every live particle (one thread each):
+        v += h (g + a(x, v) + extra), x += h v, colliders, age += h, death at age >= life."""
+        gv = ti.Vector.zero(real, dim)
+        for k in ti.static(range(dim)):
+            gv[k] = g[k]
+        g_norm = gv.norm()
+        for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+            if alive[b, i] == 1:
+                xi, vi, ai = x[b, i], v[b, i], age[b, i]
+                ev = 0
+                for _ in range(substeps):
+                    acc = gv + accel(xi, vi, forces, noise, b, i)
+                    if use_extra != 0:
+                        acc += extra[b, i]
+                    vi += h * acc
+                    xi += h * vi
+                    xi, vi, ev = collide(xi, vi, coll, modes, g_norm, h)
+                    ai += h
+                    if ai >= life[b, i] and ev == 0:
+                        ev = 1
+                    if ev != 0:
+                        break
+                x[b, i], v[b, i], age[b, i] = xi, vi, ai
+                event[b, i] = ti.cast(ev, ti.u8)
+                if ev == 1 or ev == 2:
+                    alive[b, i] = ti.cast(0, ti.u8)
+                elif ev == 3:
+                    alive[b, i] = ti.cast(2, ti.u8)
+            elif alive[b, i] == 2:  # stuck: only ages
+                age[b, i] += h * substeps
+                ev = 0
+                if age[b, i] >= life[b, i]:
+                    alive[b, i] = ti.cast(0, ti.u8)
+                    ev = 1
+                event[b, i] = ti.cast(ev, ti.u8)
+            else:
+                event[b, i] = ti.cast(0, ti.u8)
+
+    @ti.kernel
+    def dem_accel(x: t.vec_arr, v: t.vec_arr, alive: t.mask_arr, nbr: i32_3, count: i32_2, prm: t.real_arr,
+                  out: t.vec_arr):
+        """Soft-sphere contact accelerations (Cundall & Strack 1979) gathered per particle.
+
+        prm = [diameter 2R, k/m, c/m, mu, gamma_t]: for an overlap delta = 2R - |d| > 0, d = x_i - x_j,
+        n = d / |d|, relative velocity u = v_i - v_j: normal a_n = (k delta - c u.n) / m along n;
+        tangential a_t = -min(gamma_t |u_t|, mu |a_n|) u_t / |u_t| (Coulomb-capped viscous friction).
+        Pair terms are exactly antisymmetric (f_ji = -f_ij bit for bit), so momentum is conserved.
+        """
+        for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+            a = ti.Vector.zero(real, dim)
+            if alive[b, i] != 0:
+                xi, vi = x[b, i], v[b, i]
+                cnt = ti.min(count[b, i], nbr.shape[2])
+                for k in range(cnt):
+                    j = nbr[b, i, k]
+                    d = xi - x[b, j]
+                    dist = d.norm()
+                    delta = prm[0] - dist
+                    if delta > 0 and dist > 0:
+                        n = d / dist
+                        u = vi - v[b, j]
+                        un = u.dot(n)
+                        fn = prm[1] * delta - prm[2] * un
+                        a += fn * n
+                        ut = u - un * n
+                        utn = ut.norm()
+                        if utn > 0:
+                            ft = ti.min(prm[4] * utn, prm[3] * ti.abs(fn))
+                            a -= ft * ut / utn
+            out[b, i] = a
+
+    return step, dem_accel
