@@ -6,8 +6,16 @@
 | tianim/RopeSwing-v0   | :class:`envs.rope_swing.RopeSwingEnv` | :class:`envs.rope_swing.RopeSwingVectorEnv` |
 | tianim/ClothFold-v0   | :class:`envs.cloth_fold.ClothFoldEnv` | :class:`envs.cloth_fold.ClothFoldVectorEnv` |
 
-``gym.make("tianim/ArmReach-v0")`` after ``import envs``, or
-``gym.make("envs:tianim/ArmReach-v0")`` without it (gymnasium imports ``envs``).
+Two ways to make one (Gymnasium 1.x)::
+
+    import gymnasium as gym
+    env = gym.make("envs:tianim/ArmReach-v0")   # Gymnasium imports ``envs`` first: no import needed
+    import envs                                 # or import this package once ...
+    env = gym.make("tianim/ArmReach-v0")        # ... and use the plain id
+
+Without either, Gymnasium answers "Namespace tianim not found. Have you installed the proper
+package for tianim?": the ids live here, and ``tianim`` itself never imports Gymnasium (a layering
+rule, docs/architecture.md), so it cannot register them. :data:`ENV_IDS` lists the ids.
 ``envs.sb3.SB3VecEnv`` adapts a batched env to Stable-Baselines3;
 ``envs.baselines`` has a scripted controller per task.
 """
