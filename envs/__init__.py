@@ -3,6 +3,7 @@
 | id                    | single env                    | batched (``gym.make_vec``)         |
 |-----------------------|-------------------------------|------------------------------------|
 | tianim/ArmReach-v0    | :class:`envs.arm_reach.ArmReachEnv`   | :class:`envs.arm_reach.ArmReachVectorEnv`   |
+| tianim/ArmReach-v1    | :class:`envs.arm_reach_v1.ArmReachV1Env` | :class:`envs.arm_reach_v1.ArmReachV1VectorEnv` |
 | tianim/RopeSwing-v0   | :class:`envs.rope_swing.RopeSwingEnv` | :class:`envs.rope_swing.RopeSwingVectorEnv` |
 | tianim/ClothFold-v0   | :class:`envs.cloth_fold.ClothFoldEnv` | :class:`envs.cloth_fold.ClothFoldVectorEnv` |
 
@@ -23,6 +24,7 @@ from gymnasium.envs.registration import register, registry
 
 _ENVS = {
     "ArmReach-v0": ("arm_reach", "ArmReachEnv", "ArmReachVectorEnv", 100),
+    "ArmReach-v1": ("arm_reach_v1", "ArmReachV1Env", "ArmReachV1VectorEnv", 50),  # Reacher-v5's interface
     "RopeSwing-v0": ("rope_swing", "RopeSwingEnv", "RopeSwingVectorEnv", 200),
     "ClothFold-v0": ("cloth_fold", "ClothFoldEnv", "ClothFoldVectorEnv", 100),
 }

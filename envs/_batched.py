@@ -13,8 +13,11 @@ every task shares:
 * autoreset: ``AutoresetMode.NEXT_STEP`` (default; the step after a copy ends
   resets it and returns reward 0, terminated and truncated False), or
   ``AutoresetMode.SAME_STEP`` (the copy is reset in the step where it ends; its
-  last observation is in ``info["final_obs"]``, masked by ``info["_final_obs"]``),
-  which the Stable-Baselines3 adapter uses;
+  last observation is in ``info["final_obs"]``, masked by ``info["_final_obs"]``,
+  and its last step's info in ``info["final_info"]`` (gymnasium 1.x: a dict of
+  the step's info arrays whose ``_key`` masks are restricted to the copies that
+  ended, masked by ``info["_final_info"]``; the step's info also stays at the top
+  level), which the Stable-Baselines3 adapter uses;
 * action checks: float32, shape ``(num_envs, *single_action_shape)``; NaN or
   infinite actions raise ``ValueError`` (nothing is stepped); finite actions
   outside [-1, 1] are clipped.
@@ -133,6 +136,8 @@ class BatchedEnv(VectorEnv):
                 idx = np.flatnonzero(done)
                 info["final_obs"] = obs.copy()
                 info["_final_obs"] = done.copy()
+                info["final_info"] = _final_info(info, done)
+                info["_final_info"] = done.copy()
                 self._reset_copies(idx)
                 obs[idx] = self._observe_all()[idx]
                 self._steps[idx] = 0
@@ -140,6 +145,19 @@ class BatchedEnv(VectorEnv):
 
     def close_extras(self, **kwargs):
         self._needs_reset = True
+
+
+def _final_info(info: dict, done: np.ndarray) -> dict:
+    """The step's ``info`` (keys with their ``_key`` masks, a missing mask meaning every copy)
+    restricted to the copies in ``done``: gymnasium 1.x's SAME_STEP ``final_info``."""
+    final: dict[str, Any] = {}
+    for key, value in info.items():
+        if key.startswith("_") or key in ("final_obs", "final_info"):
+            continue
+        mask = np.asarray(info.get(f"_{key}", np.ones(len(done), bool)), bool)
+        final[key] = value.copy() if isinstance(value, np.ndarray) else value
+        final[f"_{key}"] = mask & done
+    return final
 
 
 def _check_render_mode(render_mode):
