@@ -462,3 +462,10 @@ def test_infinite_limit_on_the_wrong_side_is_rejected(lower, upper, words):
         PlanarChain([0.5, 0.4, 0.3], lower=lower, upper=upper)
     for w in words:
         assert w in str(info.value), str(info.value)
+
+
+def test_serial_chain_rejects_an_infinite_limit_on_the_wrong_side():
+    from tianim.kinematics import SerialChain
+
+    with pytest.raises(ValueError, match=r"lower\[0\]=inf"):
+        SerialChain(offsets=[[0.3, 0, 0]] * 2, axes=[[0, 0, 1]] * 2, lower=np.inf)

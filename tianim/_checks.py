@@ -188,6 +188,11 @@ def joint_limits(lower, upper, n: int) -> tuple[np.ndarray, np.ndarray]:
             raise ValueError(f"{name} has shape {arr.shape}; pass a scalar or {n} values, one per joint")
         out.append(arr)
     lo, hi = out
+    for name, arr, wrong, use in (("lower", lo, np.inf, "-inf"), ("upper", hi, -np.inf, "inf")):
+        j = np.nonzero(arr == wrong)[0]
+        if j.size:  # an infinite limit on the wrong side leaves the joint no range at all
+            raise ValueError(f"{name}[{int(j[0])}]={fmt(arr[j[0]])} leaves joint {int(j[0])} no range; "
+                             f"use {use} or None for an unlimited joint")
     bad = np.nonzero(lo > hi)[0]
     if bad.size:
         i = int(bad[0])

@@ -130,11 +130,6 @@ class PlanarChain:
         if base.shape != (2,):
             raise ValueError(f"base has shape {base.shape}; pass (x, y) in metres")
         lo, hi = joint_limits(lower, upper, n)
-        for name, arr, bad, use in (("lower", lo, np.inf, "-inf"), ("upper", hi, -np.inf, "inf")):
-            j = np.nonzero(arr == bad)[0]
-            if j.size:  # an infinite limit on the wrong side leaves the joint no angle at all
-                raise ValueError(f"{name}[{int(j[0])}]={fmt(arr[j[0]])} leaves joint {int(j[0])} no range; "
-                                 f"use {use} or None for an unlimited joint")
         damping = per_joint("damping", damping, n, 0.0)
         if np.any(damping < 0):
             raise ValueError(f"damping={damping.tolist()} must all be >= 0 N m s/rad")
