@@ -1,19 +1,15 @@
 """Shared plumbing of the kernel modules: Taichi types per float type and dimension,
 and a cache that builds each kernel variant once per process."""
 
-import functools
 from types import SimpleNamespace
 
+from tianim._ti import cached_kernels
 from tianim.runtime import ensure_taichi
 
 
-def cached_variants(build):
-    """Decorator: ``build(*key)`` runs once per distinct key; later calls return the same kernels.
-
-    Kernels take arrays as arguments, so a variant compiled for one scene serves every
-    other scene with the same compile-time choices.
-    """
-    return functools.lru_cache(maxsize=None)(build)
+#: The one kernel-factory cache (:func:`tianim._ti.cached_kernels`): ``build(*key)`` runs once per
+#: distinct key; kernels take arrays as arguments, so a variant compiled for one scene serves every other.
+cached_variants = cached_kernels
 
 
 def kernel_types(real_name: str, dim: int) -> SimpleNamespace:
