@@ -32,6 +32,7 @@ def test_gymnasium_check_env_without_warnings(env_id):
     env.close()
 
 
+@pytest.mark.rl
 @pytest.mark.parametrize("env_id", IDS)
 def test_sb3_check_env_and_adapter(env_id):
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
@@ -204,6 +205,7 @@ def test_scripted_baseline_beats_random(env_id, episodes):
     assert scripted.mean() > 0.5 * random_returns.mean(), (scripted.mean(), random_returns.mean())
 
 
+@pytest.mark.rl
 def test_sb3_adapter_per_index_semantics():
     import gymnasium.wrappers
 
