@@ -117,3 +117,16 @@ def test_cloth_moves_through_its_whole_length():
         T.Timeline.render = T_render
     speed = np.abs(np.diff(np.array(xs), axis=0)).max(axis=2).mean(axis=1) * 24.0  # m/s per frame
     assert np.mean(speed < 0.05) < 0.4, np.round(speed, 3)
+
+
+def test_fountain_emits_at_its_rate_and_keeps_particles_out_of_the_ball_and_ground():
+    from tianim.gallery.fountain import BALL, make_system
+
+    system = make_system()
+    for _ in range(24):  # 1 s in frames of 8 substeps, as the demo runs it
+        system.step(1 / (24 * 8), 8)
+    assert int(system.n_alive[0]) == 500  # 500 particles/s, none old enough to die (lifetime >= 2 s)
+    alive = system.alive[0] > 0
+    x = system.x[0][alive].astype(np.float64)
+    assert x[:, 1].min() >= -1e-6
+    assert np.linalg.norm(x - BALL.center, axis=1).min() >= BALL.radius - 1e-4

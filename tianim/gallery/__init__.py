@@ -16,6 +16,7 @@ DEMOS = {
     "keyframe": "keyframe",
     "arm-ik": "arm_ik",
     "stiff": "stiff",
+    "fountain": "fountain",
 }
 
 

@@ -23,7 +23,7 @@ with ``seeds[b]``, for any thread count.
 
 A step (t0, t1]
 ---------------
-1. ``substeps`` symplectic-Euler steps of h = dt / substeps (``v += h a``, ``x += h v``) with
+1. ``substeps`` symplectic-Euler steps of h = dt (the substep; the step covers ``substeps * dt``) (``v += h a``, ``x += h v``) with
    a = gravity + forces (+ DEM contact), then the colliders, each in a mode: ``"bounce"``
    (restitution and Coulomb friction, as :mod:`tianim.physics.contact`), ``"stick"`` (the particle stops
    there for the rest of its life) or ``"kill"``. A particle dies when its age reaches its lifetime
@@ -136,7 +136,7 @@ class ParticleSystem:
         self.capacity = check_int("capacity", capacity, lo=1, hi=1 << 26)
         self.batch = check_int("batch", batch, lo=1, hi=1 << 16)
         self.dim = check_int("dim", dim, lo=2, hi=3)
-        dt_ = np.dtype(dtype) if not isinstance(dtype, str) or dtype in ("float32", "float64") else None
+        dt_ = None if dtype is None else np.dtype(dtype) if not isinstance(dtype, str) or dtype in ("float32", "float64") else None
         if dt_ not in (np.float32, np.float64):
             raise TypeError(f"dtype={fmt(dtype)} is not supported; use np.float32 or np.float64")
         self.dtype = dt_.type
@@ -237,14 +237,15 @@ class ParticleSystem:
         return born, dropped
 
     def step(self, dt, substeps=1) -> ParticleStats:
-        """Advance every copy by ``dt`` [s] in ``substeps`` substeps: births, forces, colliders, deaths."""
-        dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
+        """Advance every copy by ``substeps`` substeps of ``dt`` [s] (as the physics solvers do:
+        ``dt`` is the substep): births, forces, colliders, deaths."""
+        h = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
         substeps = check_int("substeps", substeps, lo=1)
+        dt = h * substeps
         from tianim.particles._kernels import particle_kernels
 
         step, dem_accel = particle_kernels(np.dtype(self.dtype).name, self.dim)
         t0, t1 = self.t, self.t + dt
-        h = dt / substeps
         k = self._k
         died = np.zeros(self.batch, np.int64)
         killed = np.zeros(self.batch, np.int64)
