@@ -7,8 +7,8 @@ Particle status (``alive``): 0 dead (a free slot), 1 flying, 2 stuck to a collid
 Events written per step (``event``): 0 none, 1 died of age, 2 killed by a collider, 3 stuck.
 """
 
+from tianim.physics.contact import contact_parts
 from tianim.physics.kernel_types import cached_variants, kernel_types
-from tianim.physics.model import PLANE
 from tianim.particles.forces import ATTRACTOR, CURL, DRAG, VORTEX
 
 BOUNCE, STICK, KILL = 0, 1, 2
@@ -18,6 +18,7 @@ BOUNCE, STICK, KILL = 0, 1, 2
 def particle_kernels(real_name: str, dim: int):
     """``step`` and ``dem_accel`` for ``real_name`` positions in ``dim`` D."""
     t = kernel_types(real_name, dim)
+    surface, bounce = contact_parts(real_name, dim)
     ti, real, vec = t.ti, t.real, t.vec
     i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
     i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
@@ -77,27 +78,12 @@ def particle_kernels(real_name: str, dim: int):
 
     @ti.func
     def collide(xi, vi, coll: ti.template(), modes: ti.template(), g_norm, h):
-        """Collider response as tianim.physics.contact (restitution, Coulomb friction as an impulse,
+        """Collider response of tianim.physics.contact (restitution, Coulomb friction as an impulse,
         e = 0 below the resting speed 2 |g| h), plus the modes: returns (x, v, event)."""
         event = 0
         v_rest = 2 * g_norm * h
         for c in range(coll.shape[0]):
-            vec_c = ti.Vector.zero(real, dim)
-            for a in ti.static(range(dim)):
-                vec_c[a] = coll[c, 4 + a]
-            n = vec_c
-            phi = ti.cast(0, real)
-            if coll[c, 0] == PLANE:
-                phi = xi.dot(n) - coll[c, 3]
-            else:
-                d = xi - vec_c
-                dist = d.norm()
-                phi = dist - coll[c, 3]
-                n = ti.Vector.zero(real, dim)
-                if dist > 0:
-                    n = d / dist
-                else:
-                    n[dim - 1] = 1
+            phi, n = surface(xi, coll, c)
             if phi < 0 and event == 0:
                 if modes[c] == KILL:
                     event = 2
@@ -107,18 +93,7 @@ def particle_kernels(real_name: str, dim: int):
                         vi = ti.Vector.zero(real, dim)
                         event = 3
                     else:
-                        vn = vi.dot(n)
-                        if vn < 0:
-                            e = coll[c, 1]
-                            if -vn <= v_rest:
-                                e = 0
-                            dvn = -(1 + e) * vn
-                            vt = vi - vn * n
-                            vt_norm = vt.norm()
-                            scale = ti.cast(0, real)
-                            if vt_norm > coll[c, 2] * dvn:
-                                scale = 1 - coll[c, 2] * dvn / vt_norm
-                            vi = scale * vt - e * vn * n
+                        vi = bounce(vi, n, coll[c, 1], coll[c, 2], v_rest)
         return xi, vi, event
 
     @ti.kernel
