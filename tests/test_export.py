@@ -81,3 +81,26 @@ def test_frame_size_mismatch(tmp_path):
     fr = _frames(2)
     with pytest.raises(ValueError, match="one size"):
         export([fr[0], np.zeros((10, 10, 3), np.uint8)], tmp_path / "x.gif")
+
+
+def test_progress_without_tqdm_prints_plain_lines(tmp_path, monkeypatch, capsys):
+    import builtins
+
+    import numpy as np
+
+    from tianim.render.export import FrameWriter
+
+    real_import = builtins.__import__
+
+    def no_tqdm(name, *args, **kwargs):
+        if name.startswith("tqdm"):
+            raise ImportError("no tqdm here")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_tqdm)
+    frame = np.zeros((16, 16, 3), np.uint8)
+    with FrameWriter(str(tmp_path / "f.gif"), fps=24, total=50) as w:
+        for _ in range(50):
+            w.append(frame)
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if "frames" in ln]
+    assert len(lines) == 10 and lines[-1] == "f.gif: 50/50 frames", lines

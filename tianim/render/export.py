@@ -19,6 +19,7 @@ such as ``frames/f%04d.png`` or ``frames/f{:04d}.png``).
 from __future__ import annotations
 
 import os
+import sys
 from dataclasses import dataclass, field
 from typing import Iterable
 
@@ -96,13 +97,30 @@ def _parse(size: str):
     return parse_size(size)
 
 
+class _TextProgress:
+    """Progress without tqdm: one line on stderr at every tenth of the frames."""
+
+    def __init__(self, total, desc):
+        self.total, self.desc, self.done, self._next = total, desc, 0, 0.1
+
+    def update(self, n=1):
+        self.done += n
+        if self.done >= self._next * self.total:
+            print(f"{self.desc}: {self.done}/{self.total} frames", file=sys.stderr, flush=True)
+            while self._next * self.total <= self.done:
+                self._next += 0.1
+
+    def close(self):
+        pass
+
+
 def _progress(total, desc):
     if total is None or total < PROGRESS_MIN_FRAMES:
         return None
     try:
         from tqdm.auto import tqdm
-    except ImportError:  # tqdm is optional (the 'test'/'bench' extras install it)
-        return None
+    except ImportError:  # tqdm is optional (the 'test'/'bench' extras install it): plain lines instead
+        return _TextProgress(total, desc)
     return tqdm(total=total, desc=desc, unit="frame", leave=False)
 
 
