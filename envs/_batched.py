@@ -36,6 +36,8 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from ._render import no_render_mode
+
 
 def check_action(action, shape: tuple) -> np.ndarray:
     """``action`` as a float32 array of ``shape`` clipped to [-1, 1]; ValueError if it is
@@ -200,7 +202,9 @@ class SimEnv(gym.Env):
         return self._sim.observe()[0], float(reward[0]), diverged, False, {"diverged": diverged}
 
     def render(self):
-        if self.render_mode == "rgb_array" and self._sim is not None:
+        if self.render_mode is None:
+            return no_render_mode(self)
+        if self._sim is not None:
             return self._sim.frame(0)
         return None
 
@@ -248,6 +252,6 @@ class SimVectorEnv(BatchedEnv):
         return self._sim.observe()
 
     def render(self):
-        if self.render_mode != "rgb_array":
-            return None
+        if self.render_mode is None:
+            return no_render_mode(self)
         return tuple(self._sim.frame(k) for k in range(self.num_envs))

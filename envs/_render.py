@@ -43,3 +43,12 @@ def cloth_frame(x: np.ndarray, nx: int, pickers, holding) -> np.ndarray:
     for p, h in zip(pickers, holding):
         scene.sphere(p, 0.012, color="red" if h else "orange")
     return scene.render()
+
+
+def no_render_mode(env) -> None:
+    """What ``render()`` gives without a render mode: None, with a warning saying how to get frames."""
+    import warnings
+
+    warnings.warn(f"{type(env).__name__}.render() was called but the env was made without a render mode, so it "
+                  "returns None; make it with render_mode='rgb_array' (gym.make(id, render_mode='rgb_array'))",
+                  UserWarning, stacklevel=3)

@@ -76,6 +76,7 @@ from gymnasium.vector.utils import batch_space
 from tianim.kinematics import PlanarChain
 from tianim.kinematics import arm as tka
 
+from ._render import no_render_mode
 from ._batched import BatchedEnv, check_action
 
 DT = 0.02
@@ -172,7 +173,9 @@ class ArmReachEnv(gym.Env):
         return obs, reward, False, False, {"distance": dist}
 
     def render(self):
-        if self.render_mode != "rgb_array" or self._state is None:
+        if self.render_mode is None:
+            return no_render_mode(self)
+        if self._state is None:
             return None
         from ._render import arm_frame
 
@@ -243,8 +246,8 @@ class ArmReachVectorEnv(BatchedEnv):
         return self._obs()[0]
 
     def render(self):
-        if self.render_mode != "rgb_array":
-            return None
+        if self.render_mode is None:
+            return no_render_mode(self)
         from ._render import arm_frame
 
         return tuple(arm_frame(self.arm, self.q[k].tolist(), self.target[k]) for k in range(self.num_envs))

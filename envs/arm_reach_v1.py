@@ -129,6 +129,7 @@ from gymnasium.vector.utils import batch_space
 from tianim.kinematics import PlanarChain, mass_matrix
 from tianim.kinematics import arm as tka
 
+from ._render import no_render_mode
 from ._batched import BatchedEnv, check_action
 
 DT = 0.02
@@ -270,7 +271,9 @@ class ArmReachV1Env(gym.Env):
         return obs, reward_dist + reward_ctrl, False, False, {"reward_dist": reward_dist, "reward_ctrl": reward_ctrl}
 
     def render(self):
-        if self.render_mode != "rgb_array" or self._state is None:
+        if self.render_mode is None:
+            return no_render_mode(self)
+        if self._state is None:
             return None
         from ._render import arm_frame
 
@@ -352,8 +355,8 @@ class ArmReachV1VectorEnv(BatchedEnv):
         return self._obs()[0]
 
     def render(self):
-        if self.render_mode != "rgb_array":
-            return None
+        if self.render_mode is None:
+            return no_render_mode(self)
         from ._render import arm_frame
 
         return tuple(arm_frame(self.arm, self.q[k].tolist(), self.target[k]) for k in range(self.num_envs))

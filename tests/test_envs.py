@@ -238,3 +238,15 @@ def test_baselines_return_actions_shaped_like_the_action_space(env_id):
     action = policy(obs)
     assert action.shape == env.action_space.shape, action.shape
     env.step(action)
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_render_without_a_render_mode_warns_and_says_how(env_id):
+    env = gym.make(env_id)
+    env.reset(seed=0)
+    with pytest.warns(UserWarning, match="render_mode='rgb_array'"):
+        assert env.unwrapped.render() is None
+    venv = gym.make_vec(env_id, num_envs=2, vectorization_mode="vector_entry_point")
+    venv.reset(seed=0)
+    with pytest.warns(UserWarning, match="render_mode='rgb_array'"):
+        assert venv.unwrapped.render() is None
