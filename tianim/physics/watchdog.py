@@ -279,26 +279,21 @@ def _watched(parts: np.ndarray, terms) -> np.ndarray:
 
 
 def _pin_forces(model, state):
-    """Spring forces on the pinned particles that move, ``(mask (B, N), force (B, N, D))`` float64, or
-    None when no pin moves (then pins do no work)."""
+    """Spring forces along the springs that touch a moving pin: ``(moving (B, N), springs (S',),
+    force on the first end (B, S', D))`` float64, or None when no pin moves (then pins do no work)."""
     moving = state.pinned & np.any(state.v != 0, axis=2)
     if model.n_springs == 0 or not moving.any():
         return None
-    i, j = model.springs[:, 0], model.springs[:, 1]
     touched = moving.any(axis=0)
-    sel = np.flatnonzero(touched[i] | touched[j])
-    i, j = i[sel], j[sel]
+    sel = np.flatnonzero(touched[model.springs[:, 0]] | touched[model.springs[:, 1]])
+    i, j = model.springs[sel, 0], model.springs[sel, 1]
     x, v = state.x.astype(np.float64), state.v.astype(np.float64)
     d = x[:, i] - x[:, j]
     length = np.sqrt(np.einsum("bsd,bsd->bs", d, d))
     n = d / np.where(length > 0, length, 1.0)[..., None]
-    mag = -model.stiffness[sel] * (length - model.rest_length[sel])
+    mag = -model.stiffness[sel] * (length - model.rest_length[sel])  # model.py's spring force on i
     mag = mag - model.damping[sel] * np.einsum("bsd,bsd->bs", v[:, i] - v[:, j], n)
-    f = np.zeros(x.shape)
-    for b in range(state.batch):  # f_i += mag n, f_j -= mag n (model.py's spring force)
-        np.add.at(f[b], i, mag[b, :, None] * n[b])
-        np.add.at(f[b], j, -mag[b, :, None] * n[b])
-    return moving, f
+    return moving, sel, mag[..., None] * n
 
 
 def _pin_work(model, state, snap, pins0) -> np.ndarray:
@@ -306,8 +301,12 @@ def _pin_work(model, state, snap, pins0) -> np.ndarray:
     the spring forces f on them, so ``W = -sum_p f_p . dx_p`` (trapezoid rule over the call)."""
     if pins0 is None:
         return np.zeros(state.batch)
-    moving, f0 = pins0
+    moving, sel, f0 = pins0
+    i, j = model.springs[sel, 0], model.springs[sel, 1]
     pins1 = _pin_forces(model, state)
-    f1 = pins1[1] if pins1 is not None else np.zeros_like(f0)
+    f = f0 if pins1 is None or not np.array_equal(pins1[1], sel) else 0.5 * (f0 + pins1[2])
+    if pins1 is None:
+        f = 0.5 * f0
     dx = (state.x.astype(np.float64) - snap["x"].astype(np.float64)) * moving[..., None]
-    return -0.5 * np.einsum("bnd,bnd->b", f0 + f1, dx)
+    # the force on end j is -f: W = -sum_s f_s . (dx_i - dx_j) over the moving ends
+    return -np.einsum("bsd,bsd->b", f, dx[:, i] - dx[:, j])
