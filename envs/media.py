@@ -10,7 +10,6 @@ import os
 
 import gymnasium as gym
 import imageio.v2 as imageio
-import numpy as np
 
 import envs
 from envs.baselines import make_baseline

@@ -1,12 +1,10 @@
 """Particle systems against closed forms, conservation laws and determinism; bad input."""
 
-import hashlib
 import math
 import os
 import subprocess
 import sys
 import textwrap
-import warnings
 
 import numpy as np
 import pytest

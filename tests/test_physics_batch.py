@@ -1,6 +1,5 @@
 """Batching, layouts, thread counts, snapshots, pins and compilation reuse."""
 
-import hashlib
 import os
 import subprocess
 import sys

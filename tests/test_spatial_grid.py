@@ -1,6 +1,5 @@
 """The neighbour grid against scipy's cKDTree and brute force; determinism; capacity; bad input."""
 
-import hashlib
 import os
 import subprocess
 import sys

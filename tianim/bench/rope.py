@@ -9,7 +9,6 @@ chain. Also reported: batches of copies stepped together.
 
 from __future__ import annotations
 
-import numpy as np
 
 import tianim.physics as tp
 from tianim.bench.common import parser, print_table, write_json

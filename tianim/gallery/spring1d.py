@@ -35,7 +35,6 @@ def frames(width: int, height: int, n_frames: int, fps: float):
     cols = (0.10 * a, 0.22 * a)                              # the two masses
     u0, u1 = 0.36 * a, 0.97 * a                              # the plot's time axis
     tx = lambda t: u0 + (u1 - u0) * np.asarray(t) / max(duration, 1e-9)  # noqa: E731
-    W = width
     fs = font_size(height, 0.034)
     title = "x(t): simulated (blue), closed form (orange)"
     fs_title = fit(title, fs, (u1 - u0) * height)

@@ -162,7 +162,6 @@ def _polish_planar_one(chain, target, q, rest, tol: float, iters: int):
     L, bx, by, lo, hi, limited = plain_constants(chain)
     tx, ty = float(target[0]), float(target[1])
     rs = [float(v) for v in rest]
-    n = len(rs)
     rtol = _RESTORE_TOL * tol
 
     def fkj(qq):

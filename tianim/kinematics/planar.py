@@ -35,7 +35,7 @@ from math import cos, sin
 
 import numpy as np
 
-from tianim._checks import float_array, fmt, joint_limits, joint_vector, per_joint
+from tianim._checks import float_array, joint_limits, joint_vector, per_joint
 
 
 DEFAULT_GRAVITY = (0.0, -9.81)

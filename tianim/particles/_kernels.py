@@ -19,7 +19,7 @@ def particle_kernels(real_name: str, dim: int):
     """``step`` and ``dem_accel`` for ``real_name`` positions in ``dim`` D."""
     t = kernel_types(real_name, dim)
     surface, bounce = contact_parts(real_name, dim)
-    ti, real, vec = t.ti, t.real, t.vec
+    ti, real = t.ti, t.real
     i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
     i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
     real2d = ti.types.ndarray(dtype=real, ndim=2)

@@ -20,7 +20,7 @@ directions, speeds, lifetimes), so a seed fixes every particle.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

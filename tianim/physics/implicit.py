@@ -55,7 +55,7 @@ DEFAULTS = {
 def _kernel(real_name, dim, grid, spring_damping, medium_damping, colliders):
     t = kernel_types(real_name, dim)
     respond = contact_response(real_name, dim)
-    ti, real, vec, mat, vec_arr, mat_arr = t.ti, t.real, t.vec, t.mat, t.vec_arr, t.mat_arr
+    ti, real, vec, vec_arr, mat_arr = t.ti, t.real, t.vec, t.vec_arr, t.mat_arr
     real_arr, int_arr, mask_arr = t.real_arr, t.int_arr, t.mask_arr
     stat_arr = ti.types.ndarray(dtype=ti.i32, ndim=2)
     n_stencil = len(GRID_STENCIL)

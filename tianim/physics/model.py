@@ -20,7 +20,6 @@ medium damping ``-rho v`` (chapter 15.6.1; ``rho`` in kg/s, per particle).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Iterable, Sequence
 

@@ -33,7 +33,6 @@ copies only, keeps the others' results and reports them in ``StepStats.diverged`
 what batched environments need (one copy's episode ends, the rest go on).
 """
 
-import math
 import weakref
 
 import numpy as np

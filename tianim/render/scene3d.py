@@ -330,7 +330,6 @@ class Scene3D:
             camera = Camera.framing(self._frame_points(), up=tuple(self.up), aspect=self.width / self.height)
         b = self.bounds()
         lo, hi = b if b is not None else (np.zeros(3), np.zeros(3))
-        extent = max(float(np.max(hi - lo)), 1e-3)
         V, F, N, C, BK, FM = self._geometry()
         if self._spheres:
             SP = np.concatenate([s[0] for s in self._spheres]).astype(np.float64)

@@ -36,7 +36,6 @@ S = points in them (about 3^D rho h^D for density rho).
 
 from __future__ import annotations
 
-import math
 import warnings
 from dataclasses import dataclass
 
