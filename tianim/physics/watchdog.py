@@ -277,21 +277,38 @@ def _watched(parts: np.ndarray, terms) -> np.ndarray:
     return parts[:, [TERMS[t] for t in terms]].sum(axis=1)
 
 
+_PIN_SPRINGS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _pin_springs(model, touched: np.ndarray):
+    """Indices and ends of the springs with an end in ``touched`` (N,) bool, cached per model and mask."""
+    cache = _PIN_SPRINGS.setdefault(model, {})
+    key = touched.tobytes()
+    hit = cache.get(key)
+    if hit is None:
+        if len(cache) > 64:
+            cache.clear()
+        sel = np.flatnonzero(touched[model.springs[:, 0]] | touched[model.springs[:, 1]])
+        hit = (sel, model.springs[sel, 0], model.springs[sel, 1], np.asarray(model.stiffness[sel], np.float64),
+               np.asarray(model.rest_length[sel], np.float64), np.asarray(model.damping[sel], np.float64))
+        cache[key] = hit
+    return hit
+
+
 def _pin_forces(model, state):
     """Spring forces along the springs that touch a moving pin: ``(moving (B, N), springs (S',),
     force on the first end (B, S', D))`` float64, or None when no pin moves (then pins do no work)."""
-    moving = state.pinned & np.any(state.v != 0, axis=2)
+    moving = state.pinned & (state.v != 0).any(axis=2)
     if model.n_springs == 0 or not moving.any():
         return None
-    touched = moving.any(axis=0)
-    sel = np.flatnonzero(touched[model.springs[:, 0]] | touched[model.springs[:, 1]])
-    i, j = model.springs[sel, 0], model.springs[sel, 1]
-    x, v = state.x.astype(np.float64), state.v.astype(np.float64)
-    d = x[:, i] - x[:, j]
-    length = np.sqrt(np.einsum("bsd,bsd->bs", d, d))
+    sel, i, j, k, rest, c = _pin_springs(model, moving.any(axis=0))
+    x, v = state.x, state.v
+    d = (x[:, i] - x[:, j]).astype(np.float64)
+    length = np.sqrt((d * d).sum(axis=2))
     n = d / np.where(length > 0, length, 1.0)[..., None]
-    mag = -model.stiffness[sel] * (length - model.rest_length[sel])  # model.py's spring force on i
-    mag = mag - model.damping[sel] * np.einsum("bsd,bsd->bs", v[:, i] - v[:, j], n)
+    mag = -k * (length - rest)  # model.py's spring force on i
+    if model.has_spring_damping:
+        mag -= c * ((v[:, i] - v[:, j]) * n).sum(axis=2)
     return moving, sel, mag[..., None] * n
 
 
@@ -301,11 +318,11 @@ def _pin_work(model, state, snap, pins0) -> np.ndarray:
     if pins0 is None:
         return np.zeros(state.batch)
     moving, sel, f0 = pins0
-    i, j = model.springs[sel, 0], model.springs[sel, 1]
+    _sel, i, j = _pin_springs(model, moving.any(axis=0))[:3]
     pins1 = _pin_forces(model, state)
     f = f0 if pins1 is None or not np.array_equal(pins1[1], sel) else 0.5 * (f0 + pins1[2])
     if pins1 is None:
         f = 0.5 * f0
-    dx = (state.x.astype(np.float64) - snap["x"].astype(np.float64)) * moving[..., None]
+    dx = (state.x - snap["x"]).astype(np.float64) * moving[..., None]
     # the force on end j is -f: W = -sum_s f_s . (dx_i - dx_j) over the moving ends
-    return -np.einsum("bsd,bsd->b", f, dx[:, i] - dx[:, j])
+    return -(f * (dx[:, i] - dx[:, j])).sum(axis=(1, 2))
