@@ -1,9 +1,6 @@
 """Particle systems against closed forms, conservation laws and determinism; bad input."""
 
 import math
-import os
-import subprocess
-import sys
 import textwrap
 
 import numpy as np
@@ -12,6 +9,7 @@ import pytest
 from tianim.particles import (BoxEmitter, CurlNoise, DiscEmitter, Drag, Granular, ParticleSystem, PointEmitter,
                               SphereEmitter, Vortex, Attractor, curl_noise)
 from tianim.physics import Ground
+from _threads import digests_by_thread_count
 
 
 def one_particle(v0, forces=(), colliders=(), gravity=(0, -9.81, 0), life=100.0):
@@ -170,11 +168,7 @@ _THREAD_SCRIPT = textwrap.dedent("""
 
 
 def test_bit_identical_with_one_and_two_threads():
-    digests = []
-    for threads in ("1", "2"):
-        env = dict(os.environ, TIANIM_NUM_THREADS=threads, TIANIM_ARCH="cpu")
-        out = subprocess.run([sys.executable, "-c", _THREAD_SCRIPT], env=env, capture_output=True, text=True, check=True)
-        digests.append(out.stdout.strip().splitlines()[-1])
+    digests = digests_by_thread_count(_THREAD_SCRIPT)
     assert digests[0] == digests[1]
 
 

@@ -1,8 +1,5 @@
 """Batching, layouts, thread counts, snapshots, pins and compilation reuse."""
 
-import os
-import subprocess
-import sys
 import textwrap
 
 import numpy as np
@@ -11,6 +8,7 @@ import pytest
 import tianim.physics as tp
 from tianim.physics.reference import NumpyModel
 from tianim.runtime import compiled_kernel_count
+from _threads import digests_by_thread_count
 
 
 def jittered(model, batch, seed, dtype=np.float32):
@@ -74,11 +72,7 @@ _THREAD_SCRIPT = textwrap.dedent("""
 
 
 def test_bit_identical_with_one_and_two_threads():
-    digests = []
-    for threads in ("1", "2"):
-        env = dict(os.environ, TIANIM_NUM_THREADS=threads, TIANIM_ARCH="cpu")
-        out = subprocess.run([sys.executable, "-c", _THREAD_SCRIPT], env=env, capture_output=True, text=True, check=True)
-        digests.append(out.stdout.strip().splitlines()[-1])
+    digests = digests_by_thread_count(_THREAD_SCRIPT)
     assert digests[0] == digests[1]
 
 

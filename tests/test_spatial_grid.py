@@ -1,8 +1,5 @@
 """The neighbour grid against scipy's cKDTree and brute force; determinism; capacity; bad input."""
 
-import os
-import subprocess
-import sys
 import textwrap
 
 import numpy as np
@@ -10,6 +7,7 @@ import pytest
 from scipy.spatial import cKDTree
 
 from tianim.spatial import NeighbourGrid, NeighbourOverflowError, neighbour_lists
+from _threads import digests_by_thread_count
 
 
 def kdtree_sets(x, r, queries=None, exclude_self=True):
@@ -127,11 +125,7 @@ _THREAD_SCRIPT = textwrap.dedent("""
 
 
 def test_bit_identical_with_one_and_two_threads():
-    digests = []
-    for threads in ("1", "2"):
-        env = dict(os.environ, TIANIM_NUM_THREADS=threads, TIANIM_ARCH="cpu")
-        out = subprocess.run([sys.executable, "-c", _THREAD_SCRIPT], env=env, capture_output=True, text=True, check=True)
-        digests.append(out.stdout.strip().splitlines()[-1])
+    digests = digests_by_thread_count(_THREAD_SCRIPT)
     assert digests[0] == digests[1]
 
 

@@ -142,14 +142,19 @@ def as_index_array(name: str, value, n: int, ndim: int = 1, of: str = "particles
 # --- joint-space checks (kinematics, keyframe) --------------------------------------------
 
 
+def numeric_array(name: str, value, remedy: str) -> np.ndarray:
+    """``value`` as a float64 array (inf and NaN kept), or a TypeError ``"{name}=... is not numeric; {remedy}"``."""
+    if isinstance(value, (str, bytes)):
+        raise TypeError(f"{name}={fmt(value)} is not numeric; {remedy}")
+    try:
+        return np.array(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"{name}={fmt(value)} is not numeric; {remedy}") from exc
+
+
 def float_array(name: str, value, shape_hint: str) -> np.ndarray:
     """``value`` as a finite float64 array, or a ValueError/TypeError naming ``name``."""
-    if isinstance(value, (str, bytes)):
-        raise TypeError(f"{name}={fmt(value)} is not numeric; pass an array of floats {shape_hint}")
-    try:
-        arr = np.array(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name}={fmt(value)} is not numeric; pass an array of floats {shape_hint}") from exc
+    arr = numeric_array(name, value, f"pass an array of floats {shape_hint}")
     if not np.all(np.isfinite(arr)):
         raise ValueError(f"{name} contains NaN or inf ({fmt(arr)}); pass finite values {shape_hint}")
     return arr
@@ -174,12 +179,7 @@ def joint_limits(lower, upper, n: int) -> tuple[np.ndarray, np.ndarray]:
         if value is None:
             out.append(np.full(n, default))
             continue
-        if isinstance(value, (str, bytes)):
-            raise TypeError(f"{name}={fmt(value)} is not numeric; pass {n} floats (radians or metres)")
-        try:
-            arr = np.array(value, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise TypeError(f"{name}={fmt(value)} is not numeric; pass {n} floats (radians or metres)") from exc
+        arr = numeric_array(name, value, f"pass {n} floats (radians or metres)")
         if np.any(np.isnan(arr)):
             raise ValueError(f"{name} contains NaN ({fmt(arr)}); use +-inf or None for an unlimited joint")
         if arr.ndim == 0:

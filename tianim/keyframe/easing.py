@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim._checks import check_choice, fmt
+from tianim._checks import check_choice, fmt, numeric_array
 
 
 def _sine_in(x):
@@ -44,12 +44,7 @@ def _split(name: str):
 
 def _fraction(x) -> np.ndarray:
     """Normalised times as float64 clipped to [0, 1]; +-inf clip to the ends, NaN is a ValueError."""
-    if isinstance(x, (str, bytes)):
-        raise TypeError(f"x={fmt(x)} is not numeric; pass normalised times in [0, 1]")
-    try:
-        arr = np.array(x, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"x={fmt(x)} is not numeric; pass normalised times in [0, 1]") from exc
+    arr = numeric_array("x", x, "pass normalised times in [0, 1]")
     if np.any(np.isnan(arr)):
         raise ValueError(f"x={fmt(x)} contains NaN; pass normalised times in [0, 1]")
     return np.clip(arr, 0.0, 1.0)
