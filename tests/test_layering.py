@@ -32,6 +32,7 @@ for m in [m for m in sys.modules if m.split(".")[0] in ("gymnasium", "envs")]:
 def _run(code: str, **env) -> subprocess.CompletedProcess:
     full = dict(os.environ, **env)
     full.pop("TIANIM_TAICHI", None)
+    full.pop("TIANIM_BACKEND", None)
     return subprocess.run(
         [sys.executable, "-c", _BLOCK + textwrap.dedent(code)], cwd=ROOT, env=full, capture_output=True,
         text=True, timeout=600,

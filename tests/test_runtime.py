@@ -122,7 +122,8 @@ def test_cli_gpu_fallback_is_one_line():
         ("TIANIM_NUM_THREADS", "0", "1 to 65536"),
         ("TIANIM_NUM_THREADS", "-2", "1 to 65536"),
         ("TIANIM_NUM_THREADS", "2.5", "1 to 65536"),
-        ("TIANIM_TAICHI", "taichy", "taichi, quadrants"),
+        ("TIANIM_BACKEND", "taichy", "taichi, quadrants"),
+        ("TIANIM_TAICHI", "taichy", "taichi, quadrants"),  # the earlier name of the same switch
     ],
 )
 @pytest.mark.parametrize("command", [("info",), ("demo", "--list"), ("bench", "--list")])
@@ -159,17 +160,34 @@ def test_missing_taichi_package_is_a_clear_error():
 
     if importlib.util.find_spec("quadrants") is not None:
         pytest.skip("quadrants is installed here")
-    out = tianim_cmd("info", TIANIM_TAICHI="quadrants")
+    out = tianim_cmd("info", TIANIM_BACKEND="quadrants")
     assert out.returncode == 2 and "Traceback" not in out.stderr
-    assert "TIANIM_TAICHI=quadrants" in out.stderr and "pip install quadrants" in out.stderr
+    assert "TIANIM_BACKEND=quadrants" in out.stderr and "pip install quadrants" in out.stderr
     out = run("""
         import tianim.render, tianim._ti as t
         try:
             t.get()
         except ImportError as e:
             print(type(e).__name__, e)
-    """, TIANIM_TAICHI="quadrants")
+    """, TIANIM_BACKEND="quadrants")
     assert "MissingTaichiError" in out.stdout and "not installed" in out.stdout
+
+
+def test_backend_defaults_to_the_fork_where_taichi_is_missing():
+    import importlib.util
+
+    code = """
+        import sys
+        sys.modules["taichi"] = None          # as on Python 3.14, where Taichi has no wheels
+        import tianim._ti as t
+        print(t.package_name())
+    """
+    out = run(code, TIANIM_BACKEND="", TIANIM_TAICHI="")
+    assert out.returncode == 0, out.stderr
+    expected = "quadrants" if importlib.util.find_spec("quadrants") is not None else "taichi"
+    assert out.stdout.split() == [expected]
+    out = run(code, TIANIM_BACKEND="taichi", TIANIM_TAICHI="")   # a choice is kept, never second-guessed
+    assert out.stdout.split() == ["taichi"]
 
 
 @pytest.mark.parametrize("command", [("--help",), ("demo", "--list"), ("bench", "--list"), ("info",)])

@@ -12,8 +12,10 @@ Every kernel module gets Taichi from here, never by ``import taichi``::
         return k
 
 so that importing tianim (or ``tianim.render``) loads no Taichi module, and the package can
-be swapped: ``TIANIM_TAICHI=quadrants`` selects ``quadrants``, the maintained fork of Taichi
-with the same API (Genesis), instead of ``taichi`` (the default).
+be swapped: ``TIANIM_BACKEND=quadrants`` selects ``quadrants``, the maintained fork of Taichi
+with the same API (Genesis), instead of ``taichi``. Unset, tianim uses ``taichi`` where it is
+installed and ``quadrants`` otherwise (Python 3.14, where Taichi has no wheels, installs only the
+fork). ``TIANIM_TAICHI`` is the earlier name of the same switch and is still read.
 
 Taichi prints a banner (``[Taichi] version ...``) when it is imported; tianim keeps it quiet
 unless asked (``TIANIM_VERBOSE=1``, or :func:`set_verbose`, which ``tianim --verbose`` calls).
@@ -32,8 +34,10 @@ import sys
 import threading
 
 #: The environment variable that chooses the Taichi package.
-ENV_VAR = "TIANIM_TAICHI"
-#: Packages with Taichi's API that tianim can run on; the first is the default.
+ENV_VAR = "TIANIM_BACKEND"
+#: Its earlier name, read when ``TIANIM_BACKEND`` is unset.
+LEGACY_ENV_VAR = "TIANIM_TAICHI"
+#: Packages with Taichi's API that tianim can run on, in order of preference when none is chosen.
 PACKAGES = ("taichi", "quadrants")
 #: Taichi's own switch for the banner it prints at import.
 _BANNER_ENV = "ENABLE_TAICHI_HEADER_PRINT"
@@ -51,14 +55,35 @@ class MissingTaichiError(ConfigError, ImportError):
     """The chosen Taichi package (``taichi`` or ``quadrants``) is not installed."""
 
 
+def _setting() -> tuple[str, str]:
+    """``(variable, raw value)`` of the backend switch: ``TIANIM_BACKEND``, else ``TIANIM_TAICHI``."""
+    for var in (ENV_VAR, LEGACY_ENV_VAR):
+        raw = os.environ.get(var, "")
+        if raw.strip():
+            return var, raw
+    return ENV_VAR, ""
+
+
+@functools.lru_cache(maxsize=None)
+def _default_package() -> str:
+    """The first of :data:`PACKAGES` that is imported or installed (``taichi`` when neither is)."""
+    for name in PACKAGES:
+        if sys.modules.get(name) is not None or importlib.util.find_spec(name) is not None:
+            return name
+    return PACKAGES[0]
+
+
 def package_name() -> str:
-    """The Taichi package tianim uses: ``TIANIM_TAICHI`` (``taichi`` or ``quadrants``), default ``taichi``."""
-    raw = os.environ.get(ENV_VAR, "")
-    name = raw.strip().lower() or PACKAGES[0]
+    """The Taichi package tianim uses: ``TIANIM_BACKEND`` (``taichi`` or ``quadrants``); unset, the
+    first of them that is installed."""
+    var, raw = _setting()
+    if not raw.strip():
+        return _default_package()
+    name = raw.strip().lower()
     if name not in PACKAGES:
         raise ConfigError(
-            f"{ENV_VAR}={raw!r} is not a Taichi package tianim knows; use one of {', '.join(PACKAGES)} "
-            f"(unset it for {PACKAGES[0]})"
+            f"{var}={raw!r} is not a Taichi package tianim knows; use one of {', '.join(PACKAGES)} "
+            f"(unset it for the first one installed)"
         )
     return name
 
@@ -126,11 +151,12 @@ def _import(name: str):
 
 
 def _missing(name: str) -> MissingTaichiError:
-    if os.environ.get(ENV_VAR, "").strip():
-        chosen = f"{ENV_VAR}={os.environ[ENV_VAR]} selects {name!r}"
+    var, raw = _setting()
+    if raw.strip():
+        chosen = f"{var}={raw} selects {name!r}"
     else:
         chosen = f"tianim runs on {name!r} by default"
-    hint = f"pip install {name}" if name != PACKAGES[0] else f"pip install taichi (or set {ENV_VAR}=quadrants)"
+    hint = f"pip install {name}" if name != PACKAGES[0] else "pip install taichi (or pip install quadrants)"
     return MissingTaichiError(f"{chosen}, which is not installed; {hint}")
 
 
@@ -142,7 +168,7 @@ def check_installed() -> None:
 
 
 def get():
-    """The Taichi module (``taichi``, or ``quadrants`` under ``TIANIM_TAICHI=quadrants``), imported once.
+    """The Taichi module (``taichi``, or ``quadrants`` under ``TIANIM_BACKEND=quadrants``), imported once.
 
     Importing it does not initialise it: kernels that run call :func:`tianim.runtime.ensure_taichi`.
     """

@@ -9,7 +9,7 @@ this file only dispatches, so that adding a benchmark or a demo never touches it
 * ``tianim chart [...]``         -> :mod:`tianim.bench.chart`
 
 ``tianim --verbose COMMAND`` shows Taichi's start-up banner (hidden by default). A bad
-``TIANIM_ARCH``, ``TIANIM_NUM_THREADS`` or ``TIANIM_TAICHI`` is reported in one line
+``TIANIM_ARCH``, ``TIANIM_NUM_THREADS`` or ``TIANIM_BACKEND`` is reported in one line
 (exit status 2), before anything runs.
 """
 
@@ -41,7 +41,7 @@ commands:
   chart [...]          charts from benchmark JSON files
 
 environment: TIANIM_ARCH (cpu, cuda, vulkan, metal, opengl, gpu; a GPU that does not
-work falls back to the CPU), TIANIM_NUM_THREADS, TIANIM_TAICHI (taichi or quadrants)
+work falls back to the CPU), TIANIM_NUM_THREADS, TIANIM_BACKEND (taichi or quadrants)
 """
 
 

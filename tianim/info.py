@@ -34,7 +34,7 @@ def collect() -> dict:
         "arch_fallback": started.get("fallback"),
         "TIANIM_ARCH": os.environ.get("TIANIM_ARCH"),
         "TIANIM_NUM_THREADS": os.environ.get("TIANIM_NUM_THREADS"),
-        "TIANIM_TAICHI": os.environ.get("TIANIM_TAICHI"),
+        "TIANIM_BACKEND": os.environ.get("TIANIM_BACKEND") or os.environ.get("TIANIM_TAICHI"),
     }
 
 

@@ -20,7 +20,7 @@ Kernels are written so that results do not depend on the thread count
 every loop layout. The number of CPU threads can be set with
 ``TIANIM_NUM_THREADS`` (or ``init(num_threads=...)``).
 
-Taichi itself is reached through :mod:`tianim._ti` (``TIANIM_TAICHI`` picks
+Taichi itself is reached through :mod:`tianim._ti` (``TIANIM_BACKEND`` picks
 ``taichi`` or its fork ``quadrants``).
 """
 
@@ -109,7 +109,7 @@ def probe_arch(name: str) -> tuple[bool, str]:
     key = (package, name)
     if key in _probe_cache:
         return _probe_cache[key]
-    env = dict(os.environ, TIANIM_TAICHI=package, TIANIM_VERBOSE="0")
+    env = dict(os.environ, TIANIM_BACKEND=package, TIANIM_VERBOSE="0")
     try:
         out = subprocess.run(
             [sys.executable, "-m", "tianim._probe", name],
@@ -223,4 +223,6 @@ def compiled_kernel_count() -> int:
     if not is_initialized():
         return 0
     ti = _ti.get()
-    return sum(len(k.compiled_kernels) for k in ti.lang.impl.get_runtime().kernels)
+    # taichi keeps a kernel's compiled instances in ``compiled_kernels``, quadrants in ``materialized_kernels``
+    return sum(len(getattr(k, "compiled_kernels", None) or getattr(k, "materialized_kernels", ()))
+               for k in ti.lang.impl.get_runtime().kernels)

@@ -282,7 +282,10 @@ def run_implicit_euler(model, state, dt: float, substeps: int, options: dict, bu
     stats = np.zeros((b, 2), dtype=np.int32)
     kernel(state.x, state.v, *(buffer(s, state.x.shape, state.dtype) for s in ("vn", "xs", "r", "p", "ap", "z")),
            pre, state.pinned.view(np.uint8), data["mass"], data["off"], data["spr"], data["oth"], data["k"],
-           data["rest"], data["damp"], model.gravity.astype(state.dtype), real(model.medium_damping), real(dt),
-           model.grid.nx if model.grid is not None else 1, int(substeps), real(opts["newton_tol"]),
-           real(opts["cg_tol"]), int(opts["max_newton"]), int(opts["max_cg"]), stats, data["coll"])
+           data["rest"], data["damp"], model.gravity.astype(state.dtype),
+           # scalars as Python floats holding the state dtype's values (quadrants caches launches on primitives)
+           *(float(real(v)) for v in (model.medium_damping, dt)),
+           model.grid.nx if model.grid is not None else 1, int(substeps),
+           *(float(real(opts[key])) for key in ("newton_tol", "cg_tol")),
+           int(opts["max_newton"]), int(opts["max_cg"]), stats, data["coll"])
     return {"newton": stats[:, 0].copy(), "cg": stats[:, 1].copy()}

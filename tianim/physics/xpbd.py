@@ -278,7 +278,7 @@ def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: st
     real = state.dtype.type
     common_head = (state.x, state.v, buffer("dx", state.x.shape, state.dtype), lam, state.pinned.view(np.uint8),
                    data["inv_mass"])
-    g, rho, h = model.gravity.astype(state.dtype), real(model.medium_damping), real(dt)
+    g, rho, h = model.gravity.astype(state.dtype), float(real(model.medium_damping)), float(real(dt))
     nx = model.grid.nx if grid else 1
     if layout == "per_copy":
         ends = model.springs.ravel() if edges else np.zeros(2, np.int32)
