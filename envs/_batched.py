@@ -37,6 +37,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ._render import no_render_mode
+from ._rng import seed_key
+
+
+def episode_key(seed, rng: np.random.Generator) -> int:
+    """The 64-bit Philox key of a copy (``envs._rng``): its seed, or for ``seed=None`` one draw
+    of the copy's freshly seeded ``rng``; a single env seeded alike gets the same key."""
+    return seed_key(seed) if seed is not None else int(rng.integers(1 << 64, dtype=np.uint64))
 
 
 def check_action(action, shape: tuple) -> np.ndarray:
@@ -67,6 +74,9 @@ class BatchedEnv(VectorEnv):
         self.max_episode_steps = int(max_episode_steps)
         self.metadata = dict(type(self).metadata, autoreset_mode=mode)
         self._rngs = [None] * self.num_envs
+        # counter-based draws (envs/_rng.py) for envs that reset all copies in one array expression
+        self._keys = np.zeros(self.num_envs, np.uint64)
+        self._episodes = np.zeros(self.num_envs, np.uint64)
         self._steps = np.zeros(self.num_envs, np.int64)
         self._done = np.zeros(self.num_envs, bool)
         self._needs_reset = True
@@ -100,6 +110,8 @@ class BatchedEnv(VectorEnv):
         for k, s in enumerate(seeds):
             if s is not None or self._rngs[k] is None:
                 self._rngs[k] = seeding.np_random(s)[0]
+                self._keys[k] = episode_key(s, self._rngs[k])
+                self._episodes[k] = 0
         self._np_random = self._rngs[0]
 
     def reset(self, *, seed=None, options: dict[str, Any] | None = None):

@@ -38,7 +38,9 @@ infinite actions raise ``ValueError``.
 
 Joint angles uniform in [-0.1, 0.1] rad, velocities uniform in [-0.005, 0.005]
 rad/s; the target is the tip of the arm at joint angles drawn uniformly within
-the limits (base in [-pi, pi]), hence always reachable. All from ``np_random``.
+the limits (base in [-pi, pi]), hence always reachable. Drawn by Philox4x32-10 (``envs/_rng.py``)
+keyed by the seed and counted by episode, so that ``gym.make_vec`` draws the starts of every
+resetting copy in one array expression and copy ``k`` equals a single env seeded ``seed + k``.
 
 ## Episode end
 
@@ -77,7 +79,8 @@ from tianim.kinematics import PlanarChain
 from tianim.kinematics import arm as tka
 
 from ._render import no_render_mode
-from ._batched import BatchedEnv, check_action
+from ._batched import BatchedEnv, check_action, episode_key
+from ._rng import uniforms
 
 DT = 0.02
 SUBSTEPS = 2
@@ -113,14 +116,15 @@ def observation_space(n: int) -> spaces.Box:
     return spaces.Box(-high, high, dtype=np.float32)
 
 
-def sample_start(rng: np.random.Generator, observe, n: int) -> tuple[list, list, float, float]:
-    """Initial ``(q, qd, target_x, target_y)`` drawn with ONE call to ``rng`` (single env and
-    batch copies draw identically); ``observe`` is the arm's ``tianim.kinematics.arm.observer``."""
+def sample_starts(keys: np.ndarray, episodes: np.ndarray, n: int) -> np.ndarray:
+    """Initial ``[q (n), qd (n), target joint angles (n)]`` of copies with Philox ``keys`` (B,)
+    in episodes ``episodes`` (B,): ``(B, 3 n)`` float64, one array expression for any B, the
+    same bits for a copy whatever the batch (``envs/_rng.py``). The target is the tip of the arm
+    at the target joint angles: ``observer`` for one env, one kernel launch for a batch (equal
+    bit for bit, ``tianim.kinematics.arm``)."""
     lim = [math.pi] + [JOINT_LIMIT] * (n - 1)
     high = np.array([INIT_NOISE_Q] * n + [INIT_NOISE_QD] * n + lim)
-    u = rng.uniform(-high, high).tolist()
-    _, _, tx, ty = observe(u[2 * n:])
-    return u[:n], u[n:2 * n], tx, ty
+    return -high + (high + high) * uniforms(keys, episodes, 3 * n)
 
 
 class ArmReachEnv(gym.Env):
@@ -141,11 +145,18 @@ class ArmReachEnv(gym.Env):
         self.observation_space = observation_space(n)
         self._state = None
         self._renderer = None
+        self._key = None       # Philox key of this env's episodes (its seed), and the episode number
+        self._episode = 0
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
-        q, qd, tx, ty = sample_start(self.np_random, self._observe_arm, self.n_links)
-        self._state = (q, qd, tx, ty)
+        if seed is not None or self._key is None:
+            self._key, self._episode = episode_key(seed, self.np_random), 0
+        n = self.n_links
+        u = sample_starts([self._key], [self._episode], n)[0].tolist()
+        self._episode += 1
+        _, _, tx, ty = self._observe_arm(u[2 * n:])
+        self._state = (u[:n], u[n:2 * n], tx, ty)
         obs, _dist = self._observe()
         return obs, {}
 
@@ -216,11 +227,17 @@ class ArmReachVectorEnv(BatchedEnv):
         self._zero_tau = np.zeros((b, n))
 
     def _reset_copies(self, idx):
-        for k in idx.tolist():
-            q, qd, tx, ty = sample_start(self._rngs[k], self._observe_arm, self.n_links)
-            self.q[k] = q
-            self.qd[k] = qd
-            self.target[k] = (tx, ty)
+        n = self.n_links
+        u = sample_starts(self._keys[idx], self._episodes[idx], n)
+        self._episodes[idx] += np.uint64(1)
+        self.q[idx] = u[:, :n]
+        self.qd[idx] = u[:, n:2 * n]
+        # the target: the tip at the target angles, from the arm kernel without stepping (active 0)
+        angles = np.ascontiguousarray(u[:, 2 * n:])
+        tip = np.empty((idx.size, 2))
+        zero = np.zeros_like(angles)
+        tka.step_batch(self.arm, angles, zero, zero, DT, SUBSTEPS, np.zeros(idx.size, np.int32), tip=tip)
+        self.target[idx] = tip
 
     def _launch(self, tau, active):
         tka.step_batch(self.arm, self.q, self.qd, tau, DT, SUBSTEPS, active, self._cos, self._sin, self._tip)
