@@ -124,3 +124,23 @@ def test_odd_width_and_bad_shadow_size():
         Scene3D(10, 10, shadow_size=3)
     with pytest.raises(ValueError, match="normals"):
         Scene3D(10, 10).mesh(np.zeros((3, 3)), [[0, 1, 2]], normals=np.zeros((2, 3)))
+
+
+def test_each_frame_starts_from_an_empty_sample_buffer():
+    """resolve empties the samples it reads (no NumPy fill per frame): a frame drawn after another
+    scene equals the same scene drawn by a fresh renderer, and so does a frame after a failed render."""
+    def scene(s, k):
+        s.clear()
+        s.ground(0.0)
+        s.sphere((0.3 * k, 0.0, 0.4), 0.3, color="orange")
+        s.particles(np.array([[0.5, 0.2, 0.2 + 0.1 * k]]), radius=0.1, color="blue")
+        s.frame()
+        return s
+
+    used = Scene3D(96, 72)
+    scene(used, 0).render()
+    for k in (1, 2):
+        assert np.array_equal(scene(used, k).render(), scene(Scene3D(96, 72), k).render())
+    used._buf_empty = False                  # as after a render that raised between raster and resolve
+    used._buf[:] = 123
+    assert np.array_equal(scene(used, 1).render(), scene(Scene3D(96, 72), 1).render())

@@ -265,6 +265,8 @@ def kernels():
             row_d = (0.5 - 0.5 * Ws) * kx - (y * ssaa + 0.5 - 0.5 * Hs) * Un * ifocal + Fn
             for x in range(Wo):
                 keys = ti.Vector([buf[y * ssaa + s // ssaa, x * ssaa + s % ssaa] for s in ti.static(range(NS))], ti.i64)
+                for s in ti.static(range(NS)):  # read once: leave the sample buffer empty for the next frame
+                    buf[y * ssaa + s // ssaa, x * ssaa + s % ssaa] = ti.i64(EMPTY)
                 d0 = row_d + (x * ssaa) * kx
                 dup = ti.Vector([d0 + (s % ssaa) * kx - (s // ssaa) * Un * ifocal for s in ti.static(range(NS))])
                 all_keys = keys[0]

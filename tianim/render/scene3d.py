@@ -145,6 +145,7 @@ class Scene3D:
         self.ambient = float(ambient)
         self.specular = float(specular)
         self._buf = None
+        self._buf_empty = False  # True once resolve has emptied the sample buffer
         self._smap = None
         self._no_smap = np.full((1, 1), K.EMPTY_DEPTH, np.int32)
         self._no_buf = np.full((1, 1), K.EMPTY, np.int64)
@@ -287,7 +288,12 @@ class Scene3D:
         if self._buf is None or self._buf.shape != ss:
             self._buf = np.empty(ss, dtype=np.int64)
             self._out = np.empty((self.height, self.width, 3), dtype=np.uint8)
-        self._buf.fill(K.EMPTY)
+            self._buf_empty = False
+        if not self._buf_empty:
+            # resolve empties every sample it reads; only a new buffer, or a render that stopped
+            # between rasterising and resolving, needs the fill
+            self._buf.fill(K.EMPTY)
+        self._buf_empty = False
         if self.shadows and (self._smap is None or self._smap.shape[0] != self.shadow_size):
             self._smap = np.empty((self.shadow_size, self.shadow_size), dtype=np.int32)
         return self._buf, self._out
@@ -376,6 +382,7 @@ class Scene3D:
         S.kernels().resolve(buf, self.ssaa, int(self.per_sample), len(F), attr, F, FM, BK, sview, SC, cam,
                   self.light.astype(np.float32), params, smap, lcam, self._ground_pixels(camera, params),
                   *self._out_views(out))
+        self._buf_empty = True
         return out.copy()
 
     def _params(self, focal, bias, lfocal, lo, hi, bbox):
