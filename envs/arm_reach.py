@@ -225,6 +225,8 @@ class ArmReachVectorEnv(BatchedEnv):
         self._sin = np.zeros((b, n))
         self._tip = np.zeros((b, 2))
         self._zero_tau = np.zeros((b, n))
+        self._obs_buf = np.empty((b, 3 * n + 4), np.float32)
+        self._rel = np.empty((b, 2))
 
     def _reset_copies(self, idx):
         n = self.n_links
@@ -243,10 +245,12 @@ class ArmReachVectorEnv(BatchedEnv):
         tka.step_batch(self.arm, self.q, self.qd, tau, DT, SUBSTEPS, active, self._cos, self._sin, self._tip)
 
     def _obs(self):
-        rel = self._tip - self.target
-        obs = np.concatenate([self._cos, self._sin, self.qd, self.target, rel], axis=1).astype(np.float32)
+        n, obs, rel = self.n_links, self._obs_buf, self._rel
+        np.subtract(self._tip, self.target, out=rel)
+        for col, part in ((0, self._cos), (n, self._sin), (2 * n, self.qd), (3 * n, self.target), (3 * n + 2, rel)):
+            obs[:, col:col + part.shape[1]] = part     # float64 -> float32 on assignment, no temporaries
         dist = np.sqrt(rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1])
-        return obs, dist
+        return obs.copy(), dist
 
     def _advance(self, actions, reset_mask):
         a = actions.astype(np.float64)
