@@ -9,8 +9,11 @@ Pure NumPy; importing it loads neither Taichi nor scipy. C3D files need the ``mo
 * :func:`resample` - between 24, 25, 29.97, 30, 60, 120 Hz or any positive rates
 """
 
+from tianim.mocap.c3d import read_c3d, write_c3d
 from tianim.mocap.filters import butterworth, residual_cutoff, savgol
-from tianim.mocap.gaps import Gap, UnfillableGap, fill_gaps
+from tianim.mocap.gaps import Gap, UnfillableGap, fill_gaps, find_gaps
 from tianim.mocap.markers import Markers
+from tianim.mocap.resample import NTSC, resample
 
-__all__ = ["Gap", "Markers", "UnfillableGap", "butterworth", "fill_gaps", "residual_cutoff", "savgol"]
+__all__ = ["NTSC", "Gap", "Markers", "UnfillableGap", "butterworth", "fill_gaps", "find_gaps", "read_c3d",
+           "resample", "residual_cutoff", "savgol", "write_c3d"]

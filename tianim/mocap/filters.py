@@ -143,9 +143,14 @@ def _sos_zi(sos: np.ndarray) -> np.ndarray:
 
 
 def _sosfilt(sos: np.ndarray, x: np.ndarray, zi: np.ndarray) -> np.ndarray:
-    """Run the cascade over axis 0 of ``x`` (N, K) from initial states ``zi`` (S, 2, K)."""
+    """Run the cascade over axis 0 of ``x`` (N, K) from initial states ``zi`` (S, 2, K).
+
+    ``sos`` is (S, 6), or (S, 6, K) for one filter per channel (residual analysis runs every
+    trial cutoff in one pass).
+    """
     y = x.copy()
-    for i, (b0, b1, b2, _, a1, a2) in enumerate(sos):
+    for i in range(sos.shape[0]):
+        b0, b1, b2, _, a1, a2 = sos[i]
         z0, z1 = zi[i, 0].copy(), zi[i, 1].copy()
         out = np.empty_like(y)
         for t in range(y.shape[0]):
@@ -158,6 +163,13 @@ def _sosfilt(sos: np.ndarray, x: np.ndarray, zi: np.ndarray) -> np.ndarray:
     return y
 
 
+def _sos_zi_k(sos: np.ndarray) -> np.ndarray:
+    """:func:`_sos_zi` for (S, 6) -> (S, 2, 1) or (S, 6, K) -> (S, 2, K)."""
+    if sos.ndim == 2:
+        return _sos_zi(sos)[:, :, None]
+    return np.stack([_sos_zi(sos[:, :, k]) for k in range(sos.shape[2])], axis=2)
+
+
 def _filtfilt(sos: np.ndarray, x2: np.ndarray, padlen: int) -> np.ndarray:
     if padlen:
         head = 2 * x2[:1] - x2[padlen:0:-1]
@@ -165,7 +177,7 @@ def _filtfilt(sos: np.ndarray, x2: np.ndarray, padlen: int) -> np.ndarray:
         ext = np.concatenate([head, x2, tail])
     else:
         ext = x2
-    zi = _sos_zi(sos)[:, :, None]
+    zi = _sos_zi_k(sos)
     fwd = _sosfilt(sos, ext, zi * ext[0])
     back = _sosfilt(sos, fwd[::-1], zi * fwd[-1])[::-1]
     return back[padlen:len(back) - padlen] if padlen else back
@@ -234,13 +246,15 @@ def residual_cutoff(x, fs, cutoffs=None, order: int = 4, fit_from=None, axis: in
     if not isinstance(return_curve, bool):
         raise TypeError(f"return_curve={fmt(return_curve)} must be True or False")
     x2, shape = _to_2d(arr, ax)
-    res = np.empty((cut.size, x2.shape[1]))
-    for i, fc in enumerate(cut):
-        sos = butterworth_sos(fs, fc, order)
-        pad = 3 * (2 * len(sos) + 1)
-        if x2.shape[0] <= pad:
-            raise ValueError(f"x has {x2.shape[0]} samples along axis {ax}; residual analysis needs more than {pad}")
-        res[i] = np.sqrt(np.mean((_filtfilt(sos, x2, pad) - x2) ** 2, axis=0))
+    sos = np.stack([butterworth_sos(fs, fc, order) for fc in cut], axis=2)  # (S, 6, C)
+    pad = 3 * (2 * sos.shape[0] + 1)
+    if x2.shape[0] <= pad:
+        raise ValueError(f"x has {x2.shape[0]} samples along axis {ax}; residual analysis needs more than {pad}")
+    K = x2.shape[1]
+    # every (cutoff, channel) pair as one channel: (N, C * K), cutoff-major
+    xs = np.repeat(x2[:, None, :], cut.size, axis=1).reshape(x2.shape[0], -1)
+    ys = _filtfilt(np.repeat(sos, K, axis=2), xs, pad)
+    res = np.sqrt(np.mean((ys - xs) ** 2, axis=0)).reshape(cut.size, K)
     # straight line R = a + b fc over the noise-only tail (least squares), intercept a
     A = np.stack([np.ones(tail.sum()), cut[tail]], axis=1)
     coef = np.linalg.lstsq(A, res[tail], rcond=None)[0]
