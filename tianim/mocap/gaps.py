@@ -252,7 +252,10 @@ class _Filler:
                 self._pca = f"only {X.shape[0]} frame(s) show every marker; a PCA fill needs at least 10"
             else:
                 mean = X.mean(axis=0)
-                _, S, Vt = np.linalg.svd(X - mean, full_matrices=False)
+                Xc = X - mean
+                w, V = np.linalg.eigh(Xc.T @ Xc)  # principal axes of the (3M, 3M) scatter matrix
+                order = np.argsort(w)[::-1][:min(X.shape)]
+                S, Vt = np.sqrt(np.maximum(w[order], 0.0)), V[:, order].T  # singular values and axes
                 if self.pca_components is None:  # Gavish and Donoho (2014): optimal hard threshold
                     beta = min(X.shape) / max(X.shape)
                     omega = 0.56 * beta ** 3 - 0.95 * beta ** 2 + 1.82 * beta + 1.43
