@@ -102,6 +102,8 @@ def resample(x, fs_in, fs_out, axis: int = 0, method: str = "cubic", lobes: int 
     n = arr.shape[ax]
     if n < 2:
         raise ValueError(f"x has {n} sample(s) along axis {ax}; resampling needs at least 2")
+    if fs_out == fs_in:
+        return arr.copy()
     x2, shape = _to_2d(arr, ax)
     u = output_times(n, fs_in, fs_out) * fs_in  # positions in input samples
     u = np.minimum(u, n - 1)
