@@ -220,3 +220,23 @@ def test_bad_input_names_the_argument(kwargs, exc, match):
     args.update(kwargs)
     with pytest.raises(exc, match=match):
         fill_gaps(**args)
+
+
+def test_gapfill_bench_runs_small_and_agrees(tmp_path):
+    import json
+
+    from tianim.bench import gapfill
+
+    out = tmp_path / "g.json"
+    rc = gapfill.main(["--quick", "--json", str(out), "--chart", str(tmp_path / "f.png"),
+                       "--filter-chart", str(tmp_path / "c.png")])
+    assert rc == 0
+    summary = json.loads(out.read_text())["summary"]
+    assert summary["spline_agreement"] < 1e-9
+    floor = summary["noise_floor_mm"]
+    assert 1.5 < floor < 2.0  # 1 mm per coordinate -> sqrt(3) mm
+    for method in ("rigid", "pca"):
+        assert max(summary["fill_error_mm"][method].values()) < 1.5 * floor
+    assert 3.0 <= summary["best_cutoff_acceleration_hz"] <= summary["best_cutoff_position_hz"] <= 16.0
+    for name in ("f.png", "c.png"):
+        assert (tmp_path / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
