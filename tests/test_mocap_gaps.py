@@ -112,6 +112,23 @@ def test_interpolating_natural_spline_matches_scipy():
     np.testing.assert_allclose(q, yk, atol=1e-9)
 
 
+@pytest.mark.parametrize("squeeze, thin", [(1.0, False), (0.05, True)])
+def test_rigid_fill_flags_thin_donor_sets(squeeze, thin):
+    truth, _, segs = capture(n_seg=1, per_seg=4, seed=4)
+    # squeeze donor 2 towards the line through donors 1 and 3
+    line = truth[:, 3] - truth[:, 1]
+    truth = truth.copy()
+    truth[:, 2] = truth[:, 1] + 0.5 * line + squeeze * (truth[:, 2] - truth[:, 1] - 0.5 * line)
+    donors = truth[0, 1:] - truth[0, 1:].mean(axis=0)
+    sv = np.linalg.svd(donors, compute_uv=False)
+    assert (sv[1] / sv[0] < 0.2) == thin  # the premise of the case
+    X = truth.copy()
+    X[100:150, 0] = np.nan
+    filled, report = fill_gaps(X, FS, "rigid", segments=segs)
+    assert report[0].filled and ("nearly collinear" in report[0].reason) == thin
+    np.testing.assert_allclose(filled, truth, atol=1e-9)  # noise-free: exact either way
+
+
 def test_kabsch_recovers_a_known_rigid_motion():
     rng = np.random.default_rng(4)
     src = rng.normal(size=(5, 6, 3))
@@ -136,6 +153,14 @@ def test_auto_picks_spline_for_short_gaps_and_rigid_or_pca_for_long_ones():
     _, report = fill_gaps(X, FS, "auto", segments=SEGS)
     g = report[-1]
     assert (g.marker, g.first, g.method) == (5, 0, "rigid") and "start" in g.reason
+    X[0:20, 5] = NOISY[0:20, 5]
+    X[:, 12] = np.nan  # a marker never seen: no complete frame for PCA, no reference for rigid
+    X[300:420, 13] = np.nan  # long gap: auto never hands it to a spline
+    _, report = fill_gaps(X, FS, "auto", segments=[[0, 1, 2, 3], [4, 5, 6, 7]], on_unfillable="leave")
+    by_marker = {g.marker: g for g in report}
+    assert by_marker[12].method is None and by_marker[13].method is None
+    assert "rigid: the marker is on no segment" in by_marker[13].reason and "pca:" in by_marker[13].reason
+    assert "quintic" not in by_marker[13].reason
 
 
 def test_refusals_name_the_gap_and_the_reason():
@@ -211,6 +236,7 @@ BAD = [
     (dict(pca_components=0), ValueError, "pca_components"),
     (dict(auto_threshold=-0.1), ValueError, "auto_threshold"),
     (dict(labels=["a"]), ValueError, "labels"),
+    (dict(markers=Markers(np.zeros((50, 4, 3)), rate=100.0)), ValueError, "disagrees with markers.rate"),
 ]
 
 

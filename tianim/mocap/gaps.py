@@ -25,7 +25,8 @@ A *gap* is a run of consecutive frames in which one marker is missing (any coord
 * ``"auto"``: after Howarth and Callaghan (Hum. Mov. Sci. 29, 2010: rigid-body fill best for
   gaps over 200 ms, splines for short ones): gaps up to ``auto_threshold`` seconds by the
   quintic spline, longer gaps by the rigid fill where ``segments`` gives enough donors, else
-  PCA; a method that cannot fill the gap hands it to the next (the report says which did).
+  PCA (never by a spline: their error grows to decimetres over a second); a method that
+  cannot fill the gap hands it to the next (the report says which did, and why).
 
 Donors and context are always taken from the *measured* data, never from another fill.
 """
@@ -42,6 +43,8 @@ from tianim._checks import check_choice, check_finite_scalar, check_int, fmt
 
 METHODS = ("auto", "linear", "cubic", "quintic", "rigid", "pca")
 _SPLINE_M = {"linear": 1, "cubic": 2, "quintic": 3}
+#: Donor sets thinner than this (2nd / 1st singular value of their shape) get a note in the report.
+_THIN = 0.2
 
 
 class UnfillableGap(ValueError):
@@ -56,7 +59,7 @@ class Gap:
     first: int
     last: int
     method: str | None  # the method that filled it; None if it was left unfilled
-    reason: str = ""  # why it was not filled, or why another method than asked was used
+    reason: str = ""  # why it was not filled, why another method than asked was used, or a caveat
     label: str = ""
 
     @property
@@ -191,6 +194,7 @@ class _Filler:
         self.valid = ~np.isnan(P).any(axis=2)
         self.context, self.reference, self.pca_components = context, reference, pca_components
         self._pca = None
+        self.note = ""  # a caveat about the last fill, for the report
 
     # --- splines -------------------------------------------------------------------
     def spline(self, m_idx, first, last, method):
@@ -233,8 +237,12 @@ class _Filler:
         Q = self.P[refs][:, donors]  # (R, D, 3)
         Qt = self.P[refs, m_idx]  # (R, 3)
         shape0 = Q[0] - Q[0].mean(axis=0)
-        if np.linalg.svd(shape0, compute_uv=False)[1] < 1e-9 * max(1.0, np.abs(shape0).max()):
+        sv = np.linalg.svd(shape0, compute_uv=False)
+        if sv[1] < 1e-9 * max(1.0, np.abs(shape0).max()):
             raise UnfillableGap(f"the donors {donors} are collinear; a rigid fill needs 3 non-collinear donors")
+        spread = sv[1] / sv[0]
+        self.note = (f"donors {donors} are nearly collinear (width/length {spread:.2f} < {_THIN}): "
+                     "rotation about their line is poorly determined, noise is amplified") if spread < _THIN else ""
         R, t = kabsch(Q, np.broadcast_to(Q[:1], Q.shape))  # align every reference frame to the first
         tmpl_d = (np.einsum("rij,rdj->rdi", R, Q) + t[:, None]).mean(axis=0)
         tmpl_t = (np.einsum("rij,rj->ri", R, Qt) + t).mean(axis=0)
@@ -286,6 +294,7 @@ class _Filler:
         return out
 
     def run(self, method, m_idx, first, last):
+        self.note = ""
         if method in _SPLINE_M:
             return self.spline(m_idx, first, last, method)
         return self.rigid(m_idx, first, last) if method == "rigid" else self.pca(m_idx, first, last)
@@ -320,6 +329,8 @@ def fill_gaps(markers, fs, method="auto", max_gap=None, segments=None, *, on_unf
     container = markers if isinstance(markers, Markers) else None
     P = _check_markers(container.positions if container is not None else markers)
     fs = check_finite_scalar("fs", fs, lo=0.0, lo_open=True)
+    if container is not None and not math.isclose(fs, container.rate, rel_tol=1e-6):
+        raise ValueError(f"fs={fs!r} Hz disagrees with markers.rate={container.rate!r} Hz; pass fs=markers.rate")
     method = check_choice("method", method, METHODS)
     if max_gap is not None:
         max_gap = check_int("max_gap", max_gap, lo=1)
@@ -348,7 +359,7 @@ def fill_gaps(markers, fs, method="auto", max_gap=None, segments=None, *, on_unf
             continue
         if method == "auto":
             long_gap = n / fs > auto_threshold
-            chain = ["rigid", "pca", "quintic"] if long_gap else ["quintic", "rigid", "pca"]
+            chain = ["rigid", "pca"] if long_gap else ["quintic", "rigid", "pca"]
             if not segs:
                 chain.remove("rigid")
         else:
@@ -360,7 +371,7 @@ def fill_gaps(markers, fs, method="auto", max_gap=None, segments=None, *, on_unf
             except UnfillableGap as exc:
                 reasons.append(f"{meth}: {exc}")
                 continue
-            report.append(Gap(m_idx, first, last, meth, "; ".join(reasons), label))
+            report.append(Gap(m_idx, first, last, meth, "; ".join(reasons + ([filler.note] if filler.note else [])), label))
             break
         else:
             report.append(Gap(m_idx, first, last, None, "; ".join(reasons), label))
