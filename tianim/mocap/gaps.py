@@ -315,7 +315,8 @@ def fill_gaps(markers, fs, method="auto", max_gap=None, segments=None, *, on_unf
         (needed by ``"rigid"``; ``"auto"`` uses it when given).
     on_unfillable : ``"raise"`` (an :class:`UnfillableGap` naming the gap and the reason,
         before anything is filled) or ``"leave"`` (left NaN and reported).
-    context : visible frames on each side used by the splines (default ``max(4, 0.1 s * fs)``).
+    context : visible frames on each side used by the splines (default ``max(8, 0.4 s * fs)``,
+        48 at 120 Hz: shorter contexts let GCV undersmooth and the fill swing).
     reference : frames on each side averaged into the rigid template (default 10).
     pca_components : principal components the PCA fill keeps (default: those above the optimal hard
         threshold of Gavish and Donoho, IEEE Trans. Inf. Theory 60(8), 2014, i.e. not noise).
@@ -336,7 +337,7 @@ def fill_gaps(markers, fs, method="auto", max_gap=None, segments=None, *, on_unf
         max_gap = check_int("max_gap", max_gap, lo=1)
     segs = _check_segments(segments, P.shape[1])
     on_unfillable = check_choice("on_unfillable", on_unfillable, ("raise", "leave"))
-    context = max(4, int(round(0.1 * fs))) if context is None else check_int("context", context, lo=1)
+    context = max(8, int(round(0.4 * fs))) if context is None else check_int("context", context, lo=1)
     reference = check_int("reference", reference, lo=1)
     if pca_components is not None:
         pca_components = check_int("pca_components", pca_components, lo=1, hi=3 * P.shape[1])
