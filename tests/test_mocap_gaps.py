@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
@@ -201,6 +203,27 @@ def test_pca_refuses_without_complete_frames():
         X[(m * 10) % 200:(m * 10) % 200 + 12, m] = np.nan
     with pytest.raises(UnfillableGap, match="show every marker"):
         fill_gaps(X, FS, "pca")
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(st.integers(0, 7), st.integers(0, 230), st.integers(1, 40)), min_size=1, max_size=6),
+       st.sampled_from(["auto", "linear", "quintic", "rigid", "pca"]))
+def test_fill_keeps_seen_samples_and_reports_every_gap(holes, method):
+    X = NOISY[:240, :8].copy()
+    for m, first, n in holes:
+        X[first:first + n, m] = np.nan
+    seen = ~np.isnan(X[..., 0])
+    filled, report = fill_gaps(X, FS, method, segments=[[0, 1, 2, 3], [4, 5, 6, 7]], on_unfillable="leave")
+    np.testing.assert_array_equal(filled[seen], X[seen])  # measured samples are never touched
+    covered = np.zeros_like(seen)
+    for g in report:
+        assert not seen[g.first:g.last + 1, g.marker].any()  # a reported gap is all missing ...
+        assert g.first == 0 or seen[g.first - 1, g.marker]  # ... and maximal
+        assert g.last == 239 or seen[g.last + 1, g.marker]
+        covered[g.first:g.last + 1, g.marker] = True
+        assert np.isnan(filled[g.first:g.last + 1, g.marker]).all() == (not g.filled)
+        assert g.filled or g.reason
+    np.testing.assert_array_equal(covered, ~seen)
 
 
 def test_markers_in_markers_out_and_find_gaps():
