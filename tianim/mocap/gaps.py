@@ -18,10 +18,12 @@ A *gap* is a run of consecutive frames in which one marker is missing (any coord
   template is fitted to the donors (least-squares rotation and translation) and carries the
   target with it.
 * ``"pca"`` (Federolf, PLoS ONE 8(10) e78689, 2013; Gloersen and Federolf, PLoS ONE 11(3)
-  e0152616, 2016): principal components of all markers' coordinates over the frames where
-  every marker is visible; in a gap frame the component scores are the least-squares fit to
-  the visible coordinates and the missing marker is read back from them. (Their marker
-  distance weighting is not applied.)
+  e0152616, 2016): principal components of the coordinates of the markers visible in a gap
+  frame plus the missing one, over the frames where all of them are visible (so other
+  markers' drop-outs elsewhere do not starve it); the components kept are those above
+  Gavish and Donoho's optimal hard threshold (noise is not fitted); in the gap frame the
+  component scores are the least-squares fit to the visible coordinates and the missing
+  marker is read back from them. (Their marker distance weighting is not applied.)
 * ``"auto"``: after Howarth and Callaghan (Hum. Mov. Sci. 29, 2010: rigid-body fill best for
   gaps over 200 ms, splines for short ones): gaps up to ``auto_threshold`` seconds by the
   quintic spline, longer gaps by the rigid fill where ``segments`` gives enough donors, else
@@ -45,6 +47,8 @@ METHODS = ("auto", "linear", "cubic", "quintic", "rigid", "pca")
 _SPLINE_M = {"linear": 1, "cubic": 2, "quintic": 3}
 #: Donor sets thinner than this (2nd / 1st singular value of their shape) get a note in the report.
 _THIN = 0.2
+#: Fewest training frames (all of a gap frame's visible markers and the target seen) of a PCA fill.
+_PCA_MIN_FRAMES = 10
 
 
 class UnfillableGap(ValueError):
@@ -191,7 +195,7 @@ class _Filler:
         self.P, self.fs, self.segments = P, fs, segments
         self.valid = ~np.isnan(P).any(axis=2)
         self.context, self.reference, self.pca_components = context, reference, pca_components
-        self._pca = None
+        self._pca = {}  # principal components per marker subset
         self.note = ""  # a caveat about the last fill, for the report
 
     # --- splines -------------------------------------------------------------------
@@ -249,17 +253,19 @@ class _Filler:
         return np.einsum("fij,j->fi", Rf, tmpl_t) + tf
 
     # --- PCA -----------------------------------------------------------------------
-    def _components(self):
-        if self._pca is None:
-            F, M, _ = self.P.shape
-            complete = self.valid.all(axis=1)
-            X = self.P[complete].reshape(-1, 3 * M)
-            if X.shape[0] < max(10, 3):
-                self._pca = f"only {X.shape[0]} frame(s) show every marker; a PCA fill needs at least 10"
+    def _components(self, sel: np.ndarray):
+        """(mean (3S,), axes (k, 3S)) of the markers ``sel`` over the frames that show all of them."""
+        key = sel.tobytes()
+        if key not in self._pca:
+            train = self.valid[:, sel].all(axis=1)
+            X = self.P[train][:, sel].reshape(-1, 3 * sel.size)
+            if X.shape[0] < _PCA_MIN_FRAMES:
+                self._pca[key] = (f"only {X.shape[0]} frame(s) show the marker together with the {sel.size - 1} "
+                                  f"markers visible in the gap; a PCA fill needs at least {_PCA_MIN_FRAMES}")
             else:
                 mean = X.mean(axis=0)
                 Xc = X - mean
-                w, V = np.linalg.eigh(Xc.T @ Xc)  # principal axes of the (3M, 3M) scatter matrix
+                w, V = np.linalg.eigh(Xc.T @ Xc)  # principal axes of the (3S, 3S) scatter matrix
                 order = np.argsort(w)[::-1][:min(X.shape)]
                 S, Vt = np.sqrt(np.maximum(w[order], 0.0)), V[:, order].T  # singular values and axes
                 if self.pca_components is None:  # Gavish and Donoho (2014): optimal hard threshold
@@ -268,27 +274,44 @@ class _Filler:
                     k = max(1, int(np.sum(S > omega * np.median(S))))
                 else:
                     k = min(self.pca_components, Vt.shape[0])
-                self._pca = (mean, Vt[:k])
-        if isinstance(self._pca, str):
-            raise UnfillableGap(self._pca)
-        return self._pca
+                self._pca[key] = (mean, Vt[:min(k, 3 * sel.size - 4)])  # fewer axes than known coordinates
+        got = self._pca[key]
+        if isinstance(got, str):
+            raise UnfillableGap(got)
+        return got
 
     def pca(self, m_idx, first, last):
-        mean, V = self._components()
         frames = np.arange(first, last + 1)
         out = np.empty((frames.size, 3))
         patterns, inverse = np.unique(self.valid[frames], axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        seen = self.valid[:, m_idx]
+        if seen.sum() < _PCA_MIN_FRAMES:
+            raise UnfillableGap(f"the marker is seen in only {int(seen.sum())} frame(s); a PCA fill needs at least "
+                                f"{_PCA_MIN_FRAMES} to learn how it moves with the others")
         for p, pattern in enumerate(patterns):
-            obs = np.repeat(pattern, 3)
-            k = min(V.shape[0], int(obs.sum()) - 1)
-            if k < 1:
-                raise UnfillableGap("too few markers are visible in the gap for a PCA fill")
-            rows = frames[inverse.ravel() == p]
-            Vo = V[:k, obs].T  # (n_obs, k)
-            x = self.P[rows].reshape(rows.size, -1)[:, obs] - mean[obs]
-            scores = np.linalg.lstsq(Vo, x.T, rcond=None)[0]  # (k, rows)
-            full = mean + (V[:k].T @ scores).T
-            out[inverse.ravel() == p] = full[:, 3 * m_idx:3 * m_idx + 3]
+            # donors: the markers visible in this gap frame, less those that hide the most while the target
+            # is seen, until the frames showing all of them cover half of the target's seen frames
+            cand = np.nonzero(pattern)[0]
+            co = self.valid[seen][:, cand]  # (frames the target is seen, candidates)
+            while cand.size >= 2:
+                train = co.all(axis=1).sum()
+                if train >= max(_PCA_MIN_FRAMES, seen.sum() // 2):
+                    break
+                worst = int(np.argmin(co.sum(axis=0)))
+                cand, co = np.delete(cand, worst), np.delete(co, worst, axis=1)
+            if cand.size < 2:
+                raise UnfillableGap("fewer than 2 markers visible in the gap are also seen with the marker often "
+                                    "enough for a PCA fill")
+            sel = np.sort(np.append(cand, m_idx))
+            mean, V = self._components(sel)
+            t = int(np.nonzero(sel == m_idx)[0][0])
+            obs = np.ones(3 * sel.size, dtype=bool)
+            obs[3 * t:3 * t + 3] = False
+            rows = frames[inverse == p]
+            x = self.P[rows][:, sel].reshape(rows.size, -1)[:, obs] - mean[obs]
+            scores = np.linalg.lstsq(V[:, obs].T, x.T, rcond=None)[0]  # (k, rows): fit to the seen coordinates
+            out[inverse == p] = mean[3 * t:3 * t + 3] + (V[:, 3 * t:3 * t + 3].T @ scores).T
         return out
 
     def run(self, method, m_idx, first, last):
