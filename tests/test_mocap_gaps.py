@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
@@ -112,6 +114,23 @@ def test_interpolating_natural_spline_matches_scipy():
     np.testing.assert_allclose(q, yk, atol=1e-9)
 
 
+@pytest.mark.parametrize("squeeze, thin", [(1.0, False), (0.05, True)])
+def test_rigid_fill_flags_thin_donor_sets(squeeze, thin):
+    truth, _, segs = capture(n_seg=1, per_seg=4, seed=4)
+    # squeeze donor 2 towards the line through donors 1 and 3
+    line = truth[:, 3] - truth[:, 1]
+    truth = truth.copy()
+    truth[:, 2] = truth[:, 1] + 0.5 * line + squeeze * (truth[:, 2] - truth[:, 1] - 0.5 * line)
+    donors = truth[0, 1:] - truth[0, 1:].mean(axis=0)
+    sv = np.linalg.svd(donors, compute_uv=False)
+    assert (sv[1] / sv[0] < 0.2) == thin  # the premise of the case
+    X = truth.copy()
+    X[100:150, 0] = np.nan
+    filled, report = fill_gaps(X, FS, "rigid", segments=segs)
+    assert report[0].filled and ("nearly collinear" in report[0].reason) == thin
+    np.testing.assert_allclose(filled, truth, atol=1e-9)  # noise-free: exact either way
+
+
 def test_kabsch_recovers_a_known_rigid_motion():
     rng = np.random.default_rng(4)
     src = rng.normal(size=(5, 6, 3))
@@ -136,6 +155,19 @@ def test_auto_picks_spline_for_short_gaps_and_rigid_or_pca_for_long_ones():
     _, report = fill_gaps(X, FS, "auto", segments=SEGS)
     g = report[-1]
     assert (g.marker, g.first, g.method) == (5, 0, "rigid") and "start" in g.reason
+    X[0:20, 5] = NOISY[0:20, 5]
+    X[:, 12] = np.nan  # a marker never seen: no complete frame for PCA, no reference for rigid
+    X[300:420, 13] = np.nan  # long gap: auto never hands it to a spline
+    _, report = fill_gaps(X, FS, "auto", segments=[[0, 1, 2, 3], [4, 5, 6, 7]], on_unfillable="leave")
+    by_marker = {g.marker: g for g in report}
+    assert by_marker[12].method is None and "pca: the marker is seen in only 0 frame" in by_marker[12].reason
+    assert by_marker[13].method == "pca" and "rigid: the marker is on no segment" in by_marker[13].reason
+    X[4:-4, 14] = np.nan  # seen in 8 frames: no PCA; a quintic could bridge it, but auto never hands
+    _, report = fill_gaps(X, FS, "auto", on_unfillable="leave")  # a long gap to a spline
+    g14 = {g.marker: g for g in report}[14]
+    assert g14.method is None and "pca: the marker is seen in only 8" in g14.reason and "quintic" not in g14.reason
+    _, report = fill_gaps(X[:, [14, 15]], FS, "quintic")
+    assert report[0].method == "quintic"  # (asked for explicitly, the spline does bridge it)
 
 
 def test_refusals_name_the_gap_and_the_reason():
@@ -170,12 +202,40 @@ def test_leave_keeps_unfillable_gaps_nan_and_reports_them():
     assert report[0].label == "m3" and "start" in report[0].reason and "NOT filled" in str(report[0])
 
 
-def test_pca_refuses_without_complete_frames():
-    X = NOISY[:200].copy()
-    for m in range(20):
-        X[(m * 10) % 200:(m * 10) % 200 + 12, m] = np.nan
-    with pytest.raises(UnfillableGap, match="show every marker"):
+def test_pca_refuses_without_training_frames_and_survives_scattered_drop_outs():
+    X = NOISY[:300].copy()
+    X[8:, 0] = np.nan  # marker 0 seen in 8 frames only: too few to learn how it moves with the rest
+    with pytest.raises(UnfillableGap, match="seen in only 8 frame.*at least 10"):
         fill_gaps(X, FS, "pca")
+    X = NOISY[:300].copy()
+    X[:150, 3] = np.nan  # marker 3 hidden in the first half, marker 11 in the second ...
+    X[150:, 11] = np.nan
+    X[40:70, 17] = np.nan
+    assert not (~np.isnan(X[..., 0])).all(axis=1).any()  # ... so no frame shows every marker
+    filled, report = fill_gaps(X, FS, "pca")  # yet each gap finds donors seen with it
+    assert [(g.marker, g.method) for g in report] == [(3, "pca"), (11, "pca"), (17, "pca")]
+    assert np.all(fill_error(filled, TRUTH[:300], report) < 1.5 * FLOOR), fill_error(filled, TRUTH[:300], report)
+
+
+@settings(max_examples=15, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(st.integers(0, 7), st.integers(0, 230), st.integers(1, 40)), min_size=1, max_size=6),
+       st.sampled_from(["auto", "linear", "quintic", "rigid", "pca"]))
+def test_fill_keeps_seen_samples_and_reports_every_gap(holes, method):
+    X = NOISY[:240, :8].copy()
+    for m, first, n in holes:
+        X[first:first + n, m] = np.nan
+    seen = ~np.isnan(X[..., 0])
+    filled, report = fill_gaps(X, FS, method, segments=[[0, 1, 2, 3], [4, 5, 6, 7]], on_unfillable="leave")
+    np.testing.assert_array_equal(filled[seen], X[seen])  # measured samples are never touched
+    covered = np.zeros_like(seen)
+    for g in report:
+        assert not seen[g.first:g.last + 1, g.marker].any()  # a reported gap is all missing ...
+        assert g.first == 0 or seen[g.first - 1, g.marker]  # ... and maximal
+        assert g.last == 239 or seen[g.last + 1, g.marker]
+        covered[g.first:g.last + 1, g.marker] = True
+        assert np.isnan(filled[g.first:g.last + 1, g.marker]).all() == (not g.filled)
+        assert g.filled or g.reason
+    np.testing.assert_array_equal(covered, ~seen)
 
 
 def test_markers_in_markers_out_and_find_gaps():
@@ -211,6 +271,7 @@ BAD = [
     (dict(pca_components=0), ValueError, "pca_components"),
     (dict(auto_threshold=-0.1), ValueError, "auto_threshold"),
     (dict(labels=["a"]), ValueError, "labels"),
+    (dict(markers=Markers(np.zeros((50, 4, 3)), rate=100.0)), ValueError, "disagrees with markers.rate"),
 ]
 
 

@@ -3,14 +3,16 @@
 A *gap* is a run of consecutive frames in which one marker is missing (any coordinate NaN).
 :func:`fill_gaps` fills each gap by one method and reports what it did (:class:`Gap`).
 
-* ``"linear"``, ``"cubic"``, ``"quintic"`` interpolate the marker's own trajectory from the
-  ``context`` nearest valid frames on each side of the gap by the natural spline of degree
-  ``2m - 1`` (m = 1, 2, 3), the interpolant minimising ``int (f^(m))^2 dt``. In one dimension
-  it is ``f(t) = sum_i w_i |t - t_i|^(2m-1) + p(t)``, ``p`` a polynomial of degree ``m - 1``
-  with ``sum_i w_i t_i^k = 0`` for ``k < m`` (Duchon 1977; de Boor, *A Practical Guide to
-  Splines*, 1978). m = 3 is the natural quintic spline of Woltring's GCVSPL ("A Fortran
-  package for generalized, cross-validatory spline smoothing and differentiation",
-  Adv. Eng. Software 8(2), 1986) without smoothing, the "Woltring fill" of Vicon Nexus.
+* ``"linear"``, ``"cubic"``, ``"quintic"`` bridge the gap with the marker's own trajectory from
+  the ``context`` nearest visible frames on each side, by the natural spline of degree
+  ``2m - 1`` (m = 1, 2, 3), the curve minimising ``int (f^(m))^2 dt``. In one dimension it is
+  ``f(t) = sum_i w_i |t - t_i|^(2m-1) + p(t)``, ``p`` a polynomial of degree ``m - 1`` with
+  ``sum_i w_i t_i^k = 0`` for ``k < m`` (Duchon 1977; de Boor, *A Practical Guide to Splines*,
+  1978). ``"linear"`` interpolates the two nearest frames; ``"cubic"`` and ``"quintic"`` are
+  the smoothing splines of Woltring's GCVSPL ("A Fortran package for generalized,
+  cross-validatory spline smoothing and differentiation", Adv. Eng. Software 8(2), 1986) with
+  m = 2 and 3, the smoothing chosen by generalized cross-validation: the quintic is the
+  "Woltring fill" of Vicon Nexus. Interpolating noisy context exactly would make the fill swing.
   Splines cannot extrapolate: a gap at the start or end of the capture is refused.
 * ``"rigid"`` (Kabsch, Acta Cryst. A32, 1976): the target marker and >= 3 non-collinear
   donor markers of the same segment, visible through the whole gap, form a rigid template
@@ -18,14 +20,17 @@ A *gap* is a run of consecutive frames in which one marker is missing (any coord
   template is fitted to the donors (least-squares rotation and translation) and carries the
   target with it.
 * ``"pca"`` (Federolf, PLoS ONE 8(10) e78689, 2013; Gloersen and Federolf, PLoS ONE 11(3)
-  e0152616, 2016): principal components of all markers' coordinates over the frames where
-  every marker is visible; in a gap frame the component scores are the least-squares fit to
-  the visible coordinates and the missing marker is read back from them. (Their marker
-  distance weighting is not applied.)
+  e0152616, 2016): principal components of the coordinates of the markers visible in a gap
+  frame plus the missing one, over the frames where all of them are visible (so other
+  markers' drop-outs elsewhere do not starve it); the components kept are those above
+  Gavish and Donoho's optimal hard threshold (noise is not fitted); in the gap frame the
+  component scores are the least-squares fit to the visible coordinates and the missing
+  marker is read back from them. (Their marker distance weighting is not applied.)
 * ``"auto"``: after Howarth and Callaghan (Hum. Mov. Sci. 29, 2010: rigid-body fill best for
   gaps over 200 ms, splines for short ones): gaps up to ``auto_threshold`` seconds by the
   quintic spline, longer gaps by the rigid fill where ``segments`` gives enough donors, else
-  PCA; a method that cannot fill the gap hands it to the next (the report says which did).
+  PCA (never by a spline: their error grows to decimetres over a second); a method that
+  cannot fill the gap hands it to the next (the report says which did, and why).
 
 Donors and context are always taken from the *measured* data, never from another fill.
 """
@@ -42,6 +47,10 @@ from tianim._checks import check_choice, check_finite_scalar, check_int, fmt
 
 METHODS = ("auto", "linear", "cubic", "quintic", "rigid", "pca")
 _SPLINE_M = {"linear": 1, "cubic": 2, "quintic": 3}
+#: Donor sets thinner than this (2nd / 1st singular value of their shape) get a note in the report.
+_THIN = 0.2
+#: Fewest training frames (all of a gap frame's visible markers and the target seen) of a PCA fill.
+_PCA_MIN_FRAMES = 10
 
 
 class UnfillableGap(ValueError):
@@ -56,7 +65,7 @@ class Gap:
     first: int
     last: int
     method: str | None  # the method that filled it; None if it was left unfilled
-    reason: str = ""  # why it was not filled, or why another method than asked was used
+    reason: str = ""  # why it was not filled, why another method than asked was used, or a caveat
     label: str = ""
 
     @property
@@ -135,35 +144,33 @@ def natural_spline(t_known: np.ndarray, y_known: np.ndarray, t_eval: np.ndarray,
     interpolates; ``smooth=True`` is the smoothing spline ``(Phi + lam I) w + P c = y``
     (Wahba, *Spline Models for Observational Data*, 1990, ch. 1 and 4) with ``lam`` chosen by
     generalized cross-validation over a log grid, shared by the d coordinates, as in Woltring's GCVSPL.
+
+    Solved in the null space of ``P^T`` (``w = Q2 a``, Q2 orthonormal): with the eigen-decomposition
+    ``Q2^T Phi Q2 = U diag(e) U^T`` (e > 0: phi is conditionally positive definite of order m),
+    ``a = U diag(1 / (e + lam)) U^T Q2^T y``, and the GCV score of every ``lam`` costs O(N).
     """
     c, s = t_known.mean(), max(np.ptp(t_known), 1.0) / 2
     u, v = (t_known - c) / s, (t_eval - c) / s
     n, p = u.size, 2 * m - 1
     sign = -1.0 if m % 2 else 1.0
     P = np.vander(u, m, increasing=True)
-    A = np.zeros((n + m, n + m))
-    A[:n, :n] = sign * np.abs(u[:, None] - u[None, :]) ** p
-    A[:n, n:] = P
-    A[n:, :n] = P.T
-    rhs = np.zeros((n + m, y_known.shape[1]))
-    rhs[:n] = y_known
+    K = sign * np.abs(u[:, None] - u[None, :]) ** p
+    Q = np.linalg.qr(P, mode="complete")[0]
+    Q2 = Q[:, m:]
+    e, U = np.linalg.eigh(Q2.T @ K @ Q2)
+    e = np.maximum(e, 0.0)
+    z = U.T @ (Q2.T @ y_known)  # (n - m, d)
+    lam = 0.0
     if smooth and n > m + 1:
-        eye = np.zeros((n + m, n))
-        eye[:n] = np.eye(n)
-        best = None
-        for lam in np.logspace(-10, 2, 49):
-            A_l = A.copy()
-            A_l[np.arange(n), np.arange(n)] += lam
-            W = np.linalg.solve(A_l, eye)[:n]  # w = W y; the residual y - f(t_i) = lam w
-            resid = lam * (W @ y_known)
-            denom = (lam * np.trace(W)) ** 2
-            gcv = n * np.sum(resid ** 2) / denom if denom > 0 else np.inf
-            if best is None or gcv < best[0]:
-                best = (gcv, lam)
-        A[np.arange(n), np.arange(n)] += best[1]
-    coef = np.linalg.solve(A, rhs)
-    K = sign * np.abs(v[:, None] - u[None, :]) ** p
-    return K @ coef[:n] + np.vander(v, m, increasing=True) @ coef[n:]
+        lams = np.logspace(-10, 2, 49)[:, None]
+        inv = 1.0 / (e[None, :] + lams)  # (L, n - m)
+        resid2 = np.einsum("li,id->l", inv ** 2, z ** 2)  # |y - f|^2 / lam^2
+        gcv = n * resid2 / np.sum(inv, axis=1) ** 2
+        lam = float(lams[int(np.argmin(gcv)), 0])
+    w = Q2 @ (U @ (z / (e + lam)[:, None]))
+    coef_p = np.linalg.lstsq(P, y_known - K @ w - lam * w, rcond=None)[0]
+    Ke = sign * np.abs(v[:, None] - u[None, :]) ** p
+    return Ke @ w + np.vander(v, m, increasing=True) @ coef_p
 
 
 def kabsch(source: np.ndarray, target: np.ndarray):
@@ -190,7 +197,8 @@ class _Filler:
         self.P, self.fs, self.segments = P, fs, segments
         self.valid = ~np.isnan(P).any(axis=2)
         self.context, self.reference, self.pca_components = context, reference, pca_components
-        self._pca = None
+        self._pca = {}  # principal components per marker subset
+        self.note = ""  # a caveat about the last fill, for the report
 
     # --- splines -------------------------------------------------------------------
     def spline(self, m_idx, first, last, method):
@@ -233,8 +241,12 @@ class _Filler:
         Q = self.P[refs][:, donors]  # (R, D, 3)
         Qt = self.P[refs, m_idx]  # (R, 3)
         shape0 = Q[0] - Q[0].mean(axis=0)
-        if np.linalg.svd(shape0, compute_uv=False)[1] < 1e-9 * max(1.0, np.abs(shape0).max()):
+        sv = np.linalg.svd(shape0, compute_uv=False)
+        if sv[1] < 1e-9 * max(1.0, np.abs(shape0).max()):
             raise UnfillableGap(f"the donors {donors} are collinear; a rigid fill needs 3 non-collinear donors")
+        spread = sv[1] / sv[0]
+        self.note = (f"donors {donors} are nearly collinear (width/length {spread:.2f} < {_THIN}): "
+                     "rotation about their line is poorly determined, noise is amplified") if spread < _THIN else ""
         R, t = kabsch(Q, np.broadcast_to(Q[:1], Q.shape))  # align every reference frame to the first
         tmpl_d = (np.einsum("rij,rdj->rdi", R, Q) + t[:, None]).mean(axis=0)
         tmpl_t = (np.einsum("rij,rj->ri", R, Qt) + t).mean(axis=0)
@@ -243,17 +255,19 @@ class _Filler:
         return np.einsum("fij,j->fi", Rf, tmpl_t) + tf
 
     # --- PCA -----------------------------------------------------------------------
-    def _components(self):
-        if self._pca is None:
-            F, M, _ = self.P.shape
-            complete = self.valid.all(axis=1)
-            X = self.P[complete].reshape(-1, 3 * M)
-            if X.shape[0] < max(10, 3):
-                self._pca = f"only {X.shape[0]} frame(s) show every marker; a PCA fill needs at least 10"
+    def _components(self, sel: np.ndarray):
+        """(mean (3S,), axes (k, 3S)) of the markers ``sel`` over the frames that show all of them."""
+        key = sel.tobytes()
+        if key not in self._pca:
+            train = self.valid[:, sel].all(axis=1)
+            X = self.P[train][:, sel].reshape(-1, 3 * sel.size)
+            if X.shape[0] < _PCA_MIN_FRAMES:
+                self._pca[key] = (f"only {X.shape[0]} frame(s) show the marker together with the {sel.size - 1} "
+                                  f"markers visible in the gap; a PCA fill needs at least {_PCA_MIN_FRAMES}")
             else:
                 mean = X.mean(axis=0)
                 Xc = X - mean
-                w, V = np.linalg.eigh(Xc.T @ Xc)  # principal axes of the (3M, 3M) scatter matrix
+                w, V = np.linalg.eigh(Xc.T @ Xc)  # principal axes of the (3S, 3S) scatter matrix
                 order = np.argsort(w)[::-1][:min(X.shape)]
                 S, Vt = np.sqrt(np.maximum(w[order], 0.0)), V[:, order].T  # singular values and axes
                 if self.pca_components is None:  # Gavish and Donoho (2014): optimal hard threshold
@@ -262,30 +276,48 @@ class _Filler:
                     k = max(1, int(np.sum(S > omega * np.median(S))))
                 else:
                     k = min(self.pca_components, Vt.shape[0])
-                self._pca = (mean, Vt[:k])
-        if isinstance(self._pca, str):
-            raise UnfillableGap(self._pca)
-        return self._pca
+                self._pca[key] = (mean, Vt[:min(k, 3 * sel.size - 4)])  # fewer axes than known coordinates
+        got = self._pca[key]
+        if isinstance(got, str):
+            raise UnfillableGap(got)
+        return got
 
     def pca(self, m_idx, first, last):
-        mean, V = self._components()
         frames = np.arange(first, last + 1)
         out = np.empty((frames.size, 3))
         patterns, inverse = np.unique(self.valid[frames], axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        seen = self.valid[:, m_idx]
+        if seen.sum() < _PCA_MIN_FRAMES:
+            raise UnfillableGap(f"the marker is seen in only {int(seen.sum())} frame(s); a PCA fill needs at least "
+                                f"{_PCA_MIN_FRAMES} to learn how it moves with the others")
         for p, pattern in enumerate(patterns):
-            obs = np.repeat(pattern, 3)
-            k = min(V.shape[0], int(obs.sum()) - 1)
-            if k < 1:
-                raise UnfillableGap("too few markers are visible in the gap for a PCA fill")
-            rows = frames[inverse.ravel() == p]
-            Vo = V[:k, obs].T  # (n_obs, k)
-            x = self.P[rows].reshape(rows.size, -1)[:, obs] - mean[obs]
-            scores = np.linalg.lstsq(Vo, x.T, rcond=None)[0]  # (k, rows)
-            full = mean + (V[:k].T @ scores).T
-            out[inverse.ravel() == p] = full[:, 3 * m_idx:3 * m_idx + 3]
+            # donors: the markers visible in this gap frame, less those that hide the most while the target
+            # is seen, until the frames showing all of them cover half of the target's seen frames
+            cand = np.nonzero(pattern)[0]
+            co = self.valid[seen][:, cand]  # (frames the target is seen, candidates)
+            while cand.size >= 2:
+                train = co.all(axis=1).sum()
+                if train >= max(_PCA_MIN_FRAMES, seen.sum() // 2):
+                    break
+                worst = int(np.argmin(co.sum(axis=0)))
+                cand, co = np.delete(cand, worst), np.delete(co, worst, axis=1)
+            if cand.size < 2:
+                raise UnfillableGap("fewer than 2 markers visible in the gap are also seen with the marker often "
+                                    "enough for a PCA fill")
+            sel = np.sort(np.append(cand, m_idx))
+            mean, V = self._components(sel)
+            t = int(np.nonzero(sel == m_idx)[0][0])
+            obs = np.ones(3 * sel.size, dtype=bool)
+            obs[3 * t:3 * t + 3] = False
+            rows = frames[inverse == p]
+            x = self.P[rows][:, sel].reshape(rows.size, -1)[:, obs] - mean[obs]
+            scores = np.linalg.lstsq(V[:, obs].T, x.T, rcond=None)[0]  # (k, rows): fit to the seen coordinates
+            out[inverse == p] = mean[3 * t:3 * t + 3] + (V[:, 3 * t:3 * t + 3].T @ scores).T
         return out
 
     def run(self, method, m_idx, first, last):
+        self.note = ""
         if method in _SPLINE_M:
             return self.spline(m_idx, first, last, method)
         return self.rigid(m_idx, first, last) if method == "rigid" else self.pca(m_idx, first, last)
@@ -306,7 +338,8 @@ def fill_gaps(markers, fs, method="auto", max_gap=None, segments=None, *, on_unf
         (needed by ``"rigid"``; ``"auto"`` uses it when given).
     on_unfillable : ``"raise"`` (an :class:`UnfillableGap` naming the gap and the reason,
         before anything is filled) or ``"leave"`` (left NaN and reported).
-    context : visible frames on each side used by the splines (default ``max(4, 0.1 s * fs)``).
+    context : visible frames on each side used by the splines (default ``max(8, 0.4 s * fs)``,
+        48 at 120 Hz: shorter contexts let GCV undersmooth and the fill swing).
     reference : frames on each side averaged into the rigid template (default 10).
     pca_components : principal components the PCA fill keeps (default: those above the optimal hard
         threshold of Gavish and Donoho, IEEE Trans. Inf. Theory 60(8), 2014, i.e. not noise).
@@ -320,12 +353,14 @@ def fill_gaps(markers, fs, method="auto", max_gap=None, segments=None, *, on_unf
     container = markers if isinstance(markers, Markers) else None
     P = _check_markers(container.positions if container is not None else markers)
     fs = check_finite_scalar("fs", fs, lo=0.0, lo_open=True)
+    if container is not None and not math.isclose(fs, container.rate, rel_tol=1e-6):
+        raise ValueError(f"fs={fs!r} Hz disagrees with markers.rate={container.rate!r} Hz; pass fs=markers.rate")
     method = check_choice("method", method, METHODS)
     if max_gap is not None:
         max_gap = check_int("max_gap", max_gap, lo=1)
     segs = _check_segments(segments, P.shape[1])
     on_unfillable = check_choice("on_unfillable", on_unfillable, ("raise", "leave"))
-    context = max(4, int(round(0.1 * fs))) if context is None else check_int("context", context, lo=1)
+    context = max(8, int(round(0.4 * fs))) if context is None else check_int("context", context, lo=1)
     reference = check_int("reference", reference, lo=1)
     if pca_components is not None:
         pca_components = check_int("pca_components", pca_components, lo=1, hi=3 * P.shape[1])
@@ -348,7 +383,7 @@ def fill_gaps(markers, fs, method="auto", max_gap=None, segments=None, *, on_unf
             continue
         if method == "auto":
             long_gap = n / fs > auto_threshold
-            chain = ["rigid", "pca", "quintic"] if long_gap else ["quintic", "rigid", "pca"]
+            chain = ["rigid", "pca"] if long_gap else ["quintic", "rigid", "pca"]
             if not segs:
                 chain.remove("rigid")
         else:
@@ -360,7 +395,7 @@ def fill_gaps(markers, fs, method="auto", max_gap=None, segments=None, *, on_unf
             except UnfillableGap as exc:
                 reasons.append(f"{meth}: {exc}")
                 continue
-            report.append(Gap(m_idx, first, last, meth, "; ".join(reasons), label))
+            report.append(Gap(m_idx, first, last, meth, "; ".join(reasons + ([filler.note] if filler.note else [])), label))
             break
         else:
             report.append(Gap(m_idx, first, last, None, "; ".join(reasons), label))
