@@ -9,6 +9,7 @@ from tianim.crowds.agents import Agents
 from tianim.crowds.boids import Alignment, Avoid, Boids, BoidsStats, Cohesion, Seek, Separation, Wander
 from tianim.crowds.metrics import density_speed, pair_distances, polarisation, time_to_goal
 from tianim.crowds.obstacles import Wall, polygon
+from tianim.crowds.vicsek import Vicsek
 
-__all__ = ["Agents", "Alignment", "Avoid", "Boids", "BoidsStats", "Cohesion", "Seek", "Separation", "Wall",
+__all__ = ["Agents", "Alignment", "Avoid", "Boids", "BoidsStats", "Cohesion", "Seek", "Separation", "Vicsek", "Wall",
            "Wander", "density_speed", "pair_distances", "polarisation", "polygon", "time_to_goal"]
