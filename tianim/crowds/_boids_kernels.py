@@ -20,6 +20,10 @@ PRM = ("max_speed", "max_force", "min_speed", "dt",
        "seek_w", "slowing_radius", "avoid_w", "avoid_distance", "wander_w", "wander_jitter")
 
 
+#: Below this length the lateral part of an obstacle normal counts as zero (obstacle dead ahead).
+LATERAL_MIN = 1e-3
+
+
 @cached_variants
 def boids_kernels(real_name: str, dim: int):
     """``boids_step`` for ``real_name`` positions in ``dim`` D."""
@@ -46,6 +50,28 @@ def boids_kernels(real_name: str, dim: int):
         out = ti.Vector.zero(real, dim)
         if n > 0:
             out = limit(direction * (max_speed / n) - vi, max_force)
+        return out
+
+    @ti.func
+    def flee(n, h):
+        """Avoidance direction from an obstacle of outward normal n for an agent heading h: n, plus,
+        when the obstacle is ahead (n . h < 0), the unit lateral part of n across h (a fixed side,
+        h turned +90 degrees about z, when the obstacle is dead ahead), so agents go round it."""
+        out = n
+        nh = n.dot(h)
+        if nh < 0:
+            lat = n - nh * h
+            ln = lat.norm()
+            if ln > LATERAL_MIN:
+                lat = lat / ln
+            else:
+                lat = ti.Vector.zero(real, dim)
+                lat[0], lat[1] = -h[1], h[0]
+                if ti.static(dim == 3):
+                    if lat.norm() <= LATERAL_MIN:
+                        lat[0], lat[1], lat[2] = 0.0, -h[2], h[1]
+                lat = lat / lat.norm()
+            out = n + lat
         return out
 
     @ti.kernel
@@ -95,12 +121,12 @@ def boids_kernels(real_name: str, dim: int):
                 for c in range(coll.shape[0]):
                     phi, n = surface(xi, coll, c)
                     if phi < prm[16]:
-                        push += n * (1 - phi / prm[16])
+                        push += (1 - phi / prm[16]) * flee(n, hi)
                 if ti.static(dim == 2):
                     for w in range(walls.shape[0]):
                         phi, n = wall_surface(xi, walls, w)
                         if phi < prm[16]:
-                            push += n * (1 - phi / prm[16])
+                            push += (1 - phi / prm[16]) * flee(n, hi)
                 acc += prm[15] * steer_to(push, vi, max_speed, max_force)
             if prm[17] > 0:  # wander: a unit direction doing a random walk, steered along at max_force
                 wi = ws[b, i] + prm[18] * noise[b, i]

@@ -20,8 +20,11 @@ i's heading and ``x_j - x_i`` is at most ``fov / 2`` (``fov`` the full field-of-
 * alignment: ``d = sum_j v_j`` (the direction of the neighbours' mean velocity);
 * cohesion: ``d = sum_j (x_j - x_i)`` (toward their centroid);
 * seek with arrival: ``u = min(1, |g - x| / slowing_radius) max_speed (g - x) / |g - x| - v``;
-* avoid: ``d = sum_o n_o (1 - phi_o / distance)`` over obstacles o closer than ``distance``
-  (phi the signed distance, n the outward normal); after the move an agent inside an obstacle
+* avoid: ``d = sum_o (1 - phi_o / distance) f_o`` over obstacles o closer than ``distance``
+  (phi the signed distance, n the outward normal), ``f = n`` for an obstacle behind or beside
+  (``n . h >= 0``, h the heading), else ``f = n + l / |l|`` with ``l = n - (n . h) h`` the lateral
+  part (h turned +90 degrees when the obstacle is dead ahead), so agents go round obstacles
+  instead of stalling in front of them; after the move an agent inside an obstacle
   is put back on its surface and loses its inward normal velocity (agents never end inside);
 * wander: a unit direction w doing a random walk ``w <- normalize(w + jitter xi)``, xi standard
   normal per step, steering ``max_force w`` (no cap).
@@ -126,6 +129,8 @@ class Boids:
     domain : (lower, upper), optional
         Box [m] of the neighbour grid; default: the agents' bounding box at the first step, padded
         by the largest radius (agents that leave it are clamped into border cells: exact, slower).
+        Give it explicitly when copy b of a batch must equal a single run bit for bit: the cells
+        fix the order in which neighbour sums are added.
     max_neighbours : int
         Neighbours kept per agent (the grid's K); rows with more use the first K in the grid's order,
         count them in ``BoidsStats.neighbour_overflow`` and, with ``on_overflow="warn"``, warn.
