@@ -9,7 +9,8 @@ from tianim.crowds.agents import Agents
 from tianim.crowds.boids import Alignment, Avoid, Boids, BoidsStats, Cohesion, Seek, Separation, Wander
 from tianim.crowds.metrics import density_speed, pair_distances, polarisation, time_to_goal
 from tianim.crowds.obstacles import Wall, polygon
+from tianim.crowds.orca import ORCA, circle_scenario
 from tianim.crowds.vicsek import Vicsek
 
-__all__ = ["Agents", "Alignment", "Avoid", "Boids", "BoidsStats", "Cohesion", "Seek", "Separation", "Vicsek", "Wall",
-           "Wander", "density_speed", "pair_distances", "polarisation", "polygon", "time_to_goal"]
+__all__ = ["Agents", "Alignment", "Avoid", "Boids", "BoidsStats", "Cohesion", "ORCA", "Seek", "Separation", "Vicsek", "Wall",
+           "Wander", "circle_scenario", "density_speed", "pair_distances", "polarisation", "polygon", "time_to_goal"]
