@@ -10,7 +10,8 @@ from tianim.crowds.boids import Alignment, Avoid, Boids, BoidsStats, Cohesion, S
 from tianim.crowds.metrics import density_speed, pair_distances, polarisation, time_to_goal
 from tianim.crowds.obstacles import Wall, polygon
 from tianim.crowds.orca import ORCA, circle_scenario
+from tianim.crowds.social_force import SocialForce
 from tianim.crowds.vicsek import Vicsek
 
-__all__ = ["Agents", "Alignment", "Avoid", "Boids", "BoidsStats", "Cohesion", "ORCA", "Seek", "Separation", "Vicsek", "Wall",
+__all__ = ["Agents", "Alignment", "Avoid", "Boids", "BoidsStats", "Cohesion", "ORCA", "Seek", "Separation", "SocialForce", "Vicsek", "Wall",
            "Wander", "circle_scenario", "density_speed", "pair_distances", "polarisation", "polygon", "time_to_goal"]
