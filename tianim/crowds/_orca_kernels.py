@@ -147,7 +147,7 @@ def orca_kernels(real_name: str):
         t_end[b] where |goal - x_new| <= arrival radius for the first time. prm = [radius (half the
         combined radius, incl. safety), time horizon, dt, max_speed, neighbour distance^2, arrival radius,
         perturbation]. As RVO2's examples do against the deadlocks of perfectly symmetric scenes, the
-        preferred velocity gets a perturbation of that magnitude [m/s] in a direction hashed from
+        preferred velocity gets a perturbation of that fraction of its magnitude, in a direction hashed from
         (agent, tick): the same in every copy and for any thread count.
         The preferred velocity points at the goal at the preferred speed, capped at |goal - x| / dt so
         that an agent lands on its goal; inactive agents (active = 0) prefer rest.
@@ -167,7 +167,7 @@ def orca_kernels(real_name: str):
                 h = (h ^ (h >> 15)) * ti.u32(2246822519)
                 h = h ^ (h >> 13)
                 ang = ti.cast(h & ti.u32(0xFFFFFF), real) * (6.283185307179586 / 16777216.0)
-                pref += prm[6] * vec2(ti.cos(ang), ti.sin(ang))
+                pref += (prm[6] * pref.norm()) * vec2(ti.cos(ang), ti.sin(ang))
             m = 0
             lim = range2
             for k in range(ti.min(count[b, i], nbr.shape[2])):  # RVO2 insertAgentNeighbor

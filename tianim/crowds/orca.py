@@ -47,13 +47,14 @@ class ORCA(PedestrianModel):
     and goals' bounding box at the first step; outside agents are clamped, exact but slower);
     ``grid_neighbours`` the grid's row capacity (overflow warns: far neighbours may be missed);
     ``skin`` [m] the Verlet-list margin (default 0.2 ``neighbour_dist``; 0 rebuilds every step);
-    ``perturbation`` [m/s] added to preferred velocities in a hashed direction (RVO2's examples add
-    1e-4 of random noise: a perfectly symmetric circle otherwise jams for good).
+    ``perturbation`` the fraction of its magnitude added to each preferred velocity in a direction
+    hashed from (agent, step) (RVO2's examples add 1e-4 m/s of random noise; a dense symmetric
+    circle jams for good below about 1e-2; agents at rest on their goals are not disturbed).
     """
 
     def __init__(self, goals, pref_speed=1.0, radius=0.5, time_horizon=2.0, neighbour_dist=None,
                  max_neighbors=10, max_speed=2.0, safety=0.2, arrival_radius=1e-3, domain=None,
-                 grid_neighbours=256, skin=None, perturbation=1e-3):
+                 grid_neighbours=256, skin=None, perturbation=0.01):
         super().__init__(goals, pref_speed, arrival_radius, domain, grid_neighbours)
         self.radius = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
         self.time_horizon = check_finite_scalar("time_horizon", time_horizon, lo=0.0, lo_open=True)
