@@ -44,6 +44,20 @@ def boids_kernels(real_name: str, dim: int):
         return out
 
     @ti.func
+    def visible(hd, d2, cos):
+        """Whether the angle between heading h and offset d is at most fov / 2, i.e.
+        h . d >= cos |d|, tested without a square root: hd = h . d, d2 = |d|^2, cos = cos(fov / 2)."""
+        out = True
+        if cos > -1:
+            lhs = hd * hd
+            rhs = cos * cos * d2
+            if cos >= 0:
+                out = hd >= 0 and lhs >= rhs
+            else:
+                out = hd >= 0 or lhs <= rhs
+        return out
+
+    @ti.func
     def steer_to(direction, vi, max_speed, max_force):
         """Reynolds (1999) steering: (max_speed * direction / |direction| - v), capped at max_force."""
         n = direction.norm()
@@ -82,6 +96,7 @@ def boids_kernels(real_name: str, dim: int):
         v += dt a, |v| clamped to [min_speed, max_speed], x += dt v, then agents inside an obstacle
         are put back on its surface with their inward normal velocity removed."""
         max_speed, max_force, min_speed, dt = prm[0], prm[1], prm[2], prm[3]
+        rs2, cs, ra2, ca, rc2, cc = prm[5], prm[6], prm[8], prm[9], prm[11], prm[12]
         for b, i in ti.ndrange(x.shape[0], x.shape[1]):
             xi, vi, hi = x[b, i], v[b, i], hd[b, i]
             sep = ti.Vector.zero(real, dim)
@@ -93,14 +108,14 @@ def boids_kernels(real_name: str, dim: int):
                 d = x[b, j] - xi
                 d2 = d.dot(d)
                 if d2 > 0:
-                    c = hi.dot(d) / ti.sqrt(d2)
-                    if d2 <= prm[5] and c >= prm[6]:
+                    hd_ = hi.dot(d)
+                    if d2 <= rs2 and visible(hd_, d2, cs):
                         sep -= d / d2
                         ns += 1
-                    if d2 <= prm[8] and c >= prm[9]:
+                    if d2 <= ra2 and visible(hd_, d2, ca):
                         ali += v[b, j]
                         na += 1
-                    if d2 <= prm[11] and c >= prm[12]:
+                    if d2 <= rc2 and visible(hd_, d2, cc):
                         coh += d
                         nc += 1
             acc = ti.Vector.zero(real, dim)
