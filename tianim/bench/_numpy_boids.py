@@ -63,5 +63,5 @@ def numpy_boids_step(x, v, h, dt, rules, max_speed, max_force, min_speed):
     v[slow] = np.where(s[slow] > 0, v[slow] * (min_speed / np.maximum(s[slow], 1e-300)), h[slow] * min_speed)
     x = x + dt * v
     s = np.linalg.norm(v, axis=1, keepdims=True)
-    h = np.where(s > 1e-6, v / np.maximum(s, 1e-300), h)
+    h = np.where(s > 1e-2, v / np.maximum(s, 1e-300), h)  # agents.HEADING_MIN_SPEED
     return x, v, h

@@ -172,7 +172,7 @@ def boids_kernels(real_name: str, dim: int):
                         xi -= phi * n
                         vi -= ti.min(vi.dot(n), 0.0) * n
             speed = vi.norm()
-            if speed > 1e-6:  # agents.HEADING_MIN_SPEED
+            if speed > 1e-2:  # agents.HEADING_MIN_SPEED
                 hi = vi / speed
             xo[b, i], vo[b, i], ho[b, i] = xi, vi, hi
 

@@ -232,7 +232,7 @@ def orca_kernels(real_name: str):
             out[b, i, 0], out[b, i, 1], out[b, i, 2], out[b, i, 3] = xn[0], xn[1], vn[0], vn[1]
             out[b, i, 4], out[b, i, 5] = pref[0], pref[1]
             speed = vn.norm()
-            if speed > 1e-6:  # agents.HEADING_MIN_SPEED
+            if speed > 1e-2:  # agents.HEADING_MIN_SPEED
                 hd[b, i] = vn / speed
             if ti.math.isnan(arrival[b, i]):
                 g = gi - xn

@@ -93,7 +93,7 @@ def social_kernels(real_name: str):
             out[b, i, 0], out[b, i, 1], out[b, i, 2], out[b, i, 3] = xn[0], xn[1], vn[0], vn[1]
             h = hd[b, i]
             spn = vn.norm()
-            if spn > 1e-6:  # agents.HEADING_MIN_SPEED
+            if spn > 1e-2:  # agents.HEADING_MIN_SPEED
                 h = vn / spn
             out[b, i, 4], out[b, i, 5] = h[0], h[1]
 

@@ -19,7 +19,7 @@ import numpy as np
 from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt
 
 #: Below this speed [m/s] a solver keeps an agent's heading instead of turning it to v / |v|.
-HEADING_MIN_SPEED = 1e-6
+HEADING_MIN_SPEED = 1e-2
 
 
 def real_dtype(dtype):

@@ -238,6 +238,21 @@ class Boids:
         self.neighbour_overflow = np.zeros(B, np.int64)
         return self._setup
 
+    def set_goal(self, goal) -> None:
+        """Move the seek goal(s) [m]: (D,), (N, D) or (B, N, D) (a moving target); needs :class:`Seek`."""
+        if Seek not in self.behaviours:
+            raise ValueError("set_goal needs a Seek behaviour; add Seek(goal=...) to the behaviours")
+        g = as_float_array("goal", goal)
+        if self._setup is not None:
+            try:
+                self._setup["goal"][...] = g
+            except ValueError:
+                raise ValueError(f"goal has shape {g.shape}; it does not broadcast to the agents' "
+                                 f"{self._setup['goal'].shape}") from None
+        if g.ndim not in (1, 2, 3) or g.shape[-1] not in (2, 3):
+            raise ValueError(f"goal has shape {g.shape}; expected (D,), (N, D) or (B, N, D), D = 2 or 3")
+        self._goal = g
+
     def step(self, agents: Agents, dt, steps=1) -> BoidsStats:
         """Advance ``agents`` in place by ``steps`` steps of ``dt`` [s]; returns :class:`BoidsStats`."""
         dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)

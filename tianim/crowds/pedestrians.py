@@ -87,5 +87,7 @@ class PedestrianModel:
         self.arrival_time[b, d <= self.arrival_radius] = agents.t[b]
 
     def arrived(self) -> np.ndarray:
-        """(B, N) bool: agents that have reached their goal."""
+        """(B, N) bool: agents that have reached their goal (known from the first :meth:`step` on)."""
+        if self.arrival_time is None:
+            raise RuntimeError("arrived() before the first step: the model learns the agents' shape in step()")
         return ~np.isnan(self.arrival_time)
