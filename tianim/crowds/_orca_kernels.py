@@ -17,8 +17,8 @@ RVO_EPSILON = 1e-5
 
 
 @cached_variants
-def orca_kernels(real_name: str):
-    """``orca_velocity`` for ``real_name`` positions (2D)."""
+def orca_kernels(real_name: str, steps: int = 1):
+    """``orca_steps``, advancing ``steps`` steps per launch (unrolled), for ``real_name`` positions (2D)."""
     t = kernel_types(real_name, 2)
     ti, real = t.ti, t.real
     vec2 = ti.types.vector(2, real)
@@ -136,15 +136,109 @@ def orca_kernels(real_name: str):
                 distance = det(dk, pk - result)
         return result
 
+    @ti.func
+    def agent_step(x: ti.template(), v: ti.template(), hd: ti.template(), target: ti.template(), nbr: ti.template(),
+                   count: ti.template(), prm: ti.template(), work: ti.template(), out: ti.template(),
+                   arrival: ti.template(), closest: ti.template(), t_end, tick, b, i):
+        r, tau, dt, vmax, range2 = prm[0], prm[1], prm[2], prm[3], prm[4]
+        K = work.shape[2]
+        xi, vi = x[b, i], v[b, i]
+        gi = vec2(target[b, i, 0], target[b, i, 1])
+        off = gi - xi
+        dist = off.norm()
+        pref = vec2(0, 0)
+        if dist > 0 and target[b, i, 3] != 0:
+            pref = off * (ti.min(target[b, i, 2], dist / dt) / dist)
+        if prm[6] > 0:
+            h = ti.cast(i, ti.u32) * ti.u32(2654435761) ^ (ti.cast(tick, ti.u32) * ti.u32(2246822519) + ti.u32(374761393))
+            h = (h ^ (h >> 15)) * ti.u32(2246822519)
+            h = h ^ (h >> 13)
+            ang = ti.cast(h & ti.u32(0xFFFFFF), real) * (6.283185307179586 / 16777216.0)
+            pref += (prm[6] * pref.norm()) * vec2(ti.cos(ang), ti.sin(ang))
+        m = 0
+        lim = range2
+        for k in range(ti.min(count[b, i], nbr.shape[2])):  # RVO2 insertAgentNeighbor
+            j = nbr[b, i, k]
+            d = x[b, j] - xi
+            d2 = d.dot(d)
+            if d2 < lim:
+                if m < K:
+                    m += 1
+                s = m - 1
+                while s != 0 and d2 < work[b, i, s - 1, 8]:
+                    work[b, i, s, 8] = work[b, i, s - 1, 8]
+                    work[b, i, s, 9] = work[b, i, s - 1, 9]
+                    s -= 1
+                work[b, i, s, 8] = d2
+                work[b, i, s, 9] = ti.cast(j, real)
+                if m == K:
+                    lim = work[b, i, K - 1, 8]
+        if m > 0:
+            closest[b, i] = ti.min(closest[b, i], ti.sqrt(work[b, i, 0, 8]))
+        inv_tau = 1 / tau
+        combined = 2 * r
+        for k in range(m):
+            j = ti.cast(work[b, i, k, 9], ti.i32)
+            rel_p = x[b, j] - xi
+            rel_v = vi - v[b, j]
+            dist_sq = rel_p.dot(rel_p)
+            direction = vec2(0, 0)
+            u = vec2(0, 0)
+            if dist_sq > combined * combined:
+                w = rel_v - inv_tau * rel_p
+                w_len_sq = w.dot(w)
+                dot1 = w.dot(rel_p)
+                if dot1 < 0 and dot1 * dot1 > combined * combined * w_len_sq:  # cut-off circle
+                    w_len = ti.sqrt(w_len_sq)
+                    unit_w = w / w_len
+                    direction = vec2(unit_w[1], -unit_w[0])
+                    u = (combined * inv_tau - w_len) * unit_w
+                else:  # a leg of the cone
+                    leg = ti.sqrt(dist_sq - combined * combined)
+                    if det(rel_p, w) > 0:
+                        direction = vec2(rel_p[0] * leg - rel_p[1] * combined,
+                                         rel_p[0] * combined + rel_p[1] * leg) / dist_sq
+                    else:
+                        direction = -vec2(rel_p[0] * leg + rel_p[1] * combined,
+                                          -rel_p[0] * combined + rel_p[1] * leg) / dist_sq
+                    u = rel_v.dot(direction) * direction - rel_v
+            else:  # already overlapping: resolve within one time step
+                w = rel_v - rel_p / dt
+                w_len = w.norm()
+                if w_len > 0:  # (RVO2 divides by zero for coincident agents at equal velocity)
+                    unit_w = w / w_len
+                    direction = vec2(unit_w[1], -unit_w[0])
+                    u = (combined / dt - w_len) * unit_w
+                else:
+                    direction = vec2(1, 0)
+            point = vi + 0.5 * u
+            work[b, i, k, 0], work[b, i, k, 1] = point[0], point[1]
+            work[b, i, k, 2], work[b, i, k, 3] = direction[0], direction[1]
+        fail, vn = lp2(work, 0, b, i, m, vmax, pref, 0)
+        if fail < m:
+            vn = lp3(work, b, i, m, fail, vmax, vn)
+        xn = xi + dt * vn
+        out[b, i, 0], out[b, i, 1], out[b, i, 2], out[b, i, 3] = xn[0], xn[1], vn[0], vn[1]
+        out[b, i, 4], out[b, i, 5] = pref[0], pref[1]
+        speed = vn.norm()
+        if speed > 1e-2:  # agents.HEADING_MIN_SPEED
+            hd[b, i] = vn / speed
+        if ti.math.isnan(arrival[b, i]):
+            g = gi - xn
+            if g.dot(g) <= prm[5] * prm[5]:
+                arrival[b, i] = t_end
+
     @ti.kernel
-    def orca_velocity(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, target: real3d, nbr: i32_3, count: i32_2,
-                      prm: t.real_arr, work: real4d, out: real3d, arrival: f64_2, t_end: f64_1, tick: ti.i32):
-        """New velocities and positions of all agents, headings, and arrival times.
+    def orca_steps(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, target: real3d, nbr: i32_3, count: i32_2,
+                   prm: t.real_arr, work: real4d, out: real3d, arrival: f64_2, t0: f64_1, tick0: ti.i32,
+                   closest: real2d):
+        """``steps`` ORCA steps of all agents: velocities, positions, headings, arrival times.
 
         target (B, N, 4) = [goal_x, goal_y, preferred speed, active]; out (B, N, 6) = [x_new, v_new,
         v_pref] with x_new = x + dt v_new; work (B, N, K, 10) = [ORCA line (point, direction),
         projected line, distance^2 and index of the k-th nearest chosen neighbour]; arrival[b, i] =
-        t_end[b] where |goal - x_new| <= arrival radius for the first time. prm = [radius (half the
+        t0[b] + (s + 1) dt where |goal - x_new| <= arrival radius for the first time, after step s of the launch;
+        closest[b, i] = min(closest, distance to the nearest neighbour at the start of each step). prm = [radius (half the
         combined radius, incl. safety), time horizon, dt, max_speed, neighbour distance^2, arrival radius,
         perturbation]. As RVO2's examples do against the deadlocks of perfectly symmetric scenes, the
         preferred velocity gets a perturbation of that fraction of its magnitude, in a direction hashed from
@@ -152,91 +246,12 @@ def orca_kernels(real_name: str):
         The preferred velocity points at the goal at the preferred speed, capped at |goal - x| / dt so
         that an agent lands on its goal; inactive agents (active = 0) prefer rest.
         """
-        r, tau, dt, vmax, range2 = prm[0], prm[1], prm[2], prm[3], prm[4]
-        K = work.shape[2]
-        for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-            xi, vi = x[b, i], v[b, i]
-            gi = vec2(target[b, i, 0], target[b, i, 1])
-            off = gi - xi
-            dist = off.norm()
-            pref = vec2(0, 0)
-            if dist > 0 and target[b, i, 3] != 0:
-                pref = off * (ti.min(target[b, i, 2], dist / dt) / dist)
-            if prm[6] > 0:
-                h = ti.cast(i, ti.u32) * ti.u32(2654435761) ^ (ti.cast(tick, ti.u32) * ti.u32(2246822519) + ti.u32(374761393))
-                h = (h ^ (h >> 15)) * ti.u32(2246822519)
-                h = h ^ (h >> 13)
-                ang = ti.cast(h & ti.u32(0xFFFFFF), real) * (6.283185307179586 / 16777216.0)
-                pref += (prm[6] * pref.norm()) * vec2(ti.cos(ang), ti.sin(ang))
-            m = 0
-            lim = range2
-            for k in range(ti.min(count[b, i], nbr.shape[2])):  # RVO2 insertAgentNeighbor
-                j = nbr[b, i, k]
-                d = x[b, j] - xi
-                d2 = d.dot(d)
-                if d2 < lim:
-                    if m < K:
-                        m += 1
-                    s = m - 1
-                    while s != 0 and d2 < work[b, i, s - 1, 8]:
-                        work[b, i, s, 8] = work[b, i, s - 1, 8]
-                        work[b, i, s, 9] = work[b, i, s - 1, 9]
-                        s -= 1
-                    work[b, i, s, 8] = d2
-                    work[b, i, s, 9] = ti.cast(j, real)
-                    if m == K:
-                        lim = work[b, i, K - 1, 8]
-            inv_tau = 1 / tau
-            combined = 2 * r
-            for k in range(m):
-                j = ti.cast(work[b, i, k, 9], ti.i32)
-                rel_p = x[b, j] - xi
-                rel_v = vi - v[b, j]
-                dist_sq = rel_p.dot(rel_p)
-                direction = vec2(0, 0)
-                u = vec2(0, 0)
-                if dist_sq > combined * combined:
-                    w = rel_v - inv_tau * rel_p
-                    w_len_sq = w.dot(w)
-                    dot1 = w.dot(rel_p)
-                    if dot1 < 0 and dot1 * dot1 > combined * combined * w_len_sq:  # cut-off circle
-                        w_len = ti.sqrt(w_len_sq)
-                        unit_w = w / w_len
-                        direction = vec2(unit_w[1], -unit_w[0])
-                        u = (combined * inv_tau - w_len) * unit_w
-                    else:  # a leg of the cone
-                        leg = ti.sqrt(dist_sq - combined * combined)
-                        if det(rel_p, w) > 0:
-                            direction = vec2(rel_p[0] * leg - rel_p[1] * combined,
-                                             rel_p[0] * combined + rel_p[1] * leg) / dist_sq
-                        else:
-                            direction = -vec2(rel_p[0] * leg + rel_p[1] * combined,
-                                              -rel_p[0] * combined + rel_p[1] * leg) / dist_sq
-                        u = rel_v.dot(direction) * direction - rel_v
-                else:  # already overlapping: resolve within one time step
-                    w = rel_v - rel_p / dt
-                    w_len = w.norm()
-                    if w_len > 0:  # (RVO2 divides by zero for coincident agents at equal velocity)
-                        unit_w = w / w_len
-                        direction = vec2(unit_w[1], -unit_w[0])
-                        u = (combined / dt - w_len) * unit_w
-                    else:
-                        direction = vec2(1, 0)
-                point = vi + 0.5 * u
-                work[b, i, k, 0], work[b, i, k, 1] = point[0], point[1]
-                work[b, i, k, 2], work[b, i, k, 3] = direction[0], direction[1]
-            fail, vn = lp2(work, 0, b, i, m, vmax, pref, 0)
-            if fail < m:
-                vn = lp3(work, b, i, m, fail, vmax, vn)
-            xn = xi + dt * vn
-            out[b, i, 0], out[b, i, 1], out[b, i, 2], out[b, i, 3] = xn[0], xn[1], vn[0], vn[1]
-            out[b, i, 4], out[b, i, 5] = pref[0], pref[1]
-            speed = vn.norm()
-            if speed > 1e-2:  # agents.HEADING_MIN_SPEED
-                hd[b, i] = vn / speed
-            if ti.math.isnan(arrival[b, i]):
-                g = gi - xn
-                if g.dot(g) <= prm[5] * prm[5]:
-                    arrival[b, i] = t_end[b]
+        for s in ti.static(range(steps)):  # unrolled: each step's two loops are parallel top-level loops
+            for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                agent_step(x, v, hd, target, nbr, count, prm, work, out, arrival, closest,
+                           t0[b] + (s + 1) * ti.cast(prm[2], ti.f64), tick0 + s, b, i)
+            for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                x[b, i] = ti.Vector([out[b, i, 0], out[b, i, 1]])
+                v[b, i] = ti.Vector([out[b, i, 2], out[b, i, 3]])
 
-    return orca_velocity
+    return orca_steps

@@ -18,7 +18,7 @@ Neighbour lists are Verlet lists (Verlet 1967): the grid is queried at ``neighbo
 and rebuilt whenever the steps since the last build could have moved an agent by more than
 ``skin / 2`` (no agent moves more than ``max_speed dt`` per step) or the positions were changed
 outside :meth:`step`; in between every pair within ``neighbour_dist`` is still on the list, and the kernel's own distance test keeps the result exact
-(the same as rebuilding every step, up to the order of exactly equidistant neighbours). Half of each avoidance is taken by each agent (reciprocity). ``safety`` (default 0.2) inflates
+(the same as rebuilding every step, up to the order of exactly equidistant neighbours). Half of each avoidance is taken by each agent (reciprocity). ``safety`` (default 0.25) inflates
 the radius used in the velocity obstacles by that fraction, a margin against the overlap that
 RVO2's discrete steps leave (its 250-agent circle scenario comes to 0.8 of 2r; ``safety=0`` is
 RVO2 exactly); the reported radius is ``radius``. Neighbours come from one :class:`tianim.spatial.NeighbourGrid` query per step; all
@@ -37,6 +37,10 @@ from tianim.crowds.agents import Agents
 from tianim.crowds.pedestrians import PedestrianModel
 
 
+#: Steps run in one kernel launch while the Verlet lists stay valid (each variant is compiled once).
+MAX_STEPS_PER_LAUNCH = 4
+
+
 class ORCA(PedestrianModel):
     """ORCA for B copies of N 2D agents of equal ``radius`` [m] (see the module docstring).
 
@@ -47,13 +51,16 @@ class ORCA(PedestrianModel):
     and goals' bounding box at the first step; outside agents are clamped, exact but slower);
     ``grid_neighbours`` the grid's row capacity (overflow warns: far neighbours may be missed);
     ``skin`` [m] the Verlet-list margin (default 0.2 ``neighbour_dist``; 0 rebuilds every step);
+    After the first step, ``closest`` (B, N) holds each agent's smallest distance [m] to its nearest
+    neighbour at the start of any step so far (inf if none came within ``neighbour_dist``; write inf
+    to reset): the no-overlap metric without an extra query.
     ``perturbation`` the fraction of its magnitude added to each preferred velocity in a direction
     hashed from (agent, step) (RVO2's examples add 1e-4 m/s of random noise; a dense symmetric
     circle jams for good below about 1e-2; agents at rest on their goals are not disturbed).
     """
 
     def __init__(self, goals, pref_speed=1.0, radius=0.5, time_horizon=2.0, neighbour_dist=None,
-                 max_neighbors=10, max_speed=2.0, safety=0.2, arrival_radius=1e-3, domain=None,
+                 max_neighbors=10, max_speed=2.0, safety=0.25, arrival_radius=1e-3, domain=None,
                  grid_neighbours=256, skin=None, perturbation=0.01):
         super().__init__(goals, pref_speed, arrival_radius, domain, grid_neighbours)
         self.radius = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
@@ -87,20 +94,22 @@ class ORCA(PedestrianModel):
             out = np.zeros((B, N, 6), f)  # [x_new, v_new, v_pref]
             self._work = dict(key=(B, N, f), work=np.zeros((B, N, K, 10), f), out=out)
             self.v_pref = out[..., 4:6]
+            self.closest = np.full((B, N), np.inf, f)
         w = self._work
         prm = np.array([self.radius * (1 + self.safety), self.time_horizon, dt, self.max_speed,
                         self.neighbour_dist ** 2, self.arrival_radius, self.perturbation], f)
         from tianim.crowds._orca_kernels import orca_kernels
 
-        kernel = orca_kernels(np.dtype(f).name)
-        t_end = np.empty(B, np.float64)
         out = w["out"]
-        search = self.neighbour_dist + self.skin
-        hop = self.max_speed * dt * (1 + 1e-6)  # the farthest an agent moves in one step [m]
+        # the lists reach a little beyond neighbour_dist + skin: a margin for float rounding of |v| <= max_speed
+        search = self.neighbour_dist + self.skin * (1 + 1e-4)
+        hop = self.max_speed * dt  # the farthest an agent moves in one step [m]
         last = w.get("last_x")
         if last is None or not np.array_equal(last, agents.x):
             w["moved"] = np.inf  # positions edited since our last step: the lists are stale
-        for _ in range(steps):
+        name = np.dtype(f).name
+        left = steps
+        while left > 0:
             if w["moved"] + hop > self.skin / 2:
                 nb = self.grid.build(agents.x, check=False).query(search, on_overflow="report")
                 w["nb"], w["moved"] = nb, 0.0
@@ -110,13 +119,14 @@ class ORCA(PedestrianModel):
                                   f"within {search:g} m; nearer ones may be missed: raise grid_neighbours",
                                   RuntimeWarning, stacklevel=2)
             nb = w["nb"]
-            w["moved"] += hop
-            np.add(agents.t, dt, out=t_end)
-            kernel(agents.x, agents.v, agents.heading, self.target, nb.indices, nb.counts, prm, w["work"], out,
-                   self.arrival_time, t_end, self._tick)
-            self._tick += 1
-            agents.x[...], agents.v[...] = out[..., 0:2], out[..., 2:4]
-            agents.t[...] = t_end
+            valid = max(1, int((self.skin / 2 - w["moved"]) / hop))  # steps the lists stay valid
+            chunk = min(left, valid, MAX_STEPS_PER_LAUNCH)
+            orca_kernels(name, chunk)(agents.x, agents.v, agents.heading, self.target, nb.indices, nb.counts, prm,
+                                      w["work"], out, self.arrival_time, agents.t, self._tick, self.closest)
+            self._tick += chunk
+            w["moved"] += chunk * hop
+            agents.t += chunk * dt
+            left -= chunk
         w["last_x"] = agents.x.copy()
 
 
