@@ -230,7 +230,7 @@ def orca_kernels(real_name: str, steps: int = 1):
 
     @ti.kernel
     def orca_steps(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, target: real3d, nbr: i32_3, count: i32_2,
-                   prm: t.real_arr, work: real4d, out: real3d, arrival: f64_2, t0: f64_1, tick0: ti.i32,
+                   prm: t.real_arr, work: real4d, out: real3d, arrival: f64_2, t0: f64_1, tick0: t.int_arr,
                    closest: real2d):
         """``steps`` ORCA steps of all agents: velocities, positions, headings, arrival times.
 
@@ -242,14 +242,15 @@ def orca_kernels(real_name: str, steps: int = 1):
         combined radius, incl. safety), time horizon, dt, max_speed, neighbour distance^2, arrival radius,
         perturbation]. As RVO2's examples do against the deadlocks of perfectly symmetric scenes, the
         preferred velocity gets a perturbation of that fraction of its magnitude, in a direction hashed from
-        (agent, tick): the same in every copy and for any thread count.
+        (agent, tick), tick0[b] + s the copy's step count since its reset: the same in every copy, batched
+        or not, and for any thread count.
         The preferred velocity points at the goal at the preferred speed, capped at |goal - x| / dt so
         that an agent lands on its goal; inactive agents (active = 0) prefer rest.
         """
         for s in ti.static(range(steps)):  # unrolled: each step's two loops are parallel top-level loops
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 agent_step(x, v, hd, target, nbr, count, prm, work, out, arrival, closest,
-                           t0[b] + (s + 1) * ti.cast(prm[2], ti.f64), tick0 + s, b, i)
+                           t0[b] + (s + 1) * ti.cast(prm[2], ti.f64), tick0[b] + s, b, i)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 x[b, i] = ti.Vector([out[b, i, 0], out[b, i, 1]])
                 v[b, i] = ti.Vector([out[b, i, 2], out[b, i, 3]])

@@ -53,7 +53,8 @@ class ORCA(PedestrianModel):
     ``skin`` [m] the Verlet-list margin (default 0.2 ``neighbour_dist``; 0 rebuilds every step);
     After the first step, ``closest`` (B, N) holds each agent's smallest distance [m] to its nearest
     neighbour at the start of any step so far (inf if none came within ``neighbour_dist``; write inf
-    to reset): the no-overlap metric without an extra query.
+    to reset): the no-overlap metric without an extra query; ``ticks`` (B,) int32 the steps of each
+    copy since its :meth:`reset_copy` (the perturbation's hash input: save and restore it with a copy).
     ``perturbation`` the fraction of its magnitude added to each preferred velocity in a direction
     hashed from (agent, step) (RVO2's examples add 1e-4 m/s of random noise; a dense symmetric
     circle jams for good below about 1e-2; agents at rest on their goals are not disturbed).
@@ -72,7 +73,6 @@ class ORCA(PedestrianModel):
         self.neighbour_dist = default if neighbour_dist is None else check_finite_scalar(
             "neighbour_dist", neighbour_dist, lo=0.0, lo_open=True)
         self.perturbation = check_finite_scalar("perturbation", perturbation, lo=0.0)
-        self._tick = 0
         self.skin = 0.2 * self.neighbour_dist if skin is None else check_finite_scalar("skin", skin, lo=0.0)
         self._work = None
         self.v_pref = None  # (B, N, 2) the preferred velocities of the last step [m/s]
@@ -82,11 +82,20 @@ class ORCA(PedestrianModel):
         return (f"ORCA(radius={self.radius:g}, time_horizon={self.time_horizon:g}, max_speed={self.max_speed:g}, "
                 f"neighbour_dist={self.neighbour_dist:g}, max_neighbors={self.max_neighbors})")
 
-    def step(self, agents: Agents, dt, steps=1) -> None:
-        """Advance 2D ``agents`` in place by ``steps`` steps of ``dt`` [s], recording arrivals."""
-        dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
-        steps = check_int("steps", steps, lo=1)
-        self._setup_goals(agents, self.neighbour_dist + self.skin)
+    def _search(self) -> float:
+        return self.neighbour_dist + self.skin
+
+    def reset_copy(self, b: int, agents: Agents):
+        """Forget copy b's arrivals, closest approach and step count (after editing it)."""
+        super().reset_copy(b, agents)
+        if self._work is not None:
+            self.closest[b] = np.inf
+            self.ticks[b] = 0
+
+    def prepare(self, agents: Agents) -> None:
+        """Goal arrays (see :class:`~tianim.crowds.pedestrians.PedestrianModel`) and ORCA's work
+        arrays, ``closest`` and ``ticks`` for ``agents``' shape (the first :meth:`step` does it otherwise)."""
+        super().prepare(agents)
         B, N, _ = agents.x.shape
         f = agents.x.dtype
         K = self.max_neighbors
@@ -95,6 +104,15 @@ class ORCA(PedestrianModel):
             self._work = dict(key=(B, N, f), work=np.zeros((B, N, K, 10), f), out=out)
             self.v_pref = out[..., 4:6]
             self.closest = np.full((B, N), np.inf, f)
+            self.ticks = np.zeros(B, np.int32)  # steps per copy since its reset (the perturbation's hash)
+
+    def step(self, agents: Agents, dt, steps=1) -> None:
+        """Advance 2D ``agents`` in place by ``steps`` steps of ``dt`` [s], recording arrivals."""
+        dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
+        steps = check_int("steps", steps, lo=1)
+        self.prepare(agents)
+        B, N, _ = agents.x.shape
+        f = agents.x.dtype
         w = self._work
         prm = np.array([self.radius * (1 + self.safety), self.time_horizon, dt, self.max_speed,
                         self.neighbour_dist ** 2, self.arrival_radius, self.perturbation], f)
@@ -122,8 +140,8 @@ class ORCA(PedestrianModel):
             valid = max(1, int((self.skin / 2 - w["moved"]) / hop))  # steps the lists stay valid
             chunk = min(left, valid, MAX_STEPS_PER_LAUNCH)
             orca_kernels(name, chunk)(agents.x, agents.v, agents.heading, self.target, nb.indices, nb.counts, prm,
-                                      w["work"], out, self.arrival_time, agents.t, self._tick, self.closest)
-            self._tick += chunk
+                                      w["work"], out, self.arrival_time, agents.t, self.ticks, self.closest)
+            self.ticks += chunk
             w["moved"] += chunk * hop
             agents.t += chunk * dt
             left -= chunk

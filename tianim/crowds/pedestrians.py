@@ -74,6 +74,15 @@ class PedestrianModel:
         self._shape = key
         self._record_arrivals(agents)  # agents that start on their goals
 
+    def prepare(self, agents: Agents) -> None:
+        """Make ``goals``, ``pref_speed``, ``target`` and ``arrival_time`` for ``agents``' shape now
+        (the first :meth:`step` does it otherwise), e.g. to edit goals per copy before stepping."""
+        self._setup_goals(agents, self._search())
+
+    def _search(self) -> float:
+        """The neighbour search radius [m] of the model (sizes the grid's cells and margins)."""
+        raise NotImplementedError
+
     def _record_arrivals(self, agents: Agents):
         d = np.linalg.norm(self.goals - agents.x, axis=2)
         new = np.isnan(self.arrival_time) & (d <= self.arrival_radius)

@@ -63,11 +63,14 @@ class SocialForce(PedestrianModel):
     def __repr__(self) -> str:
         return f"SocialForce(tau={self.tau:g}, V0={self.V0:g}, sigma={self.sigma:g}, cutoff={self.cutoff:g})"
 
+    def _search(self) -> float:
+        return self.cutoff
+
     def step(self, agents: Agents, dt, steps=1) -> None:
         """Advance 2D ``agents`` in place by ``steps`` explicit steps of ``dt`` [s], recording arrivals."""
         dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
         steps = check_int("steps", steps, lo=1)
-        self._setup_goals(agents, self.cutoff)
+        self._setup_goals(agents, self._search())
         B, N, _ = agents.x.shape
         f = agents.x.dtype
         if self._out is None or self._out.shape[:2] != (B, N) or self._out.dtype != f:
