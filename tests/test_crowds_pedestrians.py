@@ -13,10 +13,10 @@ from tianim.physics import Sphere
 # --- ORCA ---------------------------------------------------------------------------------
 
 
-def test_orca_circle_scenario_no_overlap_everyone_arrives_in_bounded_time():
-    """48 agents of radius 0.5 m on a 12 m circle walk to their antipodes (1 m/s; free flow 24 s).
+@pytest.mark.parametrize("n, R, r", [(48, 12.0, 0.5), (24, 6.0, 0.3)])
+def test_orca_circle_scenario_no_overlap_everyone_arrives_in_bounded_time(n, R, r):
+    """n agents of radius r on a circle of radius R walk to their antipodes (1 m/s; free flow 2R s).
     Stated tolerance: no centre distance below 0.99 x 2r at any step; all arrive within 4x free flow."""
-    n, R, r = 48, 12.0, 0.5
     agents, goals = circle_scenario(n, R)
     model = ORCA(goals=goals, pref_speed=1.0, radius=r, time_horizon=2.0, max_speed=2.0, arrival_radius=0.05)
     closest = np.inf
