@@ -6,6 +6,7 @@
 | tianim/ArmReach-v1    | :class:`envs.arm_reach_v1.ArmReachV1Env` | :class:`envs.arm_reach_v1.ArmReachV1VectorEnv` |
 | tianim/RopeSwing-v0   | :class:`envs.rope_swing.RopeSwingEnv` | :class:`envs.rope_swing.RopeSwingVectorEnv` |
 | tianim/ClothFold-v0   | :class:`envs.cloth_fold.ClothFoldEnv` | :class:`envs.cloth_fold.ClothFoldVectorEnv` |
+| tianim/CrowdNav-v0    | :class:`envs.crowd_nav.CrowdNavEnv` | :class:`envs.crowd_nav.CrowdNavVectorEnv` |
 
 Two ways to make one (Gymnasium 1.x)::
 
@@ -27,6 +28,7 @@ _ENVS = {
     "ArmReach-v1": ("arm_reach_v1", "ArmReachV1Env", "ArmReachV1VectorEnv", 50),  # Reacher-v5's interface
     "RopeSwing-v0": ("rope_swing", "RopeSwingEnv", "RopeSwingVectorEnv", 200),
     "ClothFold-v0": ("cloth_fold", "ClothFoldEnv", "ClothFoldVectorEnv", 100),
+    "CrowdNav-v0": ("crowd_nav", "CrowdNavEnv", "CrowdNavVectorEnv", 100),
 }
 
 ENV_IDS = tuple(f"tianim/{name}" for name in _ENVS)

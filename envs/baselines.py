@@ -128,6 +128,40 @@ class ClothFoldPickPlace:
         return _like(single, np.clip(act, -1.0, 1.0).astype(np.float32))
 
 
+class CrowdNavVO:
+    """CrowdNav-v0: sample velocities (rest, 16 directions at half and full speed, straight to the goal)
+    and take the one with the most progress toward the goal whose straight-line motion keeps 2r +
+    ``margin`` from every human over ``horizon`` s, the humans extrapolated at constant velocity
+    (a sampling velocity-obstacle planner; Fiorini & Shiller 1998); unsafe candidates are penalised
+    by the nearness of their first conflict."""
+
+    def __init__(self, horizon: float = 3.0, margin: float = 0.15, n_angles: int = 16):
+        ang = 2 * np.pi * np.arange(n_angles) / n_angles
+        dirs = np.stack([np.cos(ang), np.sin(ang)], 1)
+        self.cands = np.concatenate([np.zeros((1, 2)), 0.5 * dirs, dirs])
+        self.horizon, self.margin = horizon, margin
+
+    def __call__(self, obs):
+        from envs.crowd_nav import DT, RADIUS
+
+        o = np.atleast_2d(obs).astype(np.float64)
+        B = len(o)
+        g = o[:, 0:2]
+        dist = np.linalg.norm(g, axis=1, keepdims=True)
+        gh = g / np.maximum(dist, 1e-9)
+        straight = gh * np.minimum(1.0, dist / DT)
+        cands = np.concatenate([np.broadcast_to(self.cands, (B,) + self.cands.shape), straight[:, None]], 1)
+        hum = o[:, 4:].reshape(B, -1, 4)
+        p, vh = hum[..., 0:2], hum[..., 2:4]
+        rel_v = vh[:, None] - cands[:, :, None]  # (B, C, H, 2)
+        vv = (rel_v ** 2).sum(-1)
+        t = np.clip(-(p[:, None] * rel_v).sum(-1) / np.maximum(vv, 1e-12), 0, self.horizon)
+        d = np.linalg.norm(p[:, None] + rel_v * t[..., None], axis=-1)
+        tc = np.where(d < 2 * RADIUS + self.margin, t, np.inf).min(-1)
+        score = (cands * gh[:, None]).sum(-1) - np.where(np.isfinite(tc), 10.0 + 1.0 / (tc + 0.1), 0.0)
+        return _like(obs, cands[np.arange(B), score.argmax(1)].astype(np.float32))
+
+
 def _like(obs, action: np.ndarray) -> np.ndarray:
     """``action`` (B, A) for a batch of observations, (A,) for a single observation (the env's action shape)."""
     return action[0] if np.ndim(obs) == 1 else action
@@ -144,7 +178,9 @@ def make_baseline(env_id: str, env):
         return RopeSwingDamped()
     if env_id.endswith("ClothFold-v0"):
         return ClothFoldPickPlace()
-    raise ValueError(f"env_id={env_id!r} has no scripted baseline; known: tianim/ArmReach-v0, ArmReach-v1, RopeSwing-v0, ClothFold-v0")
+    if env_id.endswith("CrowdNav-v0"):
+        return CrowdNavVO()
+    raise ValueError(f"env_id={env_id!r} has no scripted baseline; known: tianim/ArmReach-v0, ArmReach-v1, RopeSwing-v0, ClothFold-v0, CrowdNav-v0")
 
 
 def evaluate(env, policy, episodes: int, seed: int = 0) -> np.ndarray:
@@ -165,4 +201,4 @@ def evaluate(env, policy, episodes: int, seed: int = 0) -> np.ndarray:
     return np.array(returns)
 
 
-__all__ = ["ArmReachIKPD", "RopeSwingDamped", "ClothFoldPickPlace", "make_baseline", "evaluate"]
+__all__ = ["ArmReachIKPD", "RopeSwingDamped", "ClothFoldPickPlace", "CrowdNavVO", "make_baseline", "evaluate"]

@@ -17,6 +17,8 @@ DEMOS = {
     "arm-ik": "arm_ik",
     "stiff": "stiff",
     "fountain": "fountain",
+    "flock": "flock",
+    "crossing": "crossing",
 }
 
 

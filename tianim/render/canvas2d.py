@@ -200,6 +200,39 @@ class Canvas2D:
             self.discs(keys, key_radius, key_color, outline=color, outline_width=2.0, units="px")
         return self
 
+    def triangles(self, points, headings, size=0.1, color="blue", alpha=1.0, units="world") -> "Canvas2D":
+        """Oriented triangles (boids, pedestrians): centroid ``points`` (N, 2) [m] pointing along
+        ``headings`` (N, 2) (any length > 0), ``size`` their length (scalar or (N,), [m] or px).
+
+        Each is an isosceles triangle of length L and base width L/2, tip at L * 2/3 ahead of the
+        point. The rasteriser draws only capsules, so a triangle is filled by a fan of capsules from
+        its tip to points along its base, inset by the capsule radius (edges come out slightly round).
+        """
+        p = points_array(points, "points", dim=2)
+        h = points_array(headings, "headings", dim=2)
+        if h.shape != p.shape:
+            raise ValueError(f"headings has shape {h.shape}; expected {p.shape} (one per point)")
+        hn = np.linalg.norm(h, axis=1)
+        if np.any(hn == 0):
+            raise ValueError(f"headings[{int(np.flatnonzero(hn == 0)[0])}] is zero; give a direction for every triangle")
+        L = np.broadcast_to(self._len(size, units, "size"), (len(p),)).astype(np.float64)
+        if len(p) == 0:
+            return self
+        c = self.to_pixels(p)
+        f = np.stack([h[:, 0], -h[:, 1]], axis=1) / hn[:, None]  # pixel y points down
+        side = np.stack([-f[:, 1], f[:, 0]], axis=1)
+        fans = int(np.clip(np.ceil(L.max() / 4), 2, 16))  # capsules per triangle
+        rc = np.maximum(L / 2 / (2 * fans), 0.5)  # capsule radius [px]
+        tip = c + f * (2 * L / 3 - rc)[:, None]
+        base = c - f * (L / 3 - rc)[:, None]
+        half = np.maximum(L / 4 - rc, 0.0)[:, None]
+        t = np.linspace(-1.0, 1.0, fans)
+        b = base[:, None, :] + t[None, :, None] * (half * side)[:, None, :]
+        a = np.repeat(tip[:, None, :], fans, axis=1)
+        col = np.repeat(rgb_array(color, len(p)), fans, axis=0)
+        self._push(a.reshape(-1, 2), b.reshape(-1, 2), np.repeat(rc, fans), 0.0, col, alpha, np.zeros(3), 0.0)
+        return self
+
     def text(self, xy, text: str, size: int = 16, color="dark", anchor: str = "la", units="world") -> "Canvas2D":
         """A text label at ``xy`` (world [m] or ``units="px"``); ``anchor`` as in Pillow
         (``"la"`` left-ascender, ``"mm"`` centred, ``"rb"`` right-bottom...)."""

@@ -243,6 +243,46 @@ class Scene3D:
             return self.particles(p, radius, color)
         return self.segments(p, edges, radius, color)
 
+    def cones(self, points, directions, length=0.1, radius=None, color="blue", segments=8) -> "Scene3D":
+        """Cones (3D boids) with their base centre ``length / 3`` behind ``points`` (N, 3) [m] and their
+        apex ``2 length / 3`` ahead along ``directions`` (N, 3) (any length > 0); base ``radius`` [m]
+        (default length / 4), drawn as one triangle mesh of ``segments`` side faces and a base fan each."""
+        p = points_array(points, "points", dim=3).astype(np.float64)
+        d = points_array(directions, "directions", dim=3).astype(np.float64)
+        if d.shape != p.shape:
+            raise ValueError(f"directions has shape {d.shape}; expected {p.shape} (one per point)")
+        dn = np.linalg.norm(d, axis=1)
+        if np.any(dn == 0):
+            raise ValueError(f"directions[{int(np.flatnonzero(dn == 0)[0])}] is zero; give a direction for every cone")
+        L = check_finite_scalar("length", length, lo=0.0, lo_open=True)
+        rad = L / 4 if radius is None else check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
+        k = int(segments)
+        if not 3 <= k <= 64:
+            raise ValueError(f"segments={segments!r} must be an integer in 3..64")
+        n = len(p)
+        if n == 0:
+            return self
+        f = d / dn[:, None]
+        helper = np.where(np.abs(f[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 1.0, 0.0]])
+        u = np.cross(f, helper)
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        w = np.cross(f, u)
+        ang = 2 * np.pi * np.arange(k) / k
+        ring = (p - f * (L / 3))[:, None, :] + rad * (np.cos(ang)[None, :, None] * u[:, None, :]
+                                                       + np.sin(ang)[None, :, None] * w[:, None, :])
+        apex = p + f * (2 * L / 3)
+        centre = p - f * (L / 3)
+        verts = np.concatenate([ring.reshape(-1, 3), apex, centre]).astype(np.float32)  # ring, apexes, base centres
+        base = (np.arange(n) * k)[:, None]
+        j = np.arange(k)[None, :]
+        r0, r1 = base + j, base + (j + 1) % k
+        ap = np.repeat((n * k + np.arange(n))[:, None], k, axis=1)
+        bc = np.repeat((n * k + n + np.arange(n))[:, None], k, axis=1)
+        faces = np.concatenate([np.stack([r0, r1, ap], -1).reshape(-1, 3), np.stack([r1, r0, bc], -1).reshape(-1, 3)])
+        cols = rgb_array(color, n, "color")
+        vcol = np.concatenate([np.repeat(cols, k, axis=0), cols, cols])
+        return self.mesh(verts, faces.astype(np.int32), vcol)
+
     def ground(self, height=0.0, size=None, color="#e9ecef", color2="#cfd5dc", cell=None) -> "Scene3D":
         """A checkered ground plane at ``height`` [m] along ``up`` (an exact, infinite plane).
 

@@ -1,0 +1,266 @@
+"""Crowds: boids, Vicsek and metrics (issue 11). Theory-based checks; determinism; bad input."""
+
+import math
+import textwrap
+
+import numpy as np
+import pytest
+from _threads import digests_by_thread_count
+
+from tianim.crowds import (Agents, Alignment, Avoid, Boids, Cohesion, Seek, Separation, Vicsek, Wall, Wander,
+                           density_speed, pair_distances, polarisation, polygon, time_to_goal)
+from tianim.physics import Ground, Sphere
+
+# --- Vicsek -------------------------------------------------------------------------------
+
+
+def test_vicsek_order_parameter_falls_with_noise_at_density_4():
+    """Vicsek et al. 1995, fig. 2: at rho = 4, r = 1 the order parameter phi(eta) falls from ~1 to
+    ~1/sqrt(N) with the noise. One batch, one copy per eta; phi averaged over steps 200..400."""
+    n = 1000
+    etas = np.array([0.5, 2.0, 3.5, 5.0])
+    model = Vicsek(box=math.sqrt(n / 4), radius=1.0, speed=0.5, noise=etas, seed=3)
+    agents = model.agents(n, batch=len(etas), seed=1)
+    model.step(agents, 1.0, 200)
+    phi = np.zeros(len(etas))
+    for _ in range(20):
+        model.step(agents, 1.0, 10)
+        phi += polarisation(agents.v) / 20
+    assert phi[0] > 0.9 and phi[-1] < 0.15, phi
+    assert np.all(np.diff(phi) < 0), phi
+
+
+def test_vicsek_without_noise_an_aligned_flock_stays_aligned():
+    model = Vicsek(box=10.0, radius=1.0, speed=0.3, noise=0.0)
+    agents = model.agents(400, seed=2)
+    th = 0.7
+    agents.heading[...] = [math.cos(th), math.sin(th)]
+    model.step(agents, 1.0, 50)
+    assert polarisation(agents.v)[0] == pytest.approx(1.0, abs=1e-12)
+    assert np.allclose(agents.heading, [math.cos(th), math.sin(th)], atol=1e-12)
+    assert np.all((agents.x >= 0) & (agents.x < 10.0))
+
+
+def test_vicsek_neighbours_wrap_around_the_periodic_box():
+    """Two agents across the boundary (distance 0.4 through it) align: each heading becomes the
+    mean of both (eta = 0); two agents 3 m apart inside do not interact."""
+    model = Vicsek(box=8.0, radius=1.0, speed=0.0, noise=0.0)
+    x = [[0.1, 4.0], [7.7, 4.0], [3.0, 1.0], [6.0, 1.0]]
+    h = [[1.0, 0.0], [0.0, 1.0], [1.0, 0.0], [0.0, 1.0]]
+    a = Agents(x, heading=h, dtype=np.float64)
+    model.step(a, 1.0)
+    s = math.sqrt(0.5)
+    assert np.allclose(a.heading[0, :2], [[s, s], [s, s]], atol=1e-12)
+    assert np.allclose(a.heading[0, 2:], [[1, 0], [0, 1]], atol=1e-12)
+
+
+# --- boids --------------------------------------------------------------------------------
+
+def _flock(n=300, box=12.0, seed=1, **kw):
+    agents = Agents.random(n, (0, 0), (box, box), speed=1.0, seed=seed)
+    model = Boids([Separation(2.0, radius=0.6), Alignment(1.0, radius=2.0), Cohesion(0.3, radius=2.0)],
+                  max_speed=2.0, max_force=4.0, min_speed=0.5, **kw)
+    return agents, model
+
+
+def test_boids_polarisation_rises_and_separation_keeps_its_distance():
+    """From random headings (phi ~ 1/sqrt(N)) the flock aligns (phi > 0.5 after 15 s), and once
+    separation has spread the initial random placement (2 s), no two boids come closer than half
+    the separation radius (0.3 m)."""
+    agents, model = _flock()
+    phi0 = polarisation(agents.v)[0]
+    closest = []
+    for k in range(300):
+        model.step(agents, 0.05)
+        if k >= 40:
+            closest.append(pair_distances(agents.x, 0.15, search=0.6)[0][0])
+    assert phi0 < 0.15
+    assert polarisation(agents.v)[0] > 0.5
+    assert min(closest) > 0.5 * 0.6, min(closest)
+    speed = agents.speed()
+    assert np.all(speed <= 2.0 * (1 + 1e-6)) and np.all(speed >= 0.5 * (1 - 1e-6))
+
+
+def test_field_of_view_hides_neighbours_behind():
+    """A boid moving +x with a neighbour 1 m behind it: with fov = pi (front half) alignment sees
+    nothing and the velocity stays; with fov = 2 pi it steers toward the neighbour's velocity,
+    by exactly dt * min(max_force, |max_speed u_j - v_i|) (Reynolds steering, closed form)."""
+    for fov, changes in ((math.pi, False), (2 * math.pi, True)):
+        a = Agents([[0.0, 0.0], [-1.0, 0.0]], v=[[1.0, 0.0], [0.0, 1.0]], dtype=np.float64)
+        Boids([Alignment(1.0, radius=2.0, fov=fov)], max_speed=1.0, max_force=0.5).step(a, 0.1)
+        if not changes:
+            assert np.allclose(a.v[0, 0], [1.0, 0.0], atol=1e-15)
+        else:
+            u = np.array([0.0, 1.0]) - np.array([1.0, 0.0])
+            want = np.array([1.0, 0.0]) + 0.1 * 0.5 * u / np.linalg.norm(u)
+            want *= min(1.0, 1.0 / np.linalg.norm(want))
+            assert np.allclose(a.v[0, 0], want, atol=1e-12)
+
+
+def test_seek_with_arrival_stops_at_the_goal():
+    a = Agents([[0.0, 0.0, 0.0]], v=[[0.0, 0.0, 0.0]], dtype=np.float64)
+    model = Boids([Seek(goal=(5.0, 2.0, -1.0), weight=1.0, slowing_radius=2.0)], max_speed=1.5, max_force=3.0)
+    model.step(a, 0.02, 1500)
+    assert np.linalg.norm(a.x[0, 0] - [5.0, 2.0, -1.0]) < 0.02
+    assert np.linalg.norm(a.v[0, 0]) < 0.02
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_avoidance_keeps_agents_out_of_obstacles(dim):
+    """Agents seeking through a sphere/circle and across a plane/wall never end a step inside."""
+    rng = np.random.default_rng(0)
+    x = np.zeros((60, dim))
+    x[:, 0] = -6 + rng.random(60)
+    x[:, 1] = rng.uniform(-1.5, 1.5, 60)
+    goal = np.zeros(dim)
+    goal[0] = 6.0
+    obstacles = [Sphere(center=tuple(np.zeros(dim)), radius=1.0)]
+    if dim == 2:
+        obstacles += [Wall((-8.0, 4.0), (8.0, 4.0), 0.1)] + polygon([(2, -4), (3, -4), (3, -3)])
+    else:
+        obstacles += [Ground(height=-2.0, normal=(0.0, 1.0, 0.0))]
+    a = Agents(x, v=np.tile(np.eye(dim)[0], (60, 1)), dtype=np.float64)
+    model = Boids([Separation(1.0, radius=0.3), Seek(goal=goal, slowing_radius=1.0),
+                   Avoid(obstacles, weight=3.0, distance=1.0)], max_speed=1.5, max_force=3.0)
+    for _ in range(300):
+        model.step(a, 0.05)
+        p = a.x[0]
+        assert np.all(np.linalg.norm(p, axis=1) >= 1.0 - 1e-9)
+        if dim == 2:
+            assert np.all(np.abs(p[:, 1] - 4.0) >= 0.1 - 1e-9)
+        else:
+            assert np.all(p[:, 1] >= -2.0 - 1e-9)
+    assert np.median(a.x[0, :, 0]) > 2.0  # most went round the obstacle
+
+
+# --- metrics ------------------------------------------------------------------------------
+
+def test_polarisation_closed_forms():
+    assert polarisation([[1.0, 0.0], [2.0, 0.0]])[0] == pytest.approx(1.0)
+    assert polarisation([[1.0, 0.0], [-3.0, 0.0]])[0] == pytest.approx(0.0)
+    assert polarisation([[1.0, 0.0, 0.0], [0.0, 5.0, 0.0]])[0] == pytest.approx(math.sqrt(2) / 2)
+
+
+def test_pair_distances_match_brute_force():
+    rng = np.random.default_rng(4)
+    x = rng.random((2, 200, 2)) * 10
+    md, ov = pair_distances(x, 0.2, search=2.0)
+    for b in range(2):
+        d = np.linalg.norm(x[b, :, None] - x[b, None], axis=2)[np.triu_indices(200, 1)]
+        assert md[b] == pytest.approx(d.min(), rel=1e-12)
+        assert ov[b] == np.count_nonzero(d < 0.4)
+
+
+def test_density_speed_and_time_to_goal():
+    x = [[0.5, 0.5], [1.5, 0.5], [5.0, 5.0]]
+    v = [[1.0, 0.0], [0.0, 3.0], [9.0, 9.0]]
+    rho, s = density_speed(x, v, (0, 0), (2, 1))
+    assert rho[0] == pytest.approx(1.0) and s[0] == pytest.approx(2.0)
+    assert time_to_goal([[1.0, 3.0], [2.0, np.nan]]).tolist()[0] == 3.0
+    assert np.isnan(time_to_goal([[1.0, 3.0], [2.0, np.nan]])[1])
+
+
+# --- determinism --------------------------------------------------------------------------
+
+def _boids_all(batch, seeds):
+    a = Agents.random(150, (0, 0, 0), (6, 6, 6), speed=1.0, batch=batch, seeds=seeds)
+    m = Boids([Separation(2.0, radius=0.5), Alignment(1.0, radius=1.5, fov=4.0), Cohesion(0.5, radius=1.5),
+               Wander(0.5, 0.3), Avoid([Sphere((3.0, 3.0, 3.0), 1.0)])], max_speed=2.0, max_force=3.0, seeds=seeds,
+              domain=((-2, -2, -2), (8, 8, 8)))  # the same cells (and neighbour order) batched or not
+    return a, m
+
+
+def test_boids_and_vicsek_batch_equals_separate_runs_bit_for_bit():
+    both, mb = _boids_all(2, [5, 9])
+    single = [_boids_all(1, [s]) for s in (5, 9)]
+    mb.step(both, 0.05, 20)
+    for a, m in single:
+        m.step(a, 0.05, 20)
+    for b in range(2):
+        assert np.array_equal(both.x[b], single[b][0].x[0]) and np.array_equal(both.v[b], single[b][0].v[0])
+    vb = Vicsek(6.0, noise=[1.0, 2.0], seeds=[3, 4])
+    ab = vb.agents(100, batch=2, seed=7)
+    vb.step(ab, 1.0, 30)
+    for b, (eta, s) in enumerate(((1.0, 3), (2.0, 4))):
+        v1 = Vicsek(6.0, noise=eta, seed=s)
+        a1 = v1.agents(100, seed=7 + b)
+        v1.step(a1, 1.0, 30)
+        assert np.array_equal(ab.x[b], a1.x[0]) and np.array_equal(ab.heading[b], a1.heading[0])
+
+
+_THREAD_SCRIPT = textwrap.dedent("""
+    import hashlib, numpy as np
+    from tianim.crowds import Agents, Boids, Separation, Alignment, Cohesion, Wander, Vicsek
+    a = Agents.random(3000, (0, 0), (40, 40), speed=1.0, batch=2, seed=1)
+    m = Boids([Separation(2.0, radius=0.6), Alignment(1.0, radius=2.0), Cohesion(0.3, radius=2.0), Wander()],
+              max_speed=2.0, max_force=4.0, seed=2)
+    m.step(a, 0.05, 20)
+    v = Vicsek(20.0, noise=1.0, seed=3)
+    b = v.agents(1600, seed=4, dtype=np.float32)
+    v.step(b, 1.0, 20)
+    print(hashlib.sha256(a.x.tobytes() + a.v.tobytes() + b.x.tobytes() + b.heading.tobytes()).hexdigest())
+""")
+
+
+def test_bit_identical_with_one_and_two_threads():
+    digests = digests_by_thread_count(_THREAD_SCRIPT)
+    assert digests[0] == digests[1]
+
+
+# --- bad input ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("make, exc, match", [
+    (lambda: Agents(np.zeros((3, 4))), ValueError, "x has shape"),
+    (lambda: Agents([[0.0, np.nan]]), ValueError, "x"),
+    (lambda: Agents([[0.0, 0.0]], v=[[1.0, 0.0, 0.0]]), ValueError, "v has shape"),
+    (lambda: Agents([[0.0, 0.0]], heading=[[0.0, 0.0]]), ValueError, "heading"),
+    (lambda: Agents([[0.0, 0.0]], dtype=np.int32), TypeError, "dtype"),
+    (lambda: Agents.random(0, (0, 0), (1, 1)), ValueError, "n=0"),
+    (lambda: Agents.random(5, (0, 0), (1, -1)), ValueError, "upper"),
+    (lambda: Agents.random(5, (0, 0), (1, 1), batch=2, seeds=[1]), ValueError, "seeds"),
+    (lambda: Boids("flock"), TypeError, "behaviours"),
+    (lambda: Boids(["cohesion"]), TypeError, r"behaviours\[0\]"),
+    (lambda: Boids([Cohesion(), Cohesion()]), ValueError, "repeats Cohesion"),
+    (lambda: Boids([Separation(radius=0)]), ValueError, "separation.radius"),
+    (lambda: Boids([Alignment(weight=-1)]), ValueError, "alignment.weight"),
+    (lambda: Boids([Cohesion(fov=7.0)]), ValueError, "cohesion.fov"),
+    (lambda: Boids([Seek()]), ValueError, "seek.goal"),
+    (lambda: Boids([Seek(goal=(1, 2), slowing_radius=0)]), ValueError, "slowing_radius"),
+    (lambda: Boids([Avoid(distance=-1)]), ValueError, "avoid.distance"),
+    (lambda: Boids([Wander(jitter=float("nan"))]), ValueError, "wander.jitter"),
+    (lambda: Boids([], max_speed=0), ValueError, "max_speed"),
+    (lambda: Boids([], max_speed=1, min_speed=2), ValueError, "min_speed"),
+    (lambda: Boids([], max_neighbours=0), ValueError, "max_neighbours"),
+    (lambda: Boids([], on_overflow="ignore"), ValueError, "on_overflow"),
+    (lambda: Boids([], domain=((0, 0), (1,))), ValueError, "domain"),
+    (lambda: Vicsek(box=-1), ValueError, "box"),
+    (lambda: Vicsek(box=4, radius=2), ValueError, "radius"),
+    (lambda: Vicsek(box=4, noise=7.0), ValueError, "noise"),
+    (lambda: Vicsek(box=4, speed=float("inf")), ValueError, "speed"),
+    (lambda: pair_distances(np.zeros((3, 2)), radius=0), ValueError, "radius"),
+    (lambda: density_speed(np.zeros((3, 2)), np.zeros((2, 2)), (0, 0), (1, 1)), ValueError, "v has shape"),
+    (lambda: polarisation(np.zeros((3, 4))), ValueError, "v has shape"),
+])
+def test_bad_input_names_the_argument(make, exc, match):
+    with pytest.raises(exc, match=match):
+        make()
+
+
+@pytest.mark.parametrize("call, exc, match", [
+    (lambda m, a: m.step(a, dt=0), ValueError, "dt"),
+    (lambda m, a: m.step(a, dt=0.1, steps=0), ValueError, "steps"),
+    (lambda m, a: m.step("agents", dt=0.1), TypeError, "agents"),
+    (lambda m, a: Boids([Avoid([Wall()])]).step(Agents(np.zeros((2, 3))), 0.1), ValueError, "Wall"),
+    (lambda m, a: Boids([Avoid(["rock"])]).step(a, 0.1), TypeError, r"obstacles\[0\]"),
+    (lambda m, a: Boids([Seek(goal=np.zeros((5, 2)))]).step(a, 0.1), ValueError, "seek.goal"),
+    (lambda m, a: Vicsek(4.0).step(Agents(np.zeros((2, 3))), 1.0), ValueError, "3D"),
+    (lambda m, a: Vicsek(4.0).step(Agents([[5.0, 1.0]]), 1.0), ValueError, "outside the periodic box"),
+    (lambda m, a: Vicsek(4.0, noise=[1.0, 2.0, 3.0]).step(Agents([[1.0, 1.0]]), 1.0), ValueError, "batch"),
+])
+def test_bad_step_raises_and_changes_nothing(call, exc, match):
+    a, m = _flock(n=20)
+    m.step(a, 0.05)
+    x, v = a.x.copy(), a.v.copy()
+    with pytest.raises(exc, match=match):
+        call(m, a)
+    assert np.array_equal(a.x, x) and np.array_equal(a.v, v)

@@ -1,0 +1,216 @@
+"""Pedestrian models (issue 11): ORCA and social force. Closed forms, scenarios, determinism, bad input."""
+
+import math
+import textwrap
+
+import numpy as np
+import pytest
+from _threads import digests_by_thread_count
+
+from tianim.crowds import ORCA, Agents, SocialForce, Wall, circle_scenario, pair_distances, time_to_goal
+from tianim.physics import Sphere
+
+# --- ORCA ---------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("n, R, r", [(48, 12.0, 0.5), (24, 6.0, 0.3)])
+def test_orca_circle_scenario_no_overlap_everyone_arrives_in_bounded_time(n, R, r):
+    """n agents of radius r on a circle of radius R walk to their antipodes (1 m/s; free flow 2R s).
+    Stated tolerance: no centre distance below 0.99 x 2r at any step; all arrive within 4x free flow."""
+    agents, goals = circle_scenario(n, R)
+    model = ORCA(goals=goals, pref_speed=1.0, radius=r, time_horizon=2.0, max_speed=2.0, arrival_radius=0.05)
+    closest = np.inf
+    for _ in range(1000):
+        model.step(agents, 0.1)
+        closest = min(closest, pair_distances(agents.x, r, search=4 * r)[0][0])
+        if model.arrived().all():
+            break
+    free_flow = 2 * R / 1.0
+    assert closest >= 0.99 * 2 * r, closest
+    assert model.arrived().all()
+    assert time_to_goal(model.arrival_time)[0] < 4 * free_flow
+    assert np.allclose(agents.x, goals, atol=0.05 + 1e-9)
+
+
+def test_orca_corridor_10_m_at_1_m_per_s_takes_10_s():
+    """RiMEA test 1 / JuPedSim: 10 m at a preferred speed of 1 m/s takes 10 s, within one step."""
+    dt = 0.1
+    agents = Agents([[0.0, 0.0]], dtype=np.float64)
+    model = ORCA(goals=(10.0, 0.0), pref_speed=1.0, radius=0.2, arrival_radius=0.01)
+    model.step(agents, dt, 120)
+    assert abs(model.arrival_time[0, 0] - 10.0) <= dt
+    assert np.allclose(agents.x[0, 0], [10.0, 0.0], atol=0.01)
+
+
+def test_orca_is_reciprocal_for_a_symmetric_pair():
+    """Two agents approaching head-on (slightly offset): by symmetry their new velocities are
+    exact mirror images (v_a = -v_b), they never overlap, and both pass."""
+    agents = Agents([[-4.0, 0.05], [4.0, -0.05]], v=[[1.0, 0.0], [-1.0, 0.0]], dtype=np.float64)
+    model = ORCA(goals=[(4.0, 0.05), (-4.0, -0.05)], pref_speed=1.0, radius=0.5, safety=0.0, perturbation=0.0)
+    for _ in range(120):
+        model.step(agents, 0.1)
+        assert np.allclose(agents.v[0, 0], -agents.v[0, 1], atol=1e-12)
+        assert np.linalg.norm(agents.x[0, 0] - agents.x[0, 1]) >= 1.0 - 1e-6
+    assert model.arrived().all()
+
+
+def test_orca_without_neighbours_takes_the_preferred_velocity_capped_at_max_speed():
+    agents = Agents([[0.0, 0.0], [50.0, 0.0]], dtype=np.float64)
+    model = ORCA(goals=[(0.0, 30.0), (80.0, 0.0)], pref_speed=[1.5, 3.0], max_speed=2.0, perturbation=0.0)
+    model.step(agents, 0.5)
+    assert np.allclose(agents.v[0], [[0.0, 1.5], [2.0, 0.0]], atol=1e-12)
+    assert np.allclose(agents.heading[0], [[0.0, 1.0], [1.0, 0.0]], atol=1e-12)
+
+
+# --- social force -------------------------------------------------------------------------
+
+def test_social_force_lone_pedestrian_relaxes_with_time_constant_tau():
+    """dv/dt = (v0 e - v)/tau: explicit steps give v_n = v0 e + (v_0 - v0 e)(1 - dt/tau)^n exactly,
+    and the continuous solution v0 e + (v_0 - v0 e) exp(-t/tau) to O(dt)."""
+    tau, v0, dt = 0.5, 1.3, 0.01
+    agents = Agents([[0.0, 0.0]], v=[[0.0, 0.5]], dtype=np.float64)
+    model = SocialForce(goals=(1e9, 0.0), pref_speed=v0, tau=tau, max_ratio=10.0)  # e = +x to 1e-9
+    want0 = np.array([v0, 0.0])
+    for n in (1, 10, 100, 200):
+        model.step(agents, dt, n - int(round(agents.t[0] / dt)))
+        discrete = want0 + (np.array([0.0, 0.5]) - want0) * (1 - dt / tau) ** n
+        continuous = want0 + (np.array([0.0, 0.5]) - want0) * math.exp(-n * dt / tau)
+        assert np.allclose(agents.v[0, 0], discrete, rtol=0, atol=1e-8), (n, agents.v[0, 0], discrete)
+        assert np.allclose(agents.v[0, 0], continuous, atol=0.02)
+
+
+def _potential(ra, xb, vb, eb, V0=2.1, sigma=0.3, dts=2.0):
+    r = ra - xb
+    s = vb * dts
+    b = 0.5 * math.sqrt((np.linalg.norm(r) + np.linalg.norm(r - s * eb)) ** 2 - s * s)
+    return V0 * math.exp(-b / sigma)
+
+
+@pytest.mark.parametrize("xb, vb", [((1.0, 0.3), (-0.8, 0.1)), ((-0.7, -0.9), (0.0, 1.2)), ((0.5, -0.4), (0.0, 0.0))])
+def test_social_force_repulsion_is_minus_the_gradient_of_the_elliptical_potential(xb, vb):
+    """HM95 eq. 4: the kernel's f_ab equals a central finite difference of V0 exp(-b/sigma) written here."""
+    dt = 1e-4
+    va = np.array([1.0, 0.0])
+    agents = Agents([[0.0, 0.0], list(xb)], v=[va, list(vb)], dtype=np.float64)
+    model = SocialForce(goals=[(1e4, 0.0), (xb[0] + 1e4 * (vb[0] or 1e-9), xb[1] + 1e4 * vb[1])],
+                        pref_speed=[1.0, float(np.linalg.norm(vb))], max_ratio=100.0, fov=2 * math.pi)
+    eb = np.array(vb) / np.linalg.norm(vb) if np.linalg.norm(vb) > 0 else np.array([1.0, 0.0])
+    model.step(agents, dt)
+    acc = (agents.v[0, 0] - va) / dt  # the relaxation term is zero: v_a = v0 e_a
+    h = 1e-6
+    grad = np.array([(_potential(np.array([h, 0]), np.array(xb), np.linalg.norm(vb), eb)
+                      - _potential(np.array([-h, 0]), np.array(xb), np.linalg.norm(vb), eb)) / (2 * h),
+                     (_potential(np.array([0, h]), np.array(xb), np.linalg.norm(vb), eb)
+                      - _potential(np.array([0, -h]), np.array(xb), np.linalg.norm(vb), eb)) / (2 * h)])
+    assert np.allclose(acc, -grad, rtol=1e-5, atol=1e-7), (acc, -grad)
+
+
+def test_social_force_field_of_view_weakens_forces_from_behind():
+    """An agent with the other 1 m straight behind it feels c = 0.5 of the force it feels from 1 m ahead."""
+    accs = []
+    for xb in ((-1.0, 0.0), (1.0, 0.0)):
+        agents = Agents([[0.0, 0.0], list(xb)], v=[[1.0, 0.0], [0.0, 0.0]], dtype=np.float64)
+        model = SocialForce(goals=[(1e4, 0.0), xb], pref_speed=[1.0, 0.0], max_ratio=100.0)
+        model.step(agents, 1e-4)
+        accs.append((agents.v[0, 0] - [1.0, 0.0]) / 1e-4)
+    assert accs[0][0] == pytest.approx(-0.5 * accs[1][0], rel=1e-9)
+
+
+def test_social_force_two_approaching_pedestrians_repel_and_walls_push_back():
+    agents = Agents([[0.0, 0.0], [6.0, 0.1]], v=[[1.0, 0.0], [-1.0, 0.0]], dtype=np.float64)
+    model = SocialForce(goals=[(10.0, 0.0), (-4.0, 0.1)], pref_speed=1.0, obstacles=[Wall((-5, 1.5), (11, 1.5), 0.0),
+                                                                                       Sphere((3.0, -3.0), 0.5)])
+    gaps = []
+    for _ in range(300):
+        model.step(agents, 0.05)
+        gaps.append(np.linalg.norm(agents.x[0, 0] - agents.x[0, 1]))
+    lateral = agents.x[0, 0, 1] - agents.x[0, 1, 1]
+    assert min(gaps) > 0.4  # they swerved: a straight pass would come within 0.1 m
+    assert model.arrived().all() and np.all(agents.x[0, :, 1] < 1.5)
+    assert abs(lateral) < 0.5  # back on their lines after passing
+
+
+# --- determinism --------------------------------------------------------------------------
+
+def _ped(batch, model_cls, seed):
+    rng = np.random.default_rng(seed)
+    x = rng.uniform(-5, 5, (batch, 80, 2))
+    g = -x + rng.normal(0, 0.5, x.shape)
+    kw = dict(radius=0.25) if model_cls is ORCA else {}
+    return Agents(x, dtype=np.float64), model_cls(goals=g, pref_speed=1.0, domain=((-8, -8), (8, 8)), **kw), x, g
+
+
+@pytest.mark.parametrize("model_cls", [ORCA, SocialForce])
+def test_pedestrians_batch_equals_separate_runs_bit_for_bit(model_cls):
+    agents, model, x, g = _ped(3, model_cls, 1)
+    model.step(agents, 0.05, 60)
+    for b in range(3):
+        a1 = Agents(x[b:b + 1], dtype=np.float64)
+        kw = dict(radius=0.25) if model_cls is ORCA else {}
+        m1 = model_cls(goals=g[b], pref_speed=1.0, domain=((-8, -8), (8, 8)), **kw)
+        m1.step(a1, 0.05, 60)
+        assert np.array_equal(agents.x[b], a1.x[0]) and np.array_equal(agents.v[b], a1.v[0])
+
+
+_THREAD_SCRIPT = textwrap.dedent("""
+    import hashlib, numpy as np
+    from tianim.crowds import ORCA, SocialForce, Agents, circle_scenario
+    a, g = circle_scenario(400, 20.0, batch=2, dtype=np.float32)
+    m = ORCA(goals=g, radius=0.12, pref_speed=1.0)
+    m.step(a, 0.1, 60)
+    rng = np.random.default_rng(0)
+    x = rng.uniform(-10, 10, (2, 2000, 2))
+    s = Agents(x, dtype=np.float32)
+    f = SocialForce(goals=-x)
+    f.step(s, 0.05, 30)
+    print(hashlib.sha256(a.x.tobytes() + a.v.tobytes() + s.x.tobytes() + s.v.tobytes()).hexdigest())
+""")
+
+
+def test_pedestrians_bit_identical_with_one_and_two_threads():
+    digests = digests_by_thread_count(_THREAD_SCRIPT)
+    assert digests[0] == digests[1]
+
+
+# --- bad input ----------------------------------------------------------------------------
+
+@pytest.mark.parametrize("make, exc, match", [
+    (lambda: ORCA(goals=None), ValueError, "goals"),
+    (lambda: ORCA(goals=(1.0, 2.0, 3.0)), ValueError, "goals has shape"),
+    (lambda: ORCA(goals=(1.0, 2.0), pref_speed=-1), ValueError, "pref_speed"),
+    (lambda: ORCA(goals=(1.0, 2.0), radius=0), ValueError, "radius"),
+    (lambda: ORCA(goals=(1.0, 2.0), time_horizon=-2), ValueError, "time_horizon"),
+    (lambda: ORCA(goals=(1.0, 2.0), max_speed=float("nan")), ValueError, "max_speed"),
+    (lambda: ORCA(goals=(1.0, 2.0), safety=2.0), ValueError, "safety"),
+    (lambda: ORCA(goals=(1.0, 2.0), max_neighbors=0), ValueError, "max_neighbors"),
+    (lambda: ORCA(goals=(1.0, 2.0), neighbour_dist=0), ValueError, "neighbour_dist"),
+    (lambda: ORCA(goals=(1.0, 2.0), domain=((0, 0), (0, 1))), ValueError, "domain"),
+    (lambda: ORCA(goals=(1.0, 2.0), skin=-1), ValueError, "skin"),
+    (lambda: ORCA(goals=(1.0, 2.0), grid_neighbours=0), ValueError, "grid_neighbours"),
+    (lambda: SocialForce(goals=(1.0, 2.0), tau=0), ValueError, "tau"),
+    (lambda: SocialForce(goals=(1.0, 2.0), sigma=-1), ValueError, "sigma"),
+    (lambda: SocialForce(goals=(1.0, 2.0), c=1.5), ValueError, r"\bc=1.5"),
+    (lambda: SocialForce(goals=(1.0, 2.0), fov=7.0), ValueError, "fov"),
+    (lambda: SocialForce(goals=(1.0, 2.0), cutoff=0), ValueError, "cutoff"),
+    (lambda: SocialForce(goals=(1.0, 2.0), obstacles=["pillar"]), TypeError, r"obstacles\[0\]"),
+    (lambda: SocialForce(goals=(1.0, 2.0), arrival_radius=-0.1), ValueError, "arrival_radius"),
+    (lambda: circle_scenario(0, 1.0), ValueError, "n=0"),
+    (lambda: circle_scenario(4, -1.0), ValueError, "circle_radius"),
+])
+def test_bad_input_names_the_argument(make, exc, match):
+    with pytest.raises(exc, match=match):
+        make()
+
+
+@pytest.mark.parametrize("model_cls", [ORCA, SocialForce])
+@pytest.mark.parametrize("call, exc, match", [
+    (lambda m: m.step(Agents(np.zeros((3, 2))), dt=-0.1), ValueError, "dt"),
+    (lambda m: m.step(Agents(np.zeros((3, 2))), dt=0.1, steps=1.5), TypeError, "steps"),
+    (lambda m: m.step(Agents(np.zeros((3, 3))), dt=0.1), ValueError, "3D"),
+    (lambda m: m.step(np.zeros((3, 2)), dt=0.1), TypeError, "agents"),
+    (lambda m: m.step(Agents(np.zeros((5, 2))), dt=0.1), ValueError, "goals has shape"),
+])
+def test_bad_step_raises_before_changing_anything(model_cls, call, exc, match):
+    model = model_cls(goals=np.ones((3, 2)))
+    with pytest.raises(exc, match=match):
+        call(model)

@@ -1,0 +1,179 @@
+"""Taichi kernel of the boids step (one thread per agent, Jacobi update into output arrays).
+
+Cached factory, one variant per float type and dimension (docs/architecture.md, "Kernel
+conventions"). Each thread reads the old state of its neighbours and writes only its own agent's
+outputs; sums over neighbours run in the grid's fixed order: results are bit-identical for any
+thread count. :mod:`tianim.bench._numpy_boids` is the NumPy mirror of these rules.
+
+``prm`` packing (see :data:`PRM`): max_speed, max_force, min_speed, dt, then for separation,
+alignment and cohesion (weight, radius^2, cos(fov / 2)), then seek (weight, slowing radius),
+avoid (weight, distance), wander (weight, jitter).
+"""
+
+from tianim.crowds._shapes import wall_parts
+from tianim.physics.contact import contact_parts
+from tianim.physics.kernel_types import cached_variants, kernel_types
+
+#: Names of the entries of the boids parameter vector, in order.
+PRM = ("max_speed", "max_force", "min_speed", "dt",
+       "sep_w", "sep_r2", "sep_cos", "ali_w", "ali_r2", "ali_cos", "coh_w", "coh_r2", "coh_cos",
+       "seek_w", "slowing_radius", "avoid_w", "avoid_distance", "wander_w", "wander_jitter")
+
+
+#: Below this length the lateral part of an obstacle normal counts as zero (obstacle dead ahead).
+LATERAL_MIN = 1e-3
+
+
+@cached_variants
+def boids_kernels(real_name: str, dim: int):
+    """``boids_step`` for ``real_name`` positions in ``dim`` D."""
+    t = kernel_types(real_name, dim)
+    ti, real = t.ti, t.real
+    surface, _ = contact_parts(real_name, dim)
+    wall_surface = wall_parts(real_name, dim)
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    real2d = ti.types.ndarray(dtype=real, ndim=2)
+
+    @ti.func
+    def limit(a, cap):
+        n = a.norm()
+        out = a
+        if n > cap:
+            out = a * (cap / n)
+        return out
+
+    @ti.func
+    def visible(hd, d2, cos):
+        """Whether the angle between heading h and offset d is at most fov / 2, i.e.
+        h . d >= cos |d|, tested without a square root: hd = h . d, d2 = |d|^2, cos = cos(fov / 2)."""
+        out = True
+        if cos > -1:
+            lhs = hd * hd
+            rhs = cos * cos * d2
+            if cos >= 0:
+                out = hd >= 0 and lhs >= rhs
+            else:
+                out = hd >= 0 or lhs <= rhs
+        return out
+
+    @ti.func
+    def steer_to(direction, vi, max_speed, max_force):
+        """Reynolds (1999) steering: (max_speed * direction / |direction| - v), capped at max_force."""
+        n = direction.norm()
+        out = ti.Vector.zero(real, dim)
+        if n > 0:
+            out = limit(direction * (max_speed / n) - vi, max_force)
+        return out
+
+    @ti.func
+    def flee(n, h):
+        """Avoidance direction from an obstacle of outward normal n for an agent heading h: n, plus,
+        when the obstacle is ahead (n . h < 0), the unit lateral part of n across h (a fixed side,
+        h turned +90 degrees about z, when the obstacle is dead ahead), so agents go round it."""
+        out = n
+        nh = n.dot(h)
+        if nh < 0:
+            lat = n - nh * h
+            ln = lat.norm()
+            if ln > LATERAL_MIN:
+                lat = lat / ln
+            else:
+                lat = ti.Vector.zero(real, dim)
+                lat[0], lat[1] = -h[1], h[0]
+                if ti.static(dim == 3):
+                    if lat.norm() <= LATERAL_MIN:
+                        lat[0], lat[1], lat[2] = 0.0, -h[2], h[1]
+                lat = lat / lat.norm()
+            out = n + lat
+        return out
+
+    @ti.kernel
+    def boids_step(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, nbr: i32_3, count: i32_2, goal: t.vec_arr,
+                   coll: real2d, walls: real2d, ws: t.vec_arr, noise: t.vec_arr, prm: t.real_arr,
+                   xo: t.vec_arr, vo: t.vec_arr, ho: t.vec_arr):
+        """One step of dt for every agent: steering a = sum_k w_k s_k (each s_k capped at max_force),
+        v += dt a, |v| clamped to [min_speed, max_speed], x += dt v, then agents inside an obstacle
+        are put back on its surface with their inward normal velocity removed."""
+        max_speed, max_force, min_speed, dt = prm[0], prm[1], prm[2], prm[3]
+        rs2, cs, ra2, ca, rc2, cc = prm[5], prm[6], prm[8], prm[9], prm[11], prm[12]
+        for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+            xi, vi, hi = x[b, i], v[b, i], hd[b, i]
+            sep = ti.Vector.zero(real, dim)
+            ali = ti.Vector.zero(real, dim)
+            coh = ti.Vector.zero(real, dim)
+            ns, na, nc = 0, 0, 0
+            for k in range(ti.min(count[b, i], nbr.shape[2])):
+                j = nbr[b, i, k]
+                d = x[b, j] - xi
+                d2 = d.dot(d)
+                if d2 > 0:
+                    hd_ = hi.dot(d)
+                    if d2 <= rs2 and visible(hd_, d2, cs):
+                        sep -= d / d2
+                        ns += 1
+                    if d2 <= ra2 and visible(hd_, d2, ca):
+                        ali += v[b, j]
+                        na += 1
+                    if d2 <= rc2 and visible(hd_, d2, cc):
+                        coh += d
+                        nc += 1
+            acc = ti.Vector.zero(real, dim)
+            if ns > 0:
+                acc += prm[4] * steer_to(sep, vi, max_speed, max_force)
+            if na > 0:
+                acc += prm[7] * steer_to(ali, vi, max_speed, max_force)
+            if nc > 0:
+                acc += prm[10] * steer_to(coh, vi, max_speed, max_force)
+            if prm[13] > 0:  # seek with arrival (Reynolds 1999): desired speed ramps down inside the slowing radius
+                off = goal[b, i] - xi
+                dist = off.norm()
+                if dist > 0:
+                    desired = off * (max_speed * ti.min(dist / prm[14], 1.0) / dist)
+                    acc += prm[13] * limit(desired - vi, max_force)
+            if prm[15] > 0:  # avoidance: flee along the normals of obstacles closer than the distance
+                push = ti.Vector.zero(real, dim)
+                for c in range(coll.shape[0]):
+                    phi, n = surface(xi, coll, c)
+                    if phi < prm[16]:
+                        push += (1 - phi / prm[16]) * flee(n, hi)
+                if ti.static(dim == 2):
+                    for w in range(walls.shape[0]):
+                        phi, n = wall_surface(xi, walls, w)
+                        if phi < prm[16]:
+                            push += (1 - phi / prm[16]) * flee(n, hi)
+                acc += prm[15] * steer_to(push, vi, max_speed, max_force)
+            if prm[17] > 0:  # wander: a unit direction doing a random walk, steered along at max_force
+                wi = ws[b, i] + prm[18] * noise[b, i]
+                wn = wi.norm()
+                if wn > 0:
+                    wi = wi / wn
+                ws[b, i] = wi
+                acc += prm[17] * max_force * wi
+            vi += dt * acc
+            speed = vi.norm()
+            if speed > max_speed:
+                vi *= max_speed / speed
+            elif speed < min_speed:
+                if speed > 0:
+                    vi *= min_speed / speed
+                else:
+                    vi = hi * min_speed
+            xi += dt * vi
+            for c in range(coll.shape[0]):
+                phi, n = surface(xi, coll, c)
+                if phi < 0:
+                    xi -= phi * n
+                    vi -= ti.min(vi.dot(n), 0.0) * n
+            if ti.static(dim == 2):
+                for w in range(walls.shape[0]):
+                    phi, n = wall_surface(xi, walls, w)
+                    if phi < 0:
+                        xi -= phi * n
+                        vi -= ti.min(vi.dot(n), 0.0) * n
+            speed = vi.norm()
+            if speed > 1e-2:  # agents.HEADING_MIN_SPEED
+                hi = vi / speed
+            xo[b, i], vo[b, i], ho[b, i] = xi, vi, hi
+
+    return boids_step
