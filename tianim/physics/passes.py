@@ -50,10 +50,22 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
         for b, i in ti.ndrange(x.shape[0], x.shape[1]):
             kick(b, i, x, v, pinned, inv_mass, bp, nx, ny, h)
 
+    T = ti.template()
+
     @ti.func
-    def apply(b, i, x: ti.template(), v: ti.template(), W: ti.template(), inv_h):
-        x[b, i] += W[b, i]
-        v[b, i] += inv_h * W[b, i]
+    def strain_sweep(b, i, src: T, dst: T, v: T, pinned: T, inv_mass: T, topo: T, rest: T, eps, nx, inv_h):
+        corr, cnt = strain_gather(b, i, src, pinned, inv_mass, topo, rest, eps, nx)
+        corr *= SOR / ti.max(cnt, 1)
+        dst[b, i] = src[b, i] + corr
+        v[b, i] += inv_h * corr
+
+    @ti.func
+    def contact_sweep(b, i, src: T, dst: T, v: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T,
+                      excl_idx: T, k_excl, nx, thick, inv_h):
+        corr, cnt = contact_gather(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick)
+        corr /= ti.cast(ti.max(cnt, 1), real)
+        dst[b, i] = src[b, i] + corr
+        v[b, i] += inv_h * corr
 
     @ti.kernel
     def post(x: vec_arr, v: vec_arr, W: vec_arr, pinned: mask_arr, inv_mass: real_arr, bp: real_arr,
@@ -66,23 +78,33 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
                 ti.loop_config(serialize=serial)
                 for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                     project_colour(b, i, c, x, v, pinned, inv_mass, bp, nx, ny, h)
-        for _it in ti.static(range(strain_iters)):
+        # Jacobi sweeps ping-pong between x and W (the corrected positions), one parallel loop per sweep:
+        # sweep k reads src and writes dst = src + correction (and v += correction / h); an odd count
+        # ends with a copy back into x.
+        for it in ti.static(range(strain_iters)):
             ti.loop_config(serialize=serial)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                corr, cnt = strain_gather(b, i, x, pinned, inv_mass, topo, rest, eps, nx)
-                W[b, i] = corr * (SOR / ti.max(cnt, 1))
+                if ti.static(it % 2 == 0):
+                    strain_sweep(b, i, x, W, v, pinned, inv_mass, topo, rest, eps, nx, inv_h)
+                else:
+                    strain_sweep(b, i, W, x, v, pinned, inv_mass, topo, rest, eps, nx, inv_h)
+        if ti.static(strain_iters % 2 == 1):
             ti.loop_config(serialize=serial)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                apply(b, i, x, v, W, inv_h)
-        for _it in ti.static(range(sc_iters)):
+                x[b, i] = W[b, i]
+        for it in ti.static(range(sc_iters)):
             ti.loop_config(serialize=serial)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                corr, cnt = contact_gather(b, i, x, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
-                                           thick)
-                W[b, i] = corr / ti.cast(ti.max(cnt, 1), real)
+                if ti.static(it % 2 == 0):
+                    contact_sweep(b, i, x, W, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick,
+                                  inv_h)
+                else:
+                    contact_sweep(b, i, W, x, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick,
+                                  inv_h)
+        if ti.static(sc_iters % 2 == 1):
             ti.loop_config(serialize=serial)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                apply(b, i, x, v, W, inv_h)
+                x[b, i] = W[b, i]
         if ti.static(colliders):
             ti.loop_config(serialize=serial)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):

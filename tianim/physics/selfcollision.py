@@ -16,10 +16,11 @@ thickness: grids ``max(2, ceil(t / min(dx, dy)))`` (so every spring of the 12-st
 edge models ``max(1, ceil(t / shortest spring))``.
 
 Neighbours come from :class:`tianim.spatial.NeighbourGrid` (the one neighbour grid) queried at
-radius ``t + margin``. The list is reused until some particle has moved, relative to its copy's
-mean motion (the centre of the displacement box), by more than ``margin / 2`` since the build:
-then no pair can have come within t without being listed (|x_i - x_j| grows or shrinks by at most
-``|dx_i - c| + |dx_j - c|``), so the candidate set always contains every contact.
+radius ``t + margin``. The list is reused while the spread of the copy's displacements since the
+build, ``sqrt(sum_a (max_k d_ka - min_k d_ka)^2)`` with ``d = x - x_build``, stays below the margin:
+``|x_i - x_j|`` changes by at most ``|d_i - d_j|``, which that spread bounds, so no pair can have come
+within t without being listed and the candidate set always contains every contact. A cloth that
+moves as a whole (falls, is carried) keeps its list; the check costs three passes over the positions.
 
 Determinism. The corrections of a particle are summed in 64-bit fixed point
 (:data:`FIXED_POINT` steps per thickness): integer addition is associative, so the result does not
@@ -54,8 +55,8 @@ class SelfCollision:
     thickness : float
         Minimum distance t > 0 [m] kept between non-neighbour particles.
     margin : float, optional
-        Extra query radius [m] (default ``t / 2``); the neighbour list is rebuilt when a particle has
-        moved more than ``margin / 2`` relative to its copy since the last build.
+        Extra query radius [m] (default ``t / 2``); the neighbour list is rebuilt when the particles of a
+        copy have moved relative to each other by up to ``margin`` since the last build.
     iterations : int
         Jacobi sweeps of the contact projection per substep (>= 1).
     exclude : int, optional
@@ -179,14 +180,15 @@ class Contacts:
                                   dtype=x.dtype)
 
     def _needs_rebuild(self, x) -> bool:
+        """True unless every pair's relative displacement since the build is below the margin: for any i, j,
+        ``|d_i - d_j|^2 <= sum_a (max_k d_ka - min_k d_ka)^2`` (d = x - x_build, per copy)."""
         if self.x_build is None or self.x_build.shape != x.shape:
             return True
-        d = x - self.x_build
-        centre = 0.5 * (d.max(axis=1, keepdims=True) + d.min(axis=1, keepdims=True))
-        dev = d - centre
-        worst = float(np.max(np.einsum("bnd,bnd->bn", dev, dev)))
-        half = 0.5 * self.sc.query_margin * (1 - 1e-5)
-        return not worst <= half * half
+        d = np.subtract(x, self.x_build, out=self._disp)
+        spread = d.max(axis=1) - d.min(axis=1)  # (B, D)
+        worst = float(np.max(np.einsum("bd,bd->b", spread, spread)))
+        m = self.sc.query_margin * (1 - 1e-5)
+        return not worst <= m * m
 
     def update(self, x):
         """Rebuild the candidate lists if needed; returns ``(nbr (B, N, K), count (B, N))``."""
@@ -208,6 +210,7 @@ class Contacts:
                                       dtype=x.dtype)
         self.nbr, self.count = nb.indices, nb.counts
         self.x_build = x.copy()
+        self._disp = np.empty_like(x)
         self.rebuilds += 1
         return self.nbr, self.count
 
