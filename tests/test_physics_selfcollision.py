@@ -213,3 +213,13 @@ def test_bad_scenes_are_refused_before_anything_changes():
     with pytest.raises(ValueError, match="implicit_euler does not model bending"):
         tp.ImplicitEuler().step(bent, s, 1e-3, 2)
     assert np.array_equal(s.x[0], bent.positions.astype(np.float32))
+
+
+def test_bench_scene_agrees_at_a_tiny_size():
+    """`tianim bench cloth`'s self-collision rows time a contact-free cloth: with and without the feature
+    the results must be bit-identical (the bench refuses to time otherwise)."""
+    from tianim.bench.cloth import selfcollision_agreement, selfcollision_row
+
+    assert selfcollision_agreement(n=16) == 0.0
+    row = selfcollision_row(n=12, repeats=1, substeps=8)
+    assert row["selfcollision_cost_ratio"] > 0 and row["rebuilds_per_call"] >= 0
