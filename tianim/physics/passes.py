@@ -28,16 +28,21 @@ from tianim.physics.strain import SOR, strain_funcs
 
 #: Scenes with at most this many particles x copies run the passes' loops serially (no thread wake-up).
 SERIAL_MAX = 4096
+#: Particles per chunk of the in-kernel validity check of the neighbour lists.
+CHUNK = 256
 
 
 @cached_variants
-def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders, serial):
-    """``(pre, post)`` kernels; ``bend_kind``: None, "kick" (explicit) or "xpbd"."""
+def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders, serial, check=True):
+    """``(pre, post)`` kernels; ``bend_kind``: None, "kick" (explicit) or "xpbd"; ``check``: the contact
+    sweeps first test the neighbour lists (``run[b] = 1`` where still valid) and act only on valid copies;
+    without it they act where ``run[b] != 0`` as given (the second launch, after a rebuild)."""
     t = kernel_types(real_name, dim)
     ti, real, vec_arr = t.ti, t.real, t.vec_arr
     real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
     i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
     i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    i32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
     kick, project_colour = bending_funcs(real_name, dim)
     strain_gather = strain_funcs(real_name, dim, grid)
     contact_gather = contact_funcs(real_name, dim, grid)
@@ -61,17 +66,21 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
 
     @ti.func
     def contact_sweep(b, i, src: T, dst: T, v: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T,
-                      excl_idx: T, k_excl, nx, thick, inv_h):
-        corr, cnt = contact_gather(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick)
-        corr /= ti.cast(ti.max(cnt, 1), real)
-        dst[b, i] = src[b, i] + corr
-        v[b, i] += inv_h * corr
+                      excl_idx: T, k_excl, nx, thick, inv_h, run: T):
+        if run[b] != 0:
+            corr, cnt = contact_gather(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
+                                       thick)
+            corr /= ti.cast(ti.max(cnt, 1), real)
+            dst[b, i] = src[b, i] + corr
+            v[b, i] += inv_h * corr
+        else:
+            dst[b, i] = src[b, i]
 
     @ti.kernel
     def post(x: vec_arr, v: vec_arr, W: vec_arr, pinned: mask_arr, inv_mass: real_arr, bp: real_arr,
              topo: int_arr, rest: real_arr, nbr: i32_3, count: i32_2, excl_off: int_arr, excl_idx: int_arr,
              coll: real2_arr, h: real, eps: real, thick: real, g_norm: real, nx: ti.i32, ny: ti.i32,
-             k_excl: ti.i32):
+             k_excl: ti.i32, xb: vec_arr, spread: real2_arr, run: i32_1, margin: real):
         inv_h = 1 / h
         if ti.static(bend_kind == "xpbd"):
             for c in ti.static(range(6)):
@@ -92,15 +101,40 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
             ti.loop_config(serialize=serial)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 x[b, i] = W[b, i]
+        if ti.static(sc_iters and check):
+            # Are the neighbour lists still valid? The spread of the displacements since the build, per
+            # chunk of CHUNK particles (parallel), then per copy (selfcollision.Contacts docstring).
+            nch = spread.shape[1] // (2 * dim)
+            ti.loop_config(serialize=serial)
+            for b, c in ti.ndrange(x.shape[0], nch):
+                hi = ti.Vector([-1e30] * dim, dt=real)
+                lo = ti.Vector([1e30] * dim, dt=real)
+                for k in range(c * CHUNK, ti.min((c + 1) * CHUNK, x.shape[1])):
+                    d = x[b, k] - xb[b, k]
+                    hi = ti.max(hi, d)
+                    lo = ti.min(lo, d)
+                for a in ti.static(range(dim)):
+                    spread[b, 2 * dim * c + a] = hi[a]
+                    spread[b, 2 * dim * c + dim + a] = lo[a]
+            ti.loop_config(serialize=serial)
+            for b in range(x.shape[0]):
+                hi = ti.Vector([-1e30] * dim, dt=real)
+                lo = ti.Vector([1e30] * dim, dt=real)
+                for c in range(nch):
+                    for a in ti.static(range(dim)):
+                        hi[a] = ti.max(hi[a], spread[b, 2 * dim * c + a])
+                        lo[a] = ti.min(lo[a], spread[b, 2 * dim * c + dim + a])
+                w = hi - lo
+                run[b] = ti.cast(w.dot(w) <= margin * margin, ti.i32)
         for it in ti.static(range(sc_iters)):
             ti.loop_config(serialize=serial)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 if ti.static(it % 2 == 0):
                     contact_sweep(b, i, x, W, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick,
-                                  inv_h)
+                                  inv_h, run)
                 else:
                     contact_sweep(b, i, W, x, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick,
-                                  inv_h)
+                                  inv_h, run)
         if ti.static(sc_iters % 2 == 1):
             ti.loop_config(serialize=serial)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
@@ -108,7 +142,9 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
         if ti.static(colliders):
             ti.loop_config(serialize=serial)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                if pinned[b, i] == 0:
+                # with self-collision, a copy whose lists were stale gets its contacts and colliders in the
+                # second launch: every copy runs the same sequence whatever the others need
+                if pinned[b, i] == 0 and (ti.static(sc_iters == 0) or run[b] != 0):
                     x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, g_norm, h)
 
     return pre, post
@@ -160,6 +196,16 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
         excl_off, excl_idx, k_excl = contacts.excl_off, contacts.excl_idx, contacts.k_excl
     else:
         excl_off, excl_idx, k_excl = _empty((2,)), _empty((1,)), 0
+    if contacts is not None:
+        contacts.ensure(state.x)
+        nch = -(-model.n_particles // CHUNK)
+        spread = buffer("passes_spread", (state.batch, 2 * model.dim * nch), dtype)
+        run = buffer("passes_run", (state.batch,), np.int32)
+        margin = real(self_collision.query_margin * (1 - 1e-5))
+        _pre2, fix = _kernels(dtype.name, model.dim, grid, None, 0, sc_iters, len(model.colliders) > 0, serial,
+                              False)
+    else:
+        spread, run, margin = np.zeros((1, 2), dtype), _empty((1,)), real(0)
     for _ in range(int(substeps)):
         if bend_kind == "kick":
             pre(state.x, state.v, pinned, data["inv_mass"], bp, h, nx, ny)
@@ -167,8 +213,15 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
         if not post_needed:
             continue
         if contacts is not None:
-            nbr, count = contacts.update(state.x)
+            nbr, count, xb = contacts.nbr, contacts.count, contacts.x_build
         else:
-            nbr, count = _empty((1, 1, 1)), _empty((1, 1))
+            nbr, count, xb = _empty((1, 1, 1)), _empty((1, 1)), state.x
         post(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], nbr, count, excl_off,
-             excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl)
+             excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl, xb, spread, run, margin)
+        if contacts is not None and not run.all():
+            # some copy moved too far for its lists: rebuild, then its contacts (and colliders) only
+            contacts.rebuild(state.x)
+            np.subtract(1, run, out=run)
+            fix(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], contacts.nbr,
+                contacts.count, excl_off, excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl,
+                contacts.x_build, spread, run, margin)

@@ -181,19 +181,30 @@ class Contacts:
 
     def _needs_rebuild(self, x) -> bool:
         """True unless every pair's relative displacement since the build is below the margin: for any i, j,
-        ``|d_i - d_j|^2 <= sum_a (max_k d_ka - min_k d_ka)^2`` (d = x - x_build, per copy)."""
+        ``|d_i - d_j|^2 <= sum_a (max_k d_ka - min_k d_ka)^2`` (d = x - x_build, per copy). NumPy form of the
+        check the passes kernel runs (:mod:`tianim.physics.passes`)."""
         if self.x_build is None or self.x_build.shape != x.shape:
             return True
-        d = np.subtract(x, self.x_build, out=self._disp)
+        d = x - self.x_build
         spread = d.max(axis=1) - d.min(axis=1)  # (B, D)
         worst = float(np.max(np.einsum("bd,bd->b", spread, spread)))
         m = self.sc.query_margin * (1 - 1e-5)
         return not worst <= m * m
 
+    def ensure(self, x):
+        """Build the lists if there are none for positions of this shape."""
+        if self.x_build is None or self.x_build.shape != x.shape:
+            self.rebuild(x)
+
     def update(self, x):
         """Rebuild the candidate lists if needed; returns ``(nbr (B, N, K), count (B, N))``."""
-        if not self._needs_rebuild(x):
-            return self.nbr, self.count
+        if self._needs_rebuild(x):
+            self.rebuild(x)
+        return self.nbr, self.count
+
+    def rebuild(self, x):
+        """Sort ``x`` into the grid (a new grid if x left its box) and query every particle's candidates
+        (growing the rows until none overflows)."""
         if self.grid is None or not (np.all(x.min(axis=(0, 1)) >= self.grid.lower)
                                      and np.all(x.max(axis=(0, 1)) <= self.grid.upper)):
             self._new_grid(x)
@@ -203,16 +214,14 @@ class Contacts:
             if not nb.overflow:
                 break
             self.capacity = int(min(1 << 16, 2 * int(nb.counts.max())))
-            lo, hi, h = self.grid.lower, self.grid.upper, self.grid.cell_size
             from tianim.spatial import NeighbourGrid
 
+            lo, hi, h = self.grid.lower, self.grid.upper, self.grid.cell_size
             self.grid = NeighbourGrid(lo, hi, h, x.shape[1], batch=x.shape[0], max_neighbours=self.capacity,
                                       dtype=x.dtype)
         self.nbr, self.count = nb.indices, nb.counts
         self.x_build = x.copy()
-        self._disp = np.empty_like(x)
         self.rebuilds += 1
-        return self.nbr, self.count
 
 
 _CONTACTS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
