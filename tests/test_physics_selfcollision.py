@@ -153,6 +153,19 @@ def test_exclusion_rule():
     assert [idx[off[i]:off[i + 1]].tolist() for i in (0, 3)] == [[1, 2], [1, 2, 4, 5]]
 
 
+def test_coincident_particles_separate_at_the_capped_speed():
+    """Two particles placed at the same point have no direction between them: they are split along y
+    (higher index up) and, with max_separation_speed, leave each other at no more than that speed."""
+    model = tp.particles([[0.0, 1.0, 0.0], [0.0, 1.0, 0.0], [0.5, 1.0, 0.0]], gravity=0.0)
+    state = model.state()
+    solver = tp.XPBD(self_collision=tp.SelfCollision(0.1, max_separation_speed=1.0))
+    solver.step(model, state, 1e-3, 200)
+    x, v = state.x[0], state.v[0]
+    assert x[1, 1] - x[0, 1] >= 0.1 and x[1, 1] > x[0, 1]
+    assert np.abs(v).max() <= 1.0 + 1e-4  # float32 rounding of XPBD's v = dx / h
+    assert np.array_equal(x[2], [0.5, 1.0, 0.0])  # the far particle is untouched
+
+
 def test_features_off_change_nothing():
     """No option, no bending: the solvers run their old kernels (the other test files pin those down bit for
     bit); the option objects and the repr of an option-free solver are as before."""
@@ -176,6 +189,7 @@ BAD = [
     (lambda: tp.SelfCollision(0.01, iterations=1.5), "SelfCollision.iterations"),
     (lambda: tp.SelfCollision(0.01, exclude=-1), "SelfCollision.exclude"),
     (lambda: tp.SelfCollision(0.01, max_neighbours=0), "SelfCollision.max_neighbours"),
+    (lambda: tp.SelfCollision(0.01, max_separation_speed=0.0), "SelfCollision.max_separation_speed"),
     (lambda: tp.XPBD(self_collision=0.01), "self_collision"),
     (lambda: tp.SymplecticEuler(self_collision="yes"), "self_collision"),
     (lambda: tp.StrainLimit(0.0), "StrainLimit.max_stretch"),

@@ -66,13 +66,18 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
 
     @ti.func
     def contact_sweep(b, i, src: T, dst: T, v: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T,
-                      excl_idx: T, k_excl, nx, thick, inv_h, run: T):
+                      excl_idx: T, k_excl, nx, thick, inv_h, run: T, vcap):
         if run[b] != 0:
             corr, cnt = contact_gather(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
                                        thick)
             corr /= ti.cast(ti.max(cnt, 1), real)
             dst[b, i] = src[b, i] + corr
-            v[b, i] += inv_h * corr
+            dv = inv_h * corr
+            if vcap > 0:
+                speed = dv.norm()
+                if speed > vcap:
+                    dv *= vcap / speed
+            v[b, i] += dv
         else:
             dst[b, i] = src[b, i]
 
@@ -80,7 +85,7 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
     def post(x: vec_arr, v: vec_arr, W: vec_arr, pinned: mask_arr, inv_mass: real_arr, bp: real_arr,
              topo: int_arr, rest: real_arr, nbr: i32_3, count: i32_2, excl_off: int_arr, excl_idx: int_arr,
              coll: real2_arr, h: real, eps: real, thick: real, g_norm: real, nx: ti.i32, ny: ti.i32,
-             k_excl: ti.i32, xb: vec_arr, spread: real2_arr, run: i32_1, margin: real):
+             k_excl: ti.i32, xb: vec_arr, spread: real2_arr, run: i32_1, margin: real, vcap: real):
         inv_h = 1 / h
         if ti.static(bend_kind == "xpbd"):
             for c in ti.static(range(6)):
@@ -131,10 +136,10 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 if ti.static(it % 2 == 0):
                     contact_sweep(b, i, x, W, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick,
-                                  inv_h, run)
+                                  inv_h, run, vcap)
                 else:
                     contact_sweep(b, i, W, x, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick,
-                                  inv_h, run)
+                                  inv_h, run, vcap)
         if ti.static(sc_iters % 2 == 1):
             ti.loop_config(serialize=serial)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
@@ -192,6 +197,8 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
     eps = real(strain_limit.max_stretch if strain_limit is not None else 0.0)
     thick = real(self_collision.thickness if self_collision is not None else 0.0)
     g_norm = real(float(np.linalg.norm(model.gravity)))
+    cap = None if self_collision is None else self_collision.max_separation_speed
+    vcap = real(0.0 if cap is None else cap)  # 0: no cap
     if contacts is not None:
         excl_off, excl_idx, k_excl = contacts.excl_off, contacts.excl_idx, contacts.k_excl
     else:
@@ -217,11 +224,11 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
         else:
             nbr, count, xb = _empty((1, 1, 1)), _empty((1, 1)), state.x
         post(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], nbr, count, excl_off,
-             excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl, xb, spread, run, margin)
+             excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl, xb, spread, run, margin, vcap)
         if contacts is not None and not run.all():
             # some copy moved too far for its lists: rebuild, then its contacts (and colliders) only
             contacts.rebuild(state.x)
             np.subtract(1, run, out=run)
             fix(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], contacts.nbr,
                 contacts.count, excl_off, excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl,
-                contacts.x_build, spread, run, margin)
+                contacts.x_build, spread, run, margin, vcap)

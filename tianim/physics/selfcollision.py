@@ -9,6 +9,9 @@ of Mueller et al., "Position Based Dynamics", 2007, section 3.5; Bridson, Fedkiw
 same minimum separation ("thickness") between cloth particles). This runs after every substep, in
 XPBD and in the explicit solvers (:mod:`tianim.physics.passes`).
 
+Two particles at exactly the same position have no direction between them: they are split along the
+y axis (the higher index up), so that they separate deterministically.
+
 Topological neighbours are never tested: on a cloth grid the particles within ``exclude`` grid
 steps (``|d_col| <= k and |d_row| <= k``), on other models the particles within ``exclude``
 springs (graph hops). The default k makes every excluded pair's rest distance cover the
@@ -64,6 +67,10 @@ class SelfCollision:
         from the thickness (module docstring).
     max_neighbours : int, optional
         Initial capacity of a neighbour row (grows by itself when a row overflows; nothing is dropped).
+    max_separation_speed : float, optional
+        Cap [m/s] on the velocity a contact correction adds to a particle (``|dx / h|``), as PhysX's
+        ``maxDepenetrationVelocity``: overlaps that did not arise within the substep (particles placed
+        or teleported into each other) are then pushed apart without a blow-up. None (default): no cap.
     """
 
     thickness: float
@@ -71,6 +78,7 @@ class SelfCollision:
     iterations: int = 2
     exclude: int | None = None
     max_neighbours: int | None = None
+    max_separation_speed: float | None = None
 
     def __post_init__(self):
         t = check_finite_scalar("SelfCollision.thickness", self.thickness, lo=0.0, lo_open=True)
@@ -81,6 +89,9 @@ class SelfCollision:
             check_int("SelfCollision.exclude", self.exclude, lo=0, hi=1000)
         if self.max_neighbours is not None:
             check_positive_int("SelfCollision.max_neighbours", self.max_neighbours, hi=4096)
+        if self.max_separation_speed is not None:
+            check_finite_scalar("SelfCollision.max_separation_speed", self.max_separation_speed, lo=0.0,
+                                lo_open=True)
         del t
 
     @property
@@ -273,10 +284,14 @@ def contact_funcs(real_name: str, dim: int, grid: bool):
                 j = nbr[b, i, q]
                 d = x[b, i] - x[b, j]
                 dist2 = d.dot(d)
-                if dist2 < t * t and dist2 > 0 and not excluded(i, j, excl_off, excl_idx, k_excl, nx):
+                if dist2 < t * t and not excluded(i, j, excl_off, excl_idx, k_excl, nx):
                     wj = ti.select(pinned[b, j] == 0, inv_mass[j], 0)
-                    dist = ti.sqrt(dist2)
-                    c = ((wi / (wi + wj)) * (t - dist) / dist) * d
+                    c = ti.Vector.zero(real, dim)
+                    if dist2 > 0:
+                        dist = ti.sqrt(dist2)
+                        c = ((wi / (wi + wj)) * (t - dist) / dist) * d
+                    else:  # exactly coincident: no direction; split them along the up axis, by index
+                        c[ti.static(min(1, dim - 1))] = ti.select(i > j, 1, -1) * (wi / (wi + wj)) * t
                     for a in ti.static(range(dim)):
                         acc[a] += ti.cast(ti.round(ti.cast(c[a], ti.f64) * scale), ti.i64)
                     cnt += 1
