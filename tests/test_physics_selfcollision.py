@@ -127,7 +127,7 @@ def test_bit_identical_with_one_and_two_threads():
         m = tp.cloth(12, 12, size=(0.3, 0.3), total_mass=0.05, stiffness=(100.0, 30.0, 3.0), pins="none",
                      plane="xy", origin=(-0.15, 0.32, 0.0), colliders=[tp.Ground(friction=0.5)], bending=1e-4)
         h = hashlib.sha256()
-        for method in ("xpbd", "symplectic_euler"):
+        for method in ("xpbd",):  # the explicit solvers run the same passes kernels (batch test covers both)
             s = m.state(batch=2)
             s.x[..., 2] += np.random.default_rng(0).normal(0, 0.003, s.x.shape[:2]).astype(np.float32)
             solver = tp.make_solver(method, self_collision=tp.SelfCollision(0.016), strain_limit=0.1)
