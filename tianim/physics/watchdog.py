@@ -105,6 +105,18 @@ def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool):
 
 
 def fast_energy(model, state) -> np.ndarray:
+    """Kinetic, spring and gravitational energy of every copy, shape (B, 3) [J]; a model with bending
+    counts its bending energy (:func:`tianim.physics.bending.energy`) in the spring column.
+    """
+    out = _fast_energy(model, state)
+    if getattr(model, "bending", None) is not None:
+        from tianim.physics.bending import energy as bending_energy
+
+        out[:, 1] += bending_energy(model, state.x)
+    return out
+
+
+def _fast_energy(model, state) -> np.ndarray:
     """Kinetic, spring and gravitational energy of every copy, shape (B, 3) [J], by one Taichi kernel.
 
     Same definitions as :func:`tianim.physics.energy` (pinned particles' kinetic and
