@@ -181,7 +181,8 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
     sc_iters = 0 if self_collision is None else int(self_collision.iterations)
     post_needed = bend_kind == "xpbd" or strain_iters or sc_iters
     dtype = state.dtype
-    real = dtype.type
+    def real(value):  # a Python float holding the state dtype's value (quadrants caches launches on primitives)
+        return float(dtype.type(value))
     serial = state.batch * model.n_particles <= SERIAL_MAX
     pre, post = _kernels(dtype.name, model.dim, grid, bend_kind, strain_iters, sc_iters, len(model.colliders) > 0,
                          serial)
