@@ -80,28 +80,59 @@ class JointTree:
         for arr in (self.parents, self.offsets, self.axes, self.base, self.lower, self.upper, self.revolute):
             arr.setflags(write=False)
 
-    def frames(self, q):
-        """World joint positions (..., n, 3), rotations (..., n, 3, 3) and axes (..., n, 3) for ``q`` (..., n).
+    def frames(self, q, joints=None):
+        """World joint positions (..., k, 3), rotations (..., k, 3, 3) and axes (..., k, 3) for ``q`` (..., n).
 
         Position i is the joint's pivot; rotation i is its frame *after* its own motion;
-        axis i is its world axis.
+        axis i is its world axis. ``joints`` (optional index array of k joints) selects which
+        joints are returned (all n by default; every joint is computed either way).
+
+        Batched over all leading axes of ``q`` in one call: the loop runs over the n joints and each
+        step is a handful of whole-batch array operations. A revolute step uses Rodrigues' formula
+        multiplied out, ``R_p Rot(a, q) = cos q R_p + sin q (R_p K) + (1 - cos q)(R_p a) a^T``
+        (K the cross-product matrix of a), so the only matrix products are by the joint's constant
+        K, a and offset: (3B, 3) x (3, 3) products that go to BLAS, no batched 3x3 x 3x3 products.
         """
         q = joint_vector("q", q, self.n)
         batch = q.shape[:-1]
-        pos = np.empty(batch + (self.n, 3))
-        rot = np.empty(batch + (self.n, 3, 3))
-        ax = np.empty(batch + (self.n, 3))
-        for i in range(self.n):
-            p = self.parents[i]
-            Rp = rot[..., p, :, :] if p >= 0 else np.broadcast_to(np.eye(3), batch + (3, 3))
-            pp = pos[..., p, :] if p >= 0 else self.base
-            ax[..., i, :] = Rp @ self.axes[i]
-            pos[..., i, :] = pp + Rp @ self.offsets[i]
-            if self.revolute[i]:
-                rot[..., i, :, :] = Rp @ rotation(self.axes[i], q[..., i])
+        B = int(np.prod(batch, dtype=np.int64))
+        n = self.n
+        qT = np.ascontiguousarray(q.reshape(B, n).T)  # (n, B): one contiguous row per joint
+        cos, sin = np.cos(qT), np.sin(qT)
+        cos_m = 1.0 - cos
+        sel = np.arange(n) if joints is None else np.asarray(joints, dtype=np.int64)
+        pos = np.empty((n, B, 3))
+        rot = np.empty((n, B, 3, 3))
+        ax = np.empty((n, B, 3))
+        eye = np.broadcast_to(np.eye(3), (B, 3, 3))
+        for i in range(n):
+            p = int(self.parents[i])
+            a = self.axes[i]
+            if p >= 0:
+                Rp, pp = rot[p], pos[p]
+                R2 = Rp.reshape(3 * B, 3)  # the rows of every parent rotation, stacked
+                ax[i] = (R2 @ a).reshape(B, 3)
+                pos[i] = pp + (R2 @ self.offsets[i]).reshape(B, 3)
             else:
-                pos[..., i, :] += ax[..., i, :] * q[..., i, None]
-                rot[..., i, :, :] = Rp
+                Rp, R2 = eye, None
+                ax[i] = a
+                pos[i] = self.base + self.offsets[i]
+            if self.revolute[i]:
+                x, y, z = a
+                K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+                c, s, t = cos[i][:, None, None], sin[i][:, None, None], cos_m[i][:, None, None]
+                if R2 is None:
+                    rot[i] = c * eye + s * K + t * np.outer(a, a)
+                else:
+                    RK = (R2 @ K).reshape(B, 3, 3)
+                    rot[i] = c * Rp + s * RK + t * (ax[i][:, :, None] * a)
+            else:
+                pos[i] += ax[i] * qT[i][:, None]
+                rot[i] = Rp
+        k = sel.size
+        pos = np.moveaxis(pos[sel], 0, 1).reshape(batch + (k, 3))
+        rot = np.moveaxis(rot[sel], 0, 1).reshape(batch + (k, 3, 3))
+        ax = np.moveaxis(ax[sel], 0, 1).reshape(batch + (k, 3))
         return pos, rot, ax
 
     def joint_positions(self, q) -> np.ndarray:
