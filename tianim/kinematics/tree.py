@@ -34,6 +34,26 @@ def rotation(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     return np.eye(3) + s * K + (1 - c) * (K @ K)
 
 
+def _cos_sin(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """cos q and sin q from one tangent of the half angle, ``t = tan(q/2)``:
+    ``cos q = (1 - t^2)/(1 + t^2)``, ``sin q = 2t/(1 + t^2)`` (absolute error ~1e-16 for every q).
+
+    NumPy's float64 ``tan`` is SIMD-vectorised where ``sin`` and ``cos`` are not: about 5x faster
+    for the two together on large batches. ``tan(q/2)`` stays finite for every float q (pi/2 is not
+    a float).
+    """
+    t = np.multiply(q, 0.5)
+    np.tan(t, out=t)
+    c = np.multiply(t, t)
+    d = np.add(c, 1.0)
+    np.reciprocal(d, out=d)
+    np.subtract(1.0, c, out=c)
+    c *= d
+    t *= d
+    t *= 2.0
+    return c, t
+
+
 class JointTree:
     """A tree of 1-DOF joints (see the module docstring). FK for every joint; Jacobians of any point.
 
@@ -87,52 +107,76 @@ class JointTree:
         axis i is its world axis. ``joints`` (optional index array of k joints) selects which
         joints are returned (all n by default; every joint is computed either way).
 
-        Batched over all leading axes of ``q`` in one call: the loop runs over the n joints and each
-        step is a handful of whole-batch array operations. A revolute step uses Rodrigues' formula
-        multiplied out, ``R_p Rot(a, q) = cos q R_p + sin q (R_p K) + (1 - cos q)(R_p a) a^T``
-        (K the cross-product matrix of a), so the only matrix products are by the joint's constant
-        K, a and offset: (3B, 3) x (3, 3) products that go to BLAS, no batched 3x3 x 3x3 products.
+        Batched over all leading axes of ``q`` in one call: the loop runs over the n joints, and each
+        step is a few whole-batch operations on contiguous (3, B) blocks (the batch is the last, fastest
+        axis inside; the returned arrays are views with the batch axes first). A revolute step uses
+        Rodrigues' formula multiplied out, ``R_p Rot(a, q) = cos q R_p + sin q (R_p K) + (1 - cos q)
+        (R_p a) a^T`` (K the cross-product matrix of a); about a coordinate axis e_k that is a plane
+        rotation of the two other columns of R_p: no 3x3 by 3x3 products at all.
         """
         q = joint_vector("q", q, self.n)
         batch = q.shape[:-1]
         B = int(np.prod(batch, dtype=np.int64))
         n = self.n
         qT = np.ascontiguousarray(q.reshape(B, n).T)  # (n, B): one contiguous row per joint
-        cos, sin = np.cos(qT), np.sin(qT)
-        cos_m = 1.0 - cos
-        sel = np.arange(n) if joints is None else np.asarray(joints, dtype=np.int64)
-        pos = np.empty((n, B, 3))
-        rot = np.empty((n, B, 3, 3))
-        ax = np.empty((n, B, 3))
-        eye = np.broadcast_to(np.eye(3), (B, 3, 3))
+        cos, sin = _cos_sin(qT)
+        pos = np.empty((n, 3, B))
+        rot = np.empty((n, 3, 3, B))  # rot[i, r, c] is a contiguous (B,) row of element (r, c)
+        ax = np.empty((n, 3, B))
+        eye = np.eye(3)[:, :, None]
+        tmp = np.empty((3, B))  # scratch: every product below writes into preallocated memory
         for i in range(n):
             p = int(self.parents[i])
-            a = self.axes[i]
-            if p >= 0:
-                Rp, pp = rot[p], pos[p]
-                R2 = Rp.reshape(3 * B, 3)  # the rows of every parent rotation, stacked
-                ax[i] = (R2 @ a).reshape(B, 3)
-                pos[i] = pp + (R2 @ self.offsets[i]).reshape(B, 3)
+            a, o = self.axes[i], self.offsets[i]
+            k = int(np.argmax(np.abs(a)))
+            aligned = abs(a[k]) == 1.0  # about +-e_k
+            Rp = rot[p] if p >= 0 else np.broadcast_to(eye, (3, 3, B))
+            if p < 0:
+                ax[i] = a[:, None]
+                pos[i] = (self.base + o)[:, None]
             else:
-                Rp, R2 = eye, None
-                ax[i] = a
-                pos[i] = self.base + self.offsets[i]
-            if self.revolute[i]:
+                if aligned:
+                    np.multiply(Rp[:, k], a[k], out=ax[i])
+                else:
+                    np.multiply(Rp[:, 0], a[0], out=ax[i])
+                    for d in (1, 2):
+                        np.multiply(Rp[:, d], a[d], out=tmp)
+                        ax[i] += tmp
+                pos[i] = pos[p]
+                for d in range(3):
+                    if o[d] != 0.0:
+                        np.multiply(Rp[:, d], o[d], out=tmp)
+                        pos[i] += tmp
+            if not self.revolute[i]:
+                np.multiply(ax[i], qT[i], out=tmp)
+                pos[i] += tmp
+                rot[i] = Rp
+                continue
+            c, s_ = cos[i], sin[i]
+            R = rot[i]
+            if aligned:  # the columns u, v after k (cyclic) turn in their plane; column k stays
+                u, v = (k + 1) % 3, (k + 2) % 3
+                if a[k] < 0:
+                    s_ = -s_
+                R[:, k] = Rp[:, k]
+                np.multiply(Rp[:, u], c, out=R[:, u])
+                np.multiply(Rp[:, v], s_, out=tmp)
+                R[:, u] += tmp
+                np.multiply(Rp[:, v], c, out=R[:, v])
+                np.multiply(Rp[:, u], s_, out=tmp)
+                R[:, v] -= tmp
+            else:
                 x, y, z = a
                 K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-                c, s, t = cos[i][:, None, None], sin[i][:, None, None], cos_m[i][:, None, None]
-                if R2 is None:
-                    rot[i] = c * eye + s * K + t * np.outer(a, a)
-                else:
-                    RK = (R2 @ K).reshape(B, 3, 3)
-                    rot[i] = c * Rp + s * RK + t * (ax[i][:, :, None] * a)
-            else:
-                pos[i] += ax[i] * qT[i][:, None]
-                rot[i] = Rp
-        k = sel.size
-        pos = np.moveaxis(pos[sel], 0, 1).reshape(batch + (k, 3))
-        rot = np.moveaxis(rot[sel], 0, 1).reshape(batch + (k, 3, 3))
-        ax = np.moveaxis(ax[sel], 0, 1).reshape(batch + (k, 3))
+                RK = np.einsum("rkb,kc->rcb", Rp, K)
+                R[...] = c * Rp + s_ * RK + (1.0 - c) * (ax[i][:, None, :] * a[None, :, None])
+        if joints is not None:
+            sel = np.asarray(joints, dtype=np.int64)
+            pos, rot, ax = pos[sel], rot[sel], ax[sel]
+        k = pos.shape[0]
+        pos = np.moveaxis(pos, -1, 0).reshape(batch + (k, 3))
+        rot = np.moveaxis(rot, -1, 0).reshape(batch + (k, 3, 3))
+        ax = np.moveaxis(ax, -1, 0).reshape(batch + (k, 3))
         return pos, rot, ax
 
     def joint_positions(self, q) -> np.ndarray:

@@ -177,3 +177,51 @@ def virtual_markers(skeleton: Skeleton, motion, joints, local) -> np.ndarray:
     """Markers rigidly attached to ``skeleton``'s segments, moved by ``motion`` (F, C): (F, M, 3) [m]."""
     pos, rot = skeleton.fk(motion)
     return attach_markers(pos, rot, joints, local)
+
+
+def random_skeleton(n_joints: int = 31, seed: int = 0, six_channel: float = 0.0,
+                    end_sites: bool = True) -> Skeleton:
+    """A random skeleton: ``n_joints`` joints with channels (plus an End Site on every leaf if ``end_sites``).
+
+    The root has six channels; every other joint three rotation channels in a random order (mixed orders),
+    or, with probability ``six_channel``, six channels (positions and rotations, both orders random).
+    Parents favour a chain (60 %: the previous joint); offsets ~ N(0, 0.15 m) per axis.
+    """
+    n = check_positive_int("n_joints", n_joints, hi=5000)
+    p6 = check_finite_scalar("six_channel", six_channel, lo=0.0, hi=1.0)
+    rng = np.random.default_rng(check_positive_int("seed", seed, lo=0, hi=None))
+    pos, rots = list(_ROOT[:3]), list(_ROOT[3:])
+    parents, channels = [-1], [tuple(pos) + tuple(rng.permutation(rots))]
+    for j in range(1, n):
+        parents.append(j - 1 if rng.random() < 0.6 else int(rng.integers(0, j)))
+        c = tuple(rng.permutation(rots))
+        if rng.random() < p6:
+            c = tuple(rng.permutation(pos)) + c if rng.random() < 0.5 else c + tuple(rng.permutation(pos))
+        channels.append(c)
+    names = [f"J{j}" for j in range(n)]
+    ends = [False] * n
+    if end_sites:
+        leaves = sorted(set(range(n)) - set(parents))
+        for leaf in leaves:
+            names.append(f"J{leaf}_End")
+            parents.append(leaf)
+            channels.append(())
+            ends.append(True)
+    offsets = rng.normal(0.0, 0.15, size=(len(names), 3))
+    offsets[0] = 0.0
+    # parents must come before children: end sites were appended last, which keeps that order
+    return Skeleton(names, parents, offsets, channels, end_sites=ends)
+
+
+def random_motion(skeleton: Skeleton, n_frames: int = 100, seed: int = 0, amplitude: float = 60.0) -> np.ndarray:
+    """A smooth random motion (n_frames, C): each rotation channel a sum of three sinusoids of up to
+    ``amplitude`` degrees, each position channel a random walk of 5 mm steps around its start."""
+    n = check_positive_int("n_frames", n_frames)
+    amp = check_finite_scalar("amplitude", amplitude, lo=0.0)
+    rng = np.random.default_rng(check_positive_int("seed", seed, lo=0, hi=None))
+    C = skeleton.n_channels
+    t = np.arange(n)[:, None] / 60.0
+    freq, phase = rng.uniform(0.1, 2.0, (3, C)), rng.uniform(0, 2 * np.pi, (3, C))
+    ang = sum(amp / 3 * np.sin(2 * np.pi * freq[k] * t + phase[k]) for k in range(3))
+    walk_ = np.cumsum(rng.normal(0.0, 0.005, (n, C)), axis=0) + rng.normal(0.0, 0.1, C)
+    return np.where(skeleton.rotation_channel, ang, walk_)
