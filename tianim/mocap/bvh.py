@@ -99,7 +99,7 @@ def _tokens(header: str):
 def _parse_hierarchy(header: str, src: str, has_motion: bool):
     toks = list(_tokens(header))
     pos = 0
-    last_line = toks[-1][0] if toks else 1
+    last_line = max(1, header.count("\n") + (0 if header.endswith("\n") else 1))  # the file's last line
 
     def err(line, problem):
         return BvhError(f"{src}: line {line}: {problem}")
@@ -240,19 +240,21 @@ def _parse_motion(data: bytes, start: int, line: int, C: int, src: str):
         return BvhError(f"{src}: line {ln}: {problem}")
 
     def next_line(pos, ln, what):
-        """The next non-blank line after the newline at or after ``pos``: (text, its line, end index)."""
+        """The next non-blank line after the newline at ``pos`` (which ends line ``ln``): (text, line, end)."""
+        last = ln
         while True:
-            i = data.find(b"\n", pos)
-            if i < 0:
-                raise err(ln, f"the file ends after line {ln} (truncated?): expected {what}")
-            ln += 1
-            j = data.find(b"\n", i + 1)
+            if pos >= len(data):
+                raise err(last, f"the file ends here (truncated?): expected {what}")
+            j = data.find(b"\n", pos + 1)
             j = len(data) if j < 0 else j
-            text = data[i + 1:j]
+            ln += 1
+            text = data[pos + 1:j]
             if text.strip():
                 return text, ln, j
-            pos = i + 1
+            pos = j
 
+    nl0 = data.find(b"\n", start)
+    start = len(data) if nl0 < 0 else nl0
     text, line, end = next_line(start, line, "'Frames: N'")
     m = _FRAMES.match(text)
     if not m:
@@ -309,7 +311,7 @@ def _parse_motion(data: bytes, start: int, line: int, C: int, src: str):
     finite = np.isfinite(values)
     if not finite.all():
         idx = int(np.argmin(finite))
-        raise err(first + int(filled[idx // C]), f"value {values[idx]!r} (channel {idx % C}) is not finite; "
+        raise err(first + int(filled[idx // C]), f"value {float(values[idx])!r} (channel {idx % C}) is not finite; "
                   "frame values must be finite numbers")
     return values.reshape(n_frames, C), dt
 
