@@ -71,26 +71,32 @@ def humanoid(scale: float = 1.0) -> Skeleton:
 def gait_angles(t: np.ndarray, stride_time: float = 1.1) -> dict:
     """Joint angles (degrees) of the procedural gait at times ``t`` (F,) [s]: {(joint, channel): (F,)}.
 
-    Phase ``phi = 2 pi t / stride_time``; the right side runs half a stride behind the left. Signs are
-    for the :func:`humanoid` frame (a negative X rotation swings a hanging limb forward).
+    Phase ``phi = 2 pi t / stride_time``; the left foot is in stance for ``phi mod 2 pi`` in [0, pi)
+    (the right half a stride later). Hip flexion ``22 cos(phi)`` falls monotonically through stance
+    (heel strike at full flexion, toe-off at full extension); the knee bends only in swing
+    (``6 + 58 sin^2``, smooth at both ends), the ankle keeps the swinging foot level. Arms swing opposite
+    to the legs. Signs are for the :func:`humanoid` frame (a negative X rotation swings a hanging limb
+    forward).
     """
     phi = 2 * np.pi * np.asarray(t, dtype=np.float64) / stride_time
     a = {}
     for side, ph, sx in (("Left", phi, 1.0), ("Right", phi + np.pi, -1.0)):
-        a[(f"{side}UpLeg", "Xrotation")] = -(5.0 + 24.0 * np.sin(ph))
-        a[(f"{side}UpLeg", "Zrotation")] = sx * (1.5 + 2.0 * np.cos(ph))
-        a[(f"{side}Leg", "Xrotation")] = 6.0 + 52.0 * (0.5 + 0.5 * np.sin(ph + 0.6)) ** 3
-        a[(f"{side}Foot", "Xrotation")] = -4.0 + 9.0 * np.sin(ph - 0.9)
-        a[(f"{side}Toe", "Xrotation")] = 6.0 * np.maximum(0.0, np.sin(ph - 2.0)) ** 2
-        a[(f"{side}Arm", "Xrotation")] = 18.0 * np.sin(ph)
+        swing = np.sin(ph) < 0  # second half of the stride
+        bump = np.where(swing, np.sin(ph) ** 2, 0.0)
+        a[(f"{side}UpLeg", "Xrotation")] = -(4.0 + 22.0 * np.cos(ph)) - 8.0 * bump
+        a[(f"{side}UpLeg", "Zrotation")] = sx * (1.5 + 1.5 * np.cos(ph))
+        a[(f"{side}Leg", "Xrotation")] = 6.0 + 58.0 * bump
+        a[(f"{side}Foot", "Xrotation")] = -36.0 * bump  # keeps the swinging foot about level
+        a[(f"{side}Toe", "Xrotation")] = 0.0 * ph
+        a[(f"{side}Arm", "Xrotation")] = 16.0 * np.cos(ph)
         a[(f"{side}Arm", "Zrotation")] = sx * (7.0 + 1.5 * np.cos(ph))
-        a[(f"{side}ForeArm", "Xrotation")] = -(18.0 + 9.0 * np.sin(ph + 0.4))
-    a[("Hips", "Yrotation")] = 5.0 * np.sin(phi)
-    a[("Hips", "Zrotation")] = 2.5 * np.sin(2 * phi)
-    a[("Hips", "Xrotation")] = 3.0 + 1.5 * np.sin(2 * phi)
-    a[("Spine", "Yrotation")] = -3.5 * np.sin(phi)
-    a[("Chest", "Xrotation")] = -2.0
-    a[("Neck", "Yrotation")] = -1.5 * np.sin(phi)
+        a[(f"{side}ForeArm", "Xrotation")] = -(20.0 - 10.0 * np.cos(ph))
+    a[("Hips", "Yrotation")] = 5.0 * np.cos(phi)
+    a[("Hips", "Zrotation")] = 2.0 * np.sin(2 * phi)
+    a[("Hips", "Xrotation")] = 3.0 + 1.0 * np.sin(2 * phi)
+    a[("Spine", "Yrotation")] = -3.5 * np.cos(phi)
+    a[("Chest", "Xrotation")] = -2.0 + 0.0 * phi
+    a[("Neck", "Yrotation")] = -1.5 * np.cos(phi)
     a[("Head", "Xrotation")] = 2.0 + 1.0 * np.sin(2 * phi)
     return a
 
@@ -101,9 +107,10 @@ def walk(n_frames: int = 120, fps: float = 60.0, skeleton: Skeleton | None = Non
 
     ``skeleton`` defaults to :func:`humanoid`; any skeleton with the humanoid's joint names and
     channels works (another size, other rest offsets). The angles are :func:`gait_angles`; the root
-    position is then chosen frame by frame so that the lowest contact point - ankle at ``ankle_height``
-    (default: its rest height over the toe joint plus :data:`TOE_HEIGHT`) or toe joint at
-    :data:`TOE_HEIGHT` - is on the ground and does not slide horizontally (heel, then toe carry the body).
+    position is then chosen frame by frame so that the lowest point of the feet - an ankle at
+    ``ankle_height`` (default: its rest height over the toe joint plus :data:`TOE_HEIGHT`) or a toe
+    joint at :data:`TOE_HEIGHT` - is on the ground, and the stance foot's lower point does not slide
+    horizontally (heel, then toe carry the body).
     """
     n = check_positive_int("n_frames", n_frames)
     fps = check_finite_scalar("fps", fps, lo=0.0, lo_open=True)
@@ -116,19 +123,23 @@ def walk(n_frames: int = 120, fps: float = 60.0, skeleton: Skeleton | None = Non
     for (joint, ch), v in gait_angles(t, stride_time).items():
         motion[:, sk.channel_index(joint, ch)] = v
     feet = [sk.index(n) for n in ("LeftFoot", "RightFoot", "LeftToe", "RightToe")]
-    if ankle_height is None:  # the ankle's height over the toe joint at rest, plus the toe's 2 cm
+    if ankle_height is None:  # the ankle's height over the toe joint at rest, plus the toe's height
         rest = sk.fk(sk.rest_pose())[0][0]
         ankle_height = float(rest[feet[0], 1] - rest[feet[2], 1]) + TOE_HEIGHT
     h = check_finite_scalar("ankle_height", ankle_height)
     lift = np.array([h, h, TOE_HEIGHT, TOE_HEIGHT])
     pos = sk.fk(motion)[0]
     rel = pos[:, feet, :] - pos[:, :1, :]  # ankles and toes relative to the root, (F, 4, 3)
-    contact = np.argmin(rel[:, :, 1] - lift, axis=1)  # the lowest point carries the body (heel, then toe)
+    right = np.sin(2 * np.pi * t / stride_time) < 0  # the right foot is in stance
+    height = rel[:, :, 1] - lift
+    stance = np.stack([np.where(right, 1, 0), np.where(right, 3, 2)], axis=1)  # ankle, toe of the stance foot
+    rows = np.arange(n)[:, None]
+    contact = stance[np.arange(n), np.argmin(height[rows, stance], axis=1)]
     step = np.zeros((n, 3))
     idx = np.arange(1, n)
     step[1:] = -(rel[idx, contact[1:]] - rel[idx - 1, contact[1:]])
     root = np.cumsum(step, axis=0)
-    root[:, 1] = lift[contact] - rel[np.arange(n), contact, 1]
+    root[:, 1] = -height.min(axis=1)  # no point of either foot below the ground (double support at the switch)
     for k, ch in enumerate(("Xposition", "Yposition", "Zposition")):
         motion[:, sk.channel_index(0, ch)] = root[:, k] - sk.offsets[0, k]
     return sk, motion
