@@ -1,12 +1,33 @@
 """Motion capture (chapter 15.4), pure NumPy: skeletons and BVH files, virtual markers, solving, retargeting.
 
 * :class:`Skeleton` - BVH-style joints over the library's one joint tree; ``fk`` batched over frames
-* :func:`humanoid`, :func:`walk` - a synthetic skeleton and procedural gait (no sample data ships)
+* :func:`read_bvh`, :func:`parse_bvh`, :func:`write_bvh`, :func:`format_bvh` - BVH files (:class:`Clip`,
+  :class:`BvhError` naming the line)
+* :func:`humanoid`, :func:`walk`, :func:`random_skeleton`, :func:`random_motion` - synthetic skeletons and
+  motion (no sample data ships)
 * :func:`marker_set`, :func:`virtual_markers`, :func:`attach_markers` - markers rigidly attached to segments
+* :func:`solve_markers` - joint angles from markers (batched Levenberg-Marquardt on the tree)
+* :func:`retarget` - onto other bone lengths and rest poses, foot contacts planted by leg IK
 """
 
+from tianim.mocap.bvh import BvhError, Clip, format_bvh, parse_bvh, read_bvh, write_bvh
+from tianim.mocap.retarget import RetargetResult, detect_contacts, retarget
 from tianim.mocap.skeleton import CHANNELS, Skeleton
-from tianim.mocap.virtual import attach_markers, gait_angles, humanoid, marker_set, virtual_markers, walk
+from tianim.mocap.solve import SolveResult, euler_from_matrix, kabsch, solve_markers
+from tianim.mocap.virtual import (
+    attach_markers,
+    gait_angles,
+    humanoid,
+    marker_set,
+    random_motion,
+    random_skeleton,
+    virtual_markers,
+    walk,
+)
 
-__all__ = ["CHANNELS", "Skeleton", "attach_markers", "gait_angles", "humanoid", "marker_set", "virtual_markers",
-           "walk"]
+__all__ = [
+    "BvhError", "CHANNELS", "Clip", "RetargetResult", "Skeleton", "SolveResult", "attach_markers",
+    "detect_contacts", "euler_from_matrix", "format_bvh", "gait_angles", "humanoid", "kabsch", "marker_set",
+    "parse_bvh", "random_motion", "random_skeleton", "read_bvh", "retarget", "solve_markers", "virtual_markers",
+    "walk", "write_bvh",
+]
