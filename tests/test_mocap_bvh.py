@@ -380,3 +380,26 @@ def test_corrupted_files_parse_or_raise_bvh_error(start, length, junk):
         assert re.match(r"<string>: line \d+: ", str(exc)), str(exc)
     else:
         assert np.all(np.isfinite(clip.motion)) and clip.motion.shape[1] == clip.skeleton.n_channels
+
+
+# ------------------------------------------------------------------------------ the benchmark, tiny
+def test_bench_file_agrees_with_pybvh_at_a_tiny_size(tmp_path):
+    """The benchmark's own agreement check (joint positions of every frame and node, end sites included,
+    tianim vs pybvh on the same synthesised mixed-order file), and its summary keys."""
+    from tianim.bench import mocap as bench
+
+    path = str(tmp_path / "tiny.bvh")
+    sk, motion = bench.synthetic_file(path, frames=30, joints=8, seed=3)
+    assert bench.check_agreement(path, atol=1e-9) <= 1e-9
+    # and both agree with the independent scipy reference
+    clip = read_bvh(path)
+    ref = reference_fk(clip.skeleton.names, clip.skeleton.parents, clip.skeleton.offsets, clip.skeleton.channels,
+                       clip.motion)[0]
+    np.testing.assert_allclose(bench.pybvh_read_fk(path), ref, atol=1e-9)
+    out = tmp_path / "b.json"
+    assert bench.main(["--quick", "--frames", "40", "--repeats", "1", "--json", str(out)]) == 0
+    import json
+
+    summary = json.loads(out.read_text())["summary"]
+    assert set(summary) == {"bvh_read_fk_s", "pybvh_read_fk_s", "speedup_vs_pybvh", "c3d_roundtrip_s"}
+    assert summary["bvh_read_fk_s"] > 0 and summary["speedup_vs_pybvh"] > 0

@@ -34,18 +34,21 @@ def rotation(axis: np.ndarray, angle: np.ndarray) -> np.ndarray:
     return np.eye(3) + s * K + (1 - c) * (K @ K)
 
 
-def _cos_sin(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _cos_sin(q: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """cos q and sin q from one tangent of the half angle, ``t = tan(q/2)``:
     ``cos q = (1 - t^2)/(1 + t^2)``, ``sin q = 2t/(1 + t^2)`` (absolute error ~1e-16 for every q).
 
     NumPy's float64 ``tan`` is SIMD-vectorised where ``sin`` and ``cos`` are not: about 5x faster
     for the two together on large batches. ``tan(q/2)`` stays finite for every float q (pi/2 is not
-    a float).
+    a float). ``out`` (3,) + q.shape: preallocated (cos, sin, temporary), else new arrays.
     """
-    t = np.multiply(q, 0.5)
+    if out is None:
+        out = np.empty((3,) + np.shape(q))
+    c, t, d = out[0], out[1], out[2]
+    np.multiply(q, 0.5, out=t)
     np.tan(t, out=t)
-    c = np.multiply(t, t)
-    d = np.add(c, 1.0)
+    np.multiply(t, t, out=c)
+    np.add(c, 1.0, out=d)
     np.reciprocal(d, out=d)
     np.subtract(1.0, c, out=c)
     c *= d
@@ -105,7 +108,7 @@ class JointTree:
 
         Position i is the joint's pivot; rotation i is its frame *after* its own motion;
         axis i is its world axis. ``joints`` (optional index array of k joints) selects which
-        joints are returned (all n by default; every joint is computed either way).
+        joints are returned (all n by default; joints that neither are returned nor lead to one are skipped).
 
         Batched over all leading axes of ``q`` in one call: the loop runs over the n joints, and each
         step is a few whole-batch operations on contiguous (3, B) blocks (the batch is the last, fastest
@@ -117,66 +120,104 @@ class JointTree:
         q = joint_vector("q", q, self.n)
         batch = q.shape[:-1]
         B = int(np.prod(batch, dtype=np.int64))
-        n = self.n
-        qT = np.ascontiguousarray(q.reshape(B, n).T)  # (n, B): one contiguous row per joint
-        cos, sin = _cos_sin(qT)
-        pos = np.empty((n, 3, B))
-        rot = np.empty((n, 3, 3, B))  # rot[i, r, c] is a contiguous (B,) row of element (r, c)
-        ax = np.empty((n, 3, B))
-        eye = np.eye(3)[:, :, None]
-        tmp = np.empty((3, B))  # scratch: every product below writes into preallocated memory
-        for i in range(n):
-            p = int(self.parents[i])
-            a, o = self.axes[i], self.offsets[i]
-            k = int(np.argmax(np.abs(a)))
-            aligned = abs(a[k]) == 1.0  # about +-e_k
-            Rp = rot[p] if p >= 0 else np.broadcast_to(eye, (3, 3, B))
-            if p < 0:
-                ax[i] = a[:, None]
-                pos[i] = (self.base + o)[:, None]
-            else:
-                if aligned:
-                    np.multiply(Rp[:, k], a[k], out=ax[i])
-                else:
-                    np.multiply(Rp[:, 0], a[0], out=ax[i])
-                    for d in (1, 2):
-                        np.multiply(Rp[:, d], a[d], out=tmp)
-                        ax[i] += tmp
-                pos[i] = pos[p]
-                for d in range(3):
-                    if o[d] != 0.0:
-                        np.multiply(Rp[:, d], o[d], out=tmp)
-                        pos[i] += tmp
-            if not self.revolute[i]:
-                np.multiply(ax[i], qT[i], out=tmp)
-                pos[i] += tmp
-                rot[i] = Rp
-                continue
-            c, s_ = cos[i], sin[i]
-            R = rot[i]
-            if aligned:  # the columns u, v after k (cyclic) turn in their plane; column k stays
-                u, v = (k + 1) % 3, (k + 2) % 3
-                if a[k] < 0:
-                    s_ = -s_
-                R[:, k] = Rp[:, k]
-                np.multiply(Rp[:, u], c, out=R[:, u])
-                np.multiply(Rp[:, v], s_, out=tmp)
-                R[:, u] += tmp
-                np.multiply(Rp[:, v], c, out=R[:, v])
-                np.multiply(Rp[:, u], s_, out=tmp)
-                R[:, v] -= tmp
-            else:
-                x, y, z = a
-                K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-                RK = np.einsum("rkb,kc->rcb", Rp, K)
-                R[...] = c * Rp + s_ * RK + (1.0 - c) * (ax[i][:, None, :] * a[None, :, None])
-        if joints is not None:
-            sel = np.asarray(joints, dtype=np.int64)
-            pos, rot, ax = pos[sel], rot[sel], ax[sel]
+        qT = np.ascontiguousarray(q.reshape(B, self.n).T)  # (n, B): one contiguous row per joint
+        pos, rot, ax = self._frames_t(qT, joints)
         k = pos.shape[0]
         pos = np.moveaxis(pos, -1, 0).reshape(batch + (k, 3))
         rot = np.moveaxis(rot, -1, 0).reshape(batch + (k, 3, 3))
         ax = np.moveaxis(ax, -1, 0).reshape(batch + (k, 3))
+        return pos, rot, ax
+
+    def _frames_t(self, qT: np.ndarray, joints=None, axes: bool = True):
+        """:meth:`frames` on joint-major coordinates qT (n, B) (finite, unchecked), returning the
+        batch-last arrays pos (k, 3, B), rot (k, 3, 3, B), ax (k, 3, B) (None unless ``axes``)."""
+        n, B = qT.shape
+        cs = np.empty((3, B))  # cos, sin and a temporary of the current joint (see _cos_sin)
+        sel = np.arange(n) if joints is None else np.asarray(joints, dtype=np.int64).reshape(-1)
+        if sel.size and (sel.min() < 0 or sel.max() >= n):
+            raise ValueError(f"joints={sel.tolist()} must be indices in [0, {n - 1}]")
+        keep, back = np.unique(sel, return_inverse=True)
+        # storage: the returned joints get slots of the output arrays; a joint that is only a parent
+        # gets a scratch slot, handed on once its last child is done (a BVH joint's inner channel
+        # joints then live in cache-sized scratch); joints nobody needs are skipped
+        needed = np.zeros(n, dtype=bool)
+        needed[keep] = True
+        last_child = np.full(n, -1)
+        for i in range(n - 1, -1, -1):
+            p = int(self.parents[i])
+            if p >= 0 and needed[i]:
+                needed[p] = True
+                last_child[p] = max(last_child[p], i)
+        pos = np.empty((keep.size, 3, B))
+        rot = np.empty((keep.size, 3, 3, B))  # rot[s, r, c] is a contiguous (B,) row of element (r, c)
+        ax = np.empty((keep.size, 3, B)) if axes else None
+        ax_tmp = np.empty((3, B))
+        slot = np.full(n, -1)
+        slot[keep] = np.arange(keep.size)
+        free, scratch, where = [], [], {}
+        eye = np.eye(3)[:, :, None]
+        tmp = np.empty((3, B))  # scratch: every product below writes into preallocated memory
+        for i in range(n):
+            if not needed[i]:
+                continue
+            if slot[i] >= 0:
+                P, R, AX = pos[slot[i]], rot[slot[i]], (ax[slot[i]] if axes else ax_tmp)
+            else:
+                if not free:
+                    scratch.append((np.empty((3, B)), np.empty((3, 3, B)), np.empty((3, B))))
+                    free.append(len(scratch) - 1)
+                where[i] = free.pop()
+                P, R, AX = scratch[where[i]]
+            p = int(self.parents[i])
+            a, o = self.axes[i], self.offsets[i]
+            k = int(np.argmax(np.abs(a)))
+            aligned = abs(a[k]) == 1.0  # about +-e_k
+            if p < 0:
+                Rp = np.broadcast_to(eye, (3, 3, B))
+                AX[...] = a[:, None]
+                P[...] = (self.base + o)[:, None]
+            else:
+                Pp, Rp, _ = (pos[slot[p]], rot[slot[p]], None) if slot[p] >= 0 else scratch[where[p]]
+                if aligned:
+                    np.multiply(Rp[:, k], a[k], out=AX)
+                else:
+                    np.multiply(Rp[:, 0], a[0], out=AX)
+                    for d in (1, 2):
+                        np.multiply(Rp[:, d], a[d], out=tmp)
+                        AX += tmp
+                P[...] = Pp
+                for d in range(3):
+                    if o[d] != 0.0:
+                        np.multiply(Rp[:, d], o[d], out=tmp)
+                        P += tmp
+            if not self.revolute[i]:
+                np.multiply(AX, qT[i], out=tmp)
+                P += tmp
+                R[...] = Rp
+            else:
+                c, s_ = _cos_sin(qT[i], cs)
+                if aligned:  # the columns u, v after k (cyclic) turn in their plane; column k stays
+                    u, v = (k + 1) % 3, (k + 2) % 3
+                    if a[k] < 0:
+                        s_ = -s_
+                    R[:, k] = Rp[:, k]
+                    np.multiply(Rp[:, u], c, out=R[:, u])
+                    np.multiply(Rp[:, v], s_, out=tmp)
+                    R[:, u] += tmp
+                    np.multiply(Rp[:, v], c, out=R[:, v])
+                    np.multiply(Rp[:, u], s_, out=tmp)
+                    R[:, v] -= tmp
+                else:
+                    x, y, z = a
+                    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+                    RK = np.einsum("rkb,kc->rcb", Rp, K)
+                    R[...] = c * Rp + s_ * RK + (1.0 - c) * (AX[:, None, :] * a[None, :, None])
+            if p >= 0 and slot[p] < 0 and last_child[p] == i:  # the parent's scratch is free again
+                free.append(where.pop(p))
+            if slot[i] < 0 and last_child[i] < 0:
+                free.append(where.pop(i))
+        if not np.array_equal(keep, sel):
+            pos, rot, ax = pos[back], rot[back], (ax[back] if axes else None)
         return pos, rot, ax
 
     def joint_positions(self, q) -> np.ndarray:

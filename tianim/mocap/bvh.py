@@ -6,9 +6,10 @@ one value per channel). Any channel order, any rotation order per joint (intrins
 CHANNELS order, degrees), position channels on any joint and end sites are read; the result is a
 :class:`~tianim.mocap.skeleton.Skeleton` (the library's joint tree) and a motion array (F, C).
 
-Speed: the MOTION block is parsed in one ``np.loadtxt`` call (NumPy's C reader), and its per-line value counts are
-checked on the raw bytes with a few whole-array operations (no per-line Python loop), so a
-6,000-frame, 31-joint file reads in a few tens of milliseconds.
+Speed: the MOTION block is parsed in one ``np.loadtxt`` call (NumPy's C reader, which checks that every
+row has as many values as the first); only when that fails is the block diagnosed line by line, on the
+raw bytes with whole-array operations (no per-line Python loop), to name the line. A 6,000-frame,
+31-joint file reads in a few tens of milliseconds.
 
 Malformed input raises :class:`BvhError` (a ValueError) naming the source, the line and the problem;
 counts declared in the file are never used to allocate memory before the data backs them up.
@@ -19,6 +20,7 @@ from __future__ import annotations
 import io
 import os
 import re
+import warnings
 from typing import NamedTuple
 
 import numpy as np
@@ -277,15 +279,61 @@ def _parse_motion(data: bytes, start: int, line: int, C: int, src: str):
         raise err(line, f"Frame Time {ttok!r} must be a finite number of seconds > 0")
     # the body starts with the newline that ends the Frame Time line: segment k (between newlines k and
     # k + 1) is file line first + k; a trailing space lets every segment reach its end
+    values = _fast_values(data, end, n_frames, C) if C else None
     body = (data[end:] if end < len(data) else b"\n") + b" "
     first = line + 1
     if C == 0:
         return np.zeros((n_frames, 0)), dt
+    if values is None:  # something is off (or the layout is unusual): find the line, or read it the slow way
+        filled = _check_lines(body, first, frames_line, n_frames, C, err)
+        if n_frames == 0:
+            return np.zeros((0, C)), dt
+        try:
+            values = np.loadtxt(io.StringIO(body.decode("latin-1")), dtype=np.float64, comments=None, ndmin=2)
+        except ValueError:
+            _locate_bad_token(body, first, err)
+    values = values.reshape(-1)
+    finite = np.isfinite(values)
+    if not finite.all():
+        filled = _check_lines(body, first, frames_line, n_frames, C, err)
+        idx = int(np.argmin(finite))
+        raise err(first + int(filled[idx // C]), f"value {float(values[idx])!r} (channel {idx % C}) is not finite; "
+                  "frame values must be finite numbers")
+    return values.reshape(n_frames, C), dt
+
+
+def _fast_values(data: bytes, end: int, n_frames: int, C: int):
+    """The (n_frames, C) values of a well-formed MOTION body in one ``np.loadtxt`` call, or None.
+
+    NumPy's C reader on text (on bytes it decodes chunk by chunk: twice as slow) with single spaces
+    between values (what writers write); it checks that every row has as many values as the first, and
+    the shape must be exactly (n_frames, C). Blank lines inside the data, any reader error or another
+    shape give None, and the caller's line-by-line diagnosis takes over.
+    """
+    if n_frames == 0 or end >= len(data):
+        return None
+    text = data[end + 1:].decode("latin-1")  # the frame lines (data[end] ends the Frame Time line)
+    inner = text.strip()
+    if "\n\n" in inner or "\n\r\n" in inner:
+        return None
+    try:
+        with warnings.catch_warnings():  # "input contained no data": the diagnosis names the line
+            warnings.simplefilter("ignore")
+            values = np.loadtxt(io.StringIO(text), dtype=np.float64, comments=None, ndmin=2, delimiter=" ")
+    except ValueError:
+        return None
+    return values if values.shape == (n_frames, C) else None
+
+
+def _check_lines(body: bytes, first: int, frames_line: int, n_frames: int, C: int, err) -> np.ndarray:
+    """Diagnose the MOTION body line by line, on the raw bytes with whole-array operations: raise naming
+    the first line with a wrong value count, a frame count that disagrees with ``Frames:``, or a blank
+    line inside the data. Returns the body segments (lines) that hold values."""
     raw = np.frombuffer(body, dtype=np.uint8)
     nl = np.flatnonzero(raw == 10)
     ws = raw <= 32
-    starts = ws[:-1] & ~ws[1:]
-    counts = np.add.reduceat(starts, nl, dtype=np.int64)
+    tok = np.flatnonzero(ws[:-1] & ~ws[1:])  # the byte before each token (a space or newline)
+    counts = np.diff(np.searchsorted(tok, np.append(nl, raw.size)))  # tokens per line
     filled = np.flatnonzero(counts)
     n_lines = filled.size
     bad = filled[counts[filled] != C]
@@ -301,19 +349,7 @@ def _parse_motion(data: bytes, start: int, line: int, C: int, src: str):
     if n_frames and filled[-1] - filled[0] + 1 != n_lines:
         k = int(filled[0] + np.flatnonzero(np.diff(filled) > 1)[0] + 1)
         raise err(first + k, "blank line inside the frame data")
-    if C == 0 or n_frames == 0:
-        return np.zeros((n_frames, C)), dt
-    try:  # numpy's C reader; the value counts per line were checked above, so only a bad token fails here
-        values = np.loadtxt(io.BytesIO(body), dtype=np.float64, comments=None, ndmin=2)
-    except ValueError:
-        _locate_bad_token(body, first, err)
-    values = values.reshape(-1)
-    finite = np.isfinite(values)
-    if not finite.all():
-        idx = int(np.argmin(finite))
-        raise err(first + int(filled[idx // C]), f"value {float(values[idx])!r} (channel {idx % C}) is not finite; "
-                  "frame values must be finite numbers")
-    return values.reshape(n_frames, C), dt
+    return filled
 
 
 def _locate_bad_token(body: bytes, first: int, err):
