@@ -178,7 +178,9 @@ class JointTree:
                 P[...] = (self.base + o)[:, None]
             else:
                 Pp, Rp, _ = (pos[slot[p]], rot[slot[p]], None) if slot[p] >= 0 else scratch[where[p]]
-                if aligned:
+                if aligned and self.revolute[i] and not (axes and slot[i] >= 0):
+                    pass  # the world axis is not needed: a plane rotation below uses columns of Rp
+                elif aligned:
                     np.multiply(Rp[:, k], a[k], out=AX)
                 else:
                     np.multiply(Rp[:, 0], a[0], out=AX)
