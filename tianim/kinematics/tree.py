@@ -57,6 +57,11 @@ def _cos_sin(q: np.ndarray, out: np.ndarray | None = None) -> tuple[np.ndarray, 
     return c, t
 
 
+#: Batches up to this size get every joint's cos and sin in one call up front (fewer calls per joint);
+#: larger ones joint by joint into a reused buffer (less memory). Elementwise, so the bits are the same.
+TRIG_UPFRONT_MAX_BATCH = 512
+
+
 class JointTree:
     """A tree of 1-DOF joints (see the module docstring). FK for every joint; Jacobians of any point.
 
@@ -123,63 +128,95 @@ class JointTree:
         qT = np.ascontiguousarray(q.reshape(B, self.n).T)  # (n, B): one contiguous row per joint
         pos, rot, ax = self._frames_t(qT, joints)
         k = pos.shape[0]
-        pos = np.moveaxis(pos, -1, 0).reshape(batch + (k, 3))
-        rot = np.moveaxis(rot, -1, 0).reshape(batch + (k, 3, 3))
-        ax = np.moveaxis(ax, -1, 0).reshape(batch + (k, 3))
+        pos = pos.transpose(2, 0, 1).reshape(batch + (k, 3))
+        rot = rot.transpose(3, 0, 1, 2).reshape(batch + (k, 3, 3))
+        ax = ax.transpose(2, 0, 1).reshape(batch + (k, 3))
         return pos, rot, ax
+
+    def _joint_plan(self):
+        """Per-joint constants of the block FK as plain Python values, cached on the (immutable) tree:
+        (parent, revolute, axis, k, aligned, sign of a_k, u, v, cross-product matrix K, offset, nonzero
+        offset components)."""
+        plan = self.__dict__.get("_block_plan")
+        if plan is None:
+            plan = []
+            for i in range(self.n):
+                a, o = self.axes[i], self.offsets[i]
+                k = int(np.argmax(np.abs(a)))
+                x, y, z = a
+                plan.append((int(self.parents[i]), bool(self.revolute[i]), a, k, bool(abs(a[k]) == 1.0),
+                             float(np.sign(a[k])), (k + 1) % 3, (k + 2) % 3,
+                             np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]]), o,
+                             [(d, float(o[d])) for d in range(3) if o[d] != 0.0]))
+            last_child = [-1] * self.n
+            for i in range(self.n):
+                if self.parents[i] >= 0:
+                    last_child[self.parents[i]] = i
+            plan = (plan, last_child, (self.base + self.offsets[0])[:, None])
+            self.__dict__["_block_plan"] = plan
+        return plan
 
     def _frames_t(self, qT: np.ndarray, joints=None, axes: bool = True):
         """:meth:`frames` on joint-major coordinates qT (n, B) (finite, unchecked), returning the
         batch-last arrays pos (k, 3, B), rot (k, 3, 3, B), ax (k, 3, B) (None unless ``axes``)."""
         n, B = qT.shape
-        cs = np.empty((3, B))  # cos, sin and a temporary of the current joint (see _cos_sin)
-        sel = np.arange(n) if joints is None else np.asarray(joints, dtype=np.int64).reshape(-1)
-        if sel.size and (sel.min() < 0 or sel.max() >= n):
-            raise ValueError(f"joints={sel.tolist()} must be indices in [0, {n - 1}]")
-        keep, back = np.unique(sel, return_inverse=True)
-        # storage: the returned joints get slots of the output arrays; a joint that is only a parent
-        # gets a scratch slot, handed on once its last child is done (a BVH joint's inner channel
-        # joints then live in cache-sized scratch); joints nobody needs are skipped
-        needed = np.zeros(n, dtype=bool)
-        needed[keep] = True
-        last_child = np.full(n, -1)
-        for i in range(n - 1, -1, -1):
-            p = int(self.parents[i])
-            if p >= 0 and needed[i]:
-                needed[p] = True
-                last_child[p] = max(last_child[p], i)
-        pos = np.empty((keep.size, 3, B))
-        rot = np.empty((keep.size, 3, 3, B))  # rot[s, r, c] is a contiguous (B,) row of element (r, c)
-        ax = np.empty((keep.size, 3, B)) if axes else None
+        plan, last_child, _ = self._joint_plan()
+        upfront = _cos_sin(qT) if B <= TRIG_UPFRONT_MAX_BATCH else None
+        cs = None if upfront is not None else np.empty((3, B))  # cos, sin, temporary of one joint
+        if joints is None:
+            sel = keep = None
+            needed = [True] * n
+            slot = list(range(n))
+            size = n
+        else:
+            sel = np.asarray(joints, dtype=np.int64).reshape(-1)
+            if sel.size and (sel.min() < 0 or sel.max() >= n):
+                raise ValueError(f"joints={sel.tolist()} must be indices in [0, {n - 1}]")
+            keep, back = np.unique(sel, return_inverse=True)
+            # storage: the returned joints get slots of the output arrays; a joint that is only a parent
+            # gets a scratch slot, handed on once its last needed child is done (a BVH joint's inner
+            # channel joints then live in cache-sized scratch); joints nobody needs are skipped
+            needed = [False] * n
+            for i in keep.tolist():
+                needed[i] = True
+            last_child = [-1] * n
+            for i in range(n - 1, -1, -1):
+                p = plan[i][0]
+                if p >= 0 and needed[i]:
+                    needed[p] = True
+                    last_child[p] = max(last_child[p], i)
+            slot = [-1] * n
+            for s_, i in enumerate(keep.tolist()):
+                slot[i] = s_
+            size = keep.size
+        pos = np.empty((size, 3, B))
+        rot = np.empty((size, 3, 3, B))  # rot[s, r, c] is a contiguous (B,) row of element (r, c)
+        ax = np.empty((size, 3, B)) if axes else None
         ax_tmp = np.empty((3, B))
-        slot = np.full(n, -1)
-        slot[keep] = np.arange(keep.size)
         free, scratch, where = [], [], {}
-        eye = np.eye(3)[:, :, None]
+        eye = np.broadcast_to(np.eye(3)[:, :, None], (3, 3, B))
         tmp = np.empty((3, B))  # scratch: every product below writes into preallocated memory
         for i in range(n):
             if not needed[i]:
                 continue
-            if slot[i] >= 0:
-                P, R, AX = pos[slot[i]], rot[slot[i]], (ax[slot[i]] if axes else ax_tmp)
+            p, rev, a, k, aligned, sign, u, v, K, o, nz = plan[i]
+            si = slot[i]
+            if si >= 0:
+                P, R, AX = pos[si], rot[si], (ax[si] if axes else ax_tmp)
             else:
                 if not free:
                     scratch.append((np.empty((3, B)), np.empty((3, 3, B)), np.empty((3, B))))
                     free.append(len(scratch) - 1)
                 where[i] = free.pop()
                 P, R, AX = scratch[where[i]]
-            p = int(self.parents[i])
-            a, o = self.axes[i], self.offsets[i]
-            k = int(np.argmax(np.abs(a)))
-            aligned = abs(a[k]) == 1.0  # about +-e_k
             if p < 0:
-                Rp = np.broadcast_to(eye, (3, 3, B))
+                Rp = eye
                 AX[...] = a[:, None]
                 P[...] = (self.base + o)[:, None]
             else:
-                Pp, Rp, _ = (pos[slot[p]], rot[slot[p]], None) if slot[p] >= 0 else scratch[where[p]]
-                if aligned and self.revolute[i] and not (axes and slot[i] >= 0):
-                    pass  # the world axis is not needed: a plane rotation below uses columns of Rp
+                Pp, Rp = (pos[slot[p]], rot[slot[p]]) if slot[p] >= 0 else scratch[where[p]][:2]
+                if aligned and rev and not (axes and si >= 0):
+                    pass  # the world axis is not needed: the plane rotation below uses columns of Rp
                 elif aligned:
                     np.multiply(Rp[:, k], a[k], out=AX)
                 else:
@@ -188,19 +225,17 @@ class JointTree:
                         np.multiply(Rp[:, d], a[d], out=tmp)
                         AX += tmp
                 P[...] = Pp
-                for d in range(3):
-                    if o[d] != 0.0:
-                        np.multiply(Rp[:, d], o[d], out=tmp)
-                        P += tmp
-            if not self.revolute[i]:
+                for d, od in nz:
+                    np.multiply(Rp[:, d], od, out=tmp)
+                    P += tmp
+            if not rev:
                 np.multiply(AX, qT[i], out=tmp)
                 P += tmp
                 R[...] = Rp
             else:
-                c, s_ = _cos_sin(qT[i], cs)
+                c, s_ = (upfront[0][i], upfront[1][i]) if upfront is not None else _cos_sin(qT[i], cs)
                 if aligned:  # the columns u, v after k (cyclic) turn in their plane; column k stays
-                    u, v = (k + 1) % 3, (k + 2) % 3
-                    if a[k] < 0:
+                    if sign < 0:
                         s_ = -s_
                     R[:, k] = Rp[:, k]
                     np.multiply(Rp[:, u], c, out=R[:, u])
@@ -210,15 +245,14 @@ class JointTree:
                     np.multiply(Rp[:, u], s_, out=tmp)
                     R[:, v] -= tmp
                 else:
-                    x, y, z = a
-                    K = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
                     RK = np.einsum("rkb,kc->rcb", Rp, K)
                     R[...] = c * Rp + s_ * RK + (1.0 - c) * (AX[:, None, :] * a[None, :, None])
-            if p >= 0 and slot[p] < 0 and last_child[p] == i:  # the parent's scratch is free again
-                free.append(where.pop(p))
-            if slot[i] < 0 and last_child[i] < 0:
-                free.append(where.pop(i))
-        if not np.array_equal(keep, sel):
+            if where:
+                if p >= 0 and slot[p] < 0 and last_child[p] == i:  # the parent's scratch is free again
+                    free.append(where.pop(p))
+                if si < 0 and last_child[i] < 0:
+                    free.append(where.pop(i))
+        if sel is not None and not np.array_equal(keep, sel):
             pos, rot, ax = pos[back], rot[back], (ax[back] if axes else None)
         return pos, rot, ax
 
