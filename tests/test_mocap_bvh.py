@@ -114,6 +114,11 @@ def test_random_mixed_order_skeletons_fk_matches_scipy_to_1e_9(seed):
     rp, rr = reference_fk(sk.names, sk.parents, sk.offsets, sk.channels, m)
     np.testing.assert_allclose(pos, rp, atol=1e-9, rtol=0)
     np.testing.assert_allclose(rot, rr, atol=1e-12, rtol=0)
+    assert np.array_equal(sk.positions(m), pos)  # the positions-only FK: the same numbers
+    # the tree's own FK on the same coordinates, over a large batch (the joint-major block path)
+    big = np.repeat(m, 20, axis=0)
+    np.testing.assert_allclose(sk.tree.frames(sk.to_q(big), joints=sk.tree_joint)[0], np.repeat(rp, 20, axis=0),
+                               atol=1e-9, rtol=0)
     # and after a BVH round trip (file order is depth-first, so compare through the names)
     clip = parse_bvh(format_bvh(sk, m, 1 / 60, decimals=None))
     order = [clip.skeleton.names.index(n) for n in sk.names]

@@ -6,7 +6,9 @@ orders are mixed; an End Site on every leaf), smooth random motion, 6 decimals. 
 timed, tianim's joint positions (``read_bvh`` + ``Skeleton.fk``) are checked equal to pybvh's
 (``read_bvh_file`` + ``node_positions``) on every frame and node, end sites included.
 
-Summary keys: ``bvh_read_fk_s`` (median seconds of tianim's read + FK of the whole file),
+Timing: the two libraries' repeats are interleaved (at least 9 each), so load changes on a shared
+machine hit both. Summary keys: ``bvh_read_fk_s`` (median seconds of tianim's read + FK of the whole file, joint positions
+as pybvh gives them: ``Skeleton.positions``; the full ``fk`` with rotations too is in details),
 ``pybvh_read_fk_s`` (pybvh's, same file, same run; null without pybvh), ``speedup_vs_pybvh``
 (their ratio), ``c3d_roundtrip_s`` (median seconds to write then read a 6,000-frame, 40-marker
 C3D file through :func:`tianim.mocap.write_c3d` / :func:`read_c3d`, checked exact first; null without
@@ -16,6 +18,7 @@ the ``c3d`` package, with the reason in ``details``). Details add the write time
 from __future__ import annotations
 
 import os
+import statistics
 import tempfile
 import time
 import warnings
@@ -38,8 +41,15 @@ def synthetic_file(path: str, frames: int = FRAMES, joints: int = JOINTS, seed: 
 
 
 def tianim_read_fk(path: str):
+    """Joint positions (F, J, 3) of a BVH file: read + FK, positions only (what pybvh's node_positions gives)."""
     clip = read_bvh(path)
-    return clip.skeleton.fk(clip.motion)[0]
+    return clip.skeleton.positions(clip.motion)
+
+
+def tianim_read_fk_rotations(path: str):
+    """Read + full FK: positions and rotations (F, J, 3, 3)."""
+    clip = read_bvh(path)
+    return clip.skeleton.fk(clip.motion)
 
 
 def pybvh_read_fk(path: str):
@@ -97,28 +107,46 @@ def main(argv=None) -> int:
     p.add_argument("--frames", type=int, default=None, help=f"frames in the BVH file (default {FRAMES})")
     args = p.parse_args(argv)
     frames = args.frames or (600 if args.quick else FRAMES)
-    repeats = 2 if args.quick else args.repeats
+    repeats = 2 if args.quick else max(args.repeats, 9)
     details, rows = {}, []
     with tempfile.TemporaryDirectory() as tmp:
         path = os.path.join(tmp, "bench.bvh")
         sk, motion = synthetic_file(path, frames)
         details["file_mb"] = os.path.getsize(path) / 2**20
         details["channels"] = sk.n_channels
-        ours = median_time(lambda: tianim_read_fk(path), repeats=repeats)
-        rows.append({"step": "tianim read_bvh + fk", "seconds": ours})
-        t0 = time.perf_counter()
-        write_bvh(os.path.join(tmp, "w.bvh"), sk, motion, 1 / 120)
-        details["bvh_write_s"] = time.perf_counter() - t0
-        theirs = speedup = None
         try:
             import pybvh
         except ImportError:
+            pybvh = None
             details["pybvh"] = "not installed (pip install tianim[bench])"
         else:
             details["pybvh_version"] = getattr(pybvh, "__version__", "?")
             details["max_position_difference"] = check_agreement(path)
-            theirs = median_time(lambda: pybvh_read_fk(path), repeats=repeats)
+        # interleaved repeats (ours, theirs, ours, ...), so that a load change on a shared machine hits both
+        ours_t, theirs_t = [], []
+        tianim_read_fk(path)
+        if pybvh is not None:
+            pybvh_read_fk(path)
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            tianim_read_fk(path)
+            ours_t.append(time.perf_counter() - t0)
+            if pybvh is not None:
+                t0 = time.perf_counter()
+                pybvh_read_fk(path)
+                theirs_t.append(time.perf_counter() - t0)
+        ours = statistics.median(ours_t)
+        rows.append({"step": "tianim read_bvh + positions", "seconds": ours})
+        details["bvh_read_fk_rotations_s"] = median_time(lambda: tianim_read_fk_rotations(path), repeats=repeats)
+        rows.append({"step": "tianim read_bvh + fk (positions and rotations)", "seconds": details["bvh_read_fk_rotations_s"]})
+        t0 = time.perf_counter()
+        write_bvh(os.path.join(tmp, "w.bvh"), sk, motion, 1 / 120)
+        details["bvh_write_s"] = time.perf_counter() - t0
+        theirs = speedup = None
+        if pybvh is not None:
+            theirs = statistics.median(theirs_t)
             speedup = theirs / ours
+            details["speedup_per_repeat"] = [t / o for o, t in zip(ours_t, theirs_t)]
             rows.append({"step": "pybvh read_bvh_file + node_positions", "seconds": theirs})
             b = pybvh.read_bvh_file(path, world_up="+y")
             t0 = time.perf_counter()

@@ -156,9 +156,10 @@ class JointTree:
             self.__dict__["_block_plan"] = plan
         return plan
 
-    def _frames_t(self, qT: np.ndarray, joints=None, axes: bool = True):
+    def _frames_t(self, qT: np.ndarray, joints=None, axes: bool = True, rotations: bool = True):
         """:meth:`frames` on joint-major coordinates qT (n, B) (finite, unchecked), returning the
-        batch-last arrays pos (k, 3, B), rot (k, 3, 3, B), ax (k, 3, B) (None unless ``axes``)."""
+        batch-last arrays pos (k, 3, B), rot (k, 3, 3, B) (None unless ``rotations``) and ax (k, 3, B)
+        (None unless ``axes``)."""
         n, B = qT.shape
         plan, last_child, _ = self._joint_plan()
         upfront = _cos_sin(qT) if B <= TRIG_UPFRONT_MAX_BATCH else None
@@ -190,10 +191,12 @@ class JointTree:
                 slot[i] = s_
             size = keep.size
         pos = np.empty((size, 3, B))
-        rot = np.empty((size, 3, 3, B))  # rot[s, r, c] is a contiguous (B,) row of element (r, c)
+        rot = np.empty((size, 3, 3, B)) if rotations else None  # rot[s, r, c]: a contiguous (B,) row
         ax = np.empty((size, 3, B)) if axes else None
-        ax_tmp = np.empty((3, B))
-        free, scratch, where = [], [], {}
+        ax_tmp = np.empty((3, B))  # a joint's world axis is used by that joint's step only
+        P_of, R_of = [None] * n, [None] * n  # where each joint's position and rotation live
+        own_p, own_r = [False] * n, [False] * n  # ... in scratch (handed back once the children are done)
+        free_p, free_r = [], []
         eye = np.broadcast_to(np.eye(3)[:, :, None], (3, 3, B))
         tmp = np.empty((3, B))  # scratch: every product below writes into preallocated memory
         for i in range(n):
@@ -202,19 +205,23 @@ class JointTree:
             p, rev, a, k, aligned, sign, u, v, K, o, nz = plan[i]
             si = slot[i]
             if si >= 0:
-                P, R, AX = pos[si], rot[si], (ax[si] if axes else ax_tmp)
+                P = pos[si]
             else:
-                if not free:
-                    scratch.append((np.empty((3, B)), np.empty((3, 3, B)), np.empty((3, B))))
-                    free.append(len(scratch) - 1)
-                where[i] = free.pop()
-                P, R, AX = scratch[where[i]]
+                P = free_p.pop() if free_p else np.empty((3, B))
+                own_p[i] = True
+            if si >= 0 and rotations:
+                R = rot[si]
+            else:
+                R = free_r.pop() if free_r else np.empty((3, 3, B))
+                own_r[i] = True
+            P_of[i], R_of[i] = P, R
+            AX = ax[si] if (axes and si >= 0) else ax_tmp
             if p < 0:
                 Rp = eye
                 AX[...] = a[:, None]
                 P[...] = (self.base + o)[:, None]
             else:
-                Pp, Rp = (pos[slot[p]], rot[slot[p]]) if slot[p] >= 0 else scratch[where[p]][:2]
+                Pp, Rp = P_of[p], R_of[p]
                 if aligned and rev and not (axes and si >= 0):
                     pass  # the world axis is not needed: the plane rotation below uses columns of Rp
                 elif aligned:
@@ -247,13 +254,19 @@ class JointTree:
                 else:
                     RK = np.einsum("rkb,kc->rcb", Rp, K)
                     R[...] = c * Rp + s_ * RK + (1.0 - c) * (AX[:, None, :] * a[None, :, None])
-            if where:
-                if p >= 0 and slot[p] < 0 and last_child[p] == i:  # the parent's scratch is free again
-                    free.append(where.pop(p))
-                if si < 0 and last_child[i] < 0:
-                    free.append(where.pop(i))
+            for j in ((p, i) if p >= 0 and last_child[p] == i else (i,)):  # scratch nobody reads any more
+                if j == i and last_child[i] >= 0:
+                    continue
+                if own_p[j]:
+                    free_p.append(P_of[j])
+                    own_p[j] = False
+                if own_r[j]:
+                    free_r.append(R_of[j])
+                    own_r[j] = False
         if sel is not None and not np.array_equal(keep, sel):
-            pos, rot, ax = pos[back], rot[back], (ax[back] if axes else None)
+            pos = pos[back]
+            rot = rot[back] if rotations else None
+            ax = ax[back] if axes else None
         return pos, rot, ax
 
     def joint_positions(self, q) -> np.ndarray:

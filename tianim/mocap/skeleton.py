@@ -164,15 +164,24 @@ class Skeleton:
         v = q[:, self.channel_tree_joint]
         return np.where(self.rotation_channel, np.rad2deg(v), v)
 
-    def fk(self, motion) -> tuple[np.ndarray, np.ndarray]:
-        """Global joint positions (F, J, 3) [m] and rotations (F, J, 3, 3) of every frame, in one batched call
-        of the tree's forward kinematics (:meth:`JointTree.frames`; returned as views with frames first)."""
+    def _tree_coordinates(self, motion) -> np.ndarray:
         m = self.motion_array(motion)
         qT = np.zeros((self.tree.n, m.shape[0]))  # joint-major tree coordinates, straight from the channels
         qT[self.channel_tree_joint] = m.T
         qT[self.channel_tree_joint[self.rotation_channel]] *= np.pi / 180.0
-        pos, rot, _ = self.tree._frames_t(qT, joints=self.tree_joint, axes=False)
+        return qT
+
+    def fk(self, motion) -> tuple[np.ndarray, np.ndarray]:
+        """Global joint positions (F, J, 3) [m] and rotations (F, J, 3, 3) of every frame, in one batched call
+        of the tree's forward kinematics (:meth:`JointTree.frames`; returned as views with frames first)."""
+        pos, rot, _ = self.tree._frames_t(self._tree_coordinates(motion), joints=self.tree_joint, axes=False)
         return np.moveaxis(pos, -1, 0), np.moveaxis(rot, -1, 0)
+
+    def positions(self, motion) -> np.ndarray:
+        """Global joint positions (F, J, 3) [m] only: :meth:`fk` without storing the rotations (less memory)."""
+        pos, _, _ = self.tree._frames_t(self._tree_coordinates(motion), joints=self.tree_joint, axes=False,
+                                        rotations=False)
+        return np.moveaxis(pos, -1, 0)
 
     # ------------------------------------------------------------------ helpers
     def index(self, name: str) -> int:
