@@ -72,6 +72,15 @@ def test_butterworth_matches_scipy_sosfiltfilt(order):
                                signal.sosfiltfilt(sos, x, axis=1, padlen=5), atol=1e-12)
 
 
+@pytest.mark.parametrize("fs, cutoff, n", [(1000.0, 0.5, 20000), (120.0, 59.0, 3001), (24.0, 1.0, 10), (120.0, 6.0, 1)])
+def test_butterworth_blocks_match_scipy_at_extreme_cutoffs_and_lengths(fs, cutoff, n):
+    """Poles near z = 1 (0.5 Hz at 1 kHz), near Nyquist, and signals shorter than one block."""
+    x = np.random.default_rng(n).normal(size=(n + 9 + 1, 2)).cumsum(axis=0)
+    wn = 2 / np.pi * np.arctan(np.tan(np.pi * cutoff / fs) / dual_pass_correction(4))
+    ref = signal.sosfiltfilt(signal.butter(2, wn, output="sos"), x, axis=0, padlen=9)
+    np.testing.assert_allclose(butterworth(x, fs, cutoff), ref, rtol=0, atol=1e-9 * np.abs(ref).max())
+
+
 def _gait_like(seed, fs=120.0, seconds=10.0, fmax=6, noise=0.001):
     """Stride harmonics 1..fmax Hz with amplitudes 5 cm / k^2 (smooth, like a marker path) + noise."""
     rng = np.random.default_rng(seed)

@@ -3,14 +3,16 @@
 A *gap* is a run of consecutive frames in which one marker is missing (any coordinate NaN).
 :func:`fill_gaps` fills each gap by one method and reports what it did (:class:`Gap`).
 
-* ``"linear"``, ``"cubic"``, ``"quintic"`` interpolate the marker's own trajectory from the
-  ``context`` nearest valid frames on each side of the gap by the natural spline of degree
-  ``2m - 1`` (m = 1, 2, 3), the interpolant minimising ``int (f^(m))^2 dt``. In one dimension
-  it is ``f(t) = sum_i w_i |t - t_i|^(2m-1) + p(t)``, ``p`` a polynomial of degree ``m - 1``
-  with ``sum_i w_i t_i^k = 0`` for ``k < m`` (Duchon 1977; de Boor, *A Practical Guide to
-  Splines*, 1978). m = 3 is the natural quintic spline of Woltring's GCVSPL ("A Fortran
-  package for generalized, cross-validatory spline smoothing and differentiation",
-  Adv. Eng. Software 8(2), 1986) without smoothing, the "Woltring fill" of Vicon Nexus.
+* ``"linear"``, ``"cubic"``, ``"quintic"`` bridge the gap with the marker's own trajectory from
+  the ``context`` nearest visible frames on each side, by the natural spline of degree
+  ``2m - 1`` (m = 1, 2, 3), the curve minimising ``int (f^(m))^2 dt``. In one dimension it is
+  ``f(t) = sum_i w_i |t - t_i|^(2m-1) + p(t)``, ``p`` a polynomial of degree ``m - 1`` with
+  ``sum_i w_i t_i^k = 0`` for ``k < m`` (Duchon 1977; de Boor, *A Practical Guide to Splines*,
+  1978). ``"linear"`` interpolates the two nearest frames; ``"cubic"`` and ``"quintic"`` are
+  the smoothing splines of Woltring's GCVSPL ("A Fortran package for generalized,
+  cross-validatory spline smoothing and differentiation", Adv. Eng. Software 8(2), 1986) with
+  m = 2 and 3, the smoothing chosen by generalized cross-validation: the quintic is the
+  "Woltring fill" of Vicon Nexus. Interpolating noisy context exactly would make the fill swing.
   Splines cannot extrapolate: a gap at the start or end of the capture is refused.
 * ``"rigid"`` (Kabsch, Acta Cryst. A32, 1976): the target marker and >= 3 non-collinear
   donor markers of the same segment, visible through the whole gap, form a rigid template
