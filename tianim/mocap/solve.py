@@ -163,7 +163,8 @@ def solve_markers(skeleton: Skeleton, markers, joints, local, q0=None, block: in
     ``joints`` (M,), ``local`` (M, 3): where each marker sits (see :func:`tianim.mocap.virtual.marker_set`).
     ``q0``: a starting motion (C,) or (F, C) (default: :func:`initial_pose` of the first frame). Frames
     are solved ``block`` at a time, each block started from the previous block's last solution;
-    iteration stops when every frame's step is below ``tol`` (radians / metres) or after ``iterations``.
+    iteration stops when every frame's step is below ``tol`` (radians / metres) or lowers its squared
+    residual by less than a relative 1e-10, or after ``iterations``.
     ``init="segments"`` (default) starts every frame from :func:`segment_fit` (what the markers determine
     segment by segment, the rest from the warm start); ``"previous"``: from the warm start only.
     """
@@ -266,6 +267,9 @@ def _levenberg_marquardt(tree, q, dof, rev, anc, tj, loc, x_obs, seen, iteration
         q_new[:, dof] += step
         pos2, ax2, x2, res2, cost2 = _residual(tree, q_new, tj, loc, x_obs, w)
         ok = cost2 <= cost
+        # a frame is done when its step is below tol, or an accepted step no longer lowers its cost
+        # measurably (noisy markers: Gauss-Newton then creeps towards the minimum in ever smaller steps)
+        done = (np.abs(step).max(axis=1) < tol) | (ok & (cost - cost2 <= 1e-10 * cost))
         q = np.where(ok[:, None], q_new, q)
         pos = np.where(ok[:, None, None], pos2, pos)
         ax = np.where(ok[:, None, None], ax2, ax)
@@ -273,6 +277,6 @@ def _levenberg_marquardt(tree, q, dof, rev, anc, tj, loc, x_obs, seen, iteration
         res = np.where(ok[:, None, None], res2, res)
         cost = np.where(ok, cost2, cost)
         lam = np.where(ok, np.maximum(lam * 0.3, 1e-12), np.minimum(lam * 10.0, 1e12))
-        if np.all(np.abs(step).max(axis=1) < tol):
+        if np.all(done):
             break
     return q, cost, it
