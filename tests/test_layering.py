@@ -64,7 +64,7 @@ def test_every_tianim_module_imports_without_gymnasium():
     assert int(out.stdout.split()[-2]) > 20
 
 
-@pytest.mark.parametrize("mod", ["tianim", "tianim.render", "tianim.keyframe", "tianim.kinematics", "tianim.timeline"])
+@pytest.mark.parametrize("mod", ["tianim", "tianim.render", "tianim.keyframe", "tianim.kinematics", "tianim.timeline", "tianim.mocap"])
 def test_import_loads_no_taichi(mod):
     out = _run(f"""
         import {mod}

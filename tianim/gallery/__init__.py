@@ -19,6 +19,7 @@ DEMOS = {
     "fountain": "fountain",
     "flock": "flock",
     "crossing": "crossing",
+    "mocap": "mocap",
 }
 
 

@@ -1,0 +1,282 @@
+"""Joint angles from markers: inverse kinematics on the skeleton's joint tree, batched over frames.
+
+:func:`solve_markers` finds, for every frame, the channel values that put a skeleton's virtual markers
+(rigidly attached: joint index + offset in the joint's frame) on the observed markers, in the least
+squares sense. Method: Levenberg-Marquardt (damped Gauss-Newton; Levenberg 1944, Marquardt 1963) on
+all frames of a block at once - one batched FK, one batched Jacobian, one batched (n x n) solve per
+iteration - with a damping factor per frame. Blocks run in time order, each warm-started from the
+previous block's last solution (the first from ``q0``, or from a root pose fitted to the root
+segment's markers by Kabsch's method, 1976). Missing markers (NaN) simply drop out of their frame's
+least-squares problem.
+
+The Jacobian of marker x (attached below tree joint i) has column ``a_i x (x - p_i)`` for a revolute
+joint and ``a_i`` for a prismatic one (``a_i`` the joint's world axis, ``p_i`` its pivot), the
+geometric Jacobian of :mod:`tianim.kinematics.tree`.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+from tianim._checks import as_index_array, check_choice, check_finite_scalar, check_positive_int, float_array, numeric_array
+from tianim.mocap.skeleton import ROTATION_CHANNELS, Skeleton
+
+
+class SolveResult(NamedTuple):
+    """``motion`` (F, C) (degrees, metres); ``rms`` (F,) marker residual [m] over the markers seen;
+    ``iterations`` (F,) iterations used per frame (its block's count)."""
+
+    motion: np.ndarray
+    rms: np.ndarray
+    iterations: np.ndarray
+
+
+def kabsch(local: np.ndarray, world: np.ndarray, weights: np.ndarray | None = None):
+    """Best rigid fit ``world ~ R local + t`` (Kabsch 1976), batched: local (M, 3), world (..., M, 3),
+    weights (..., M) (0 drops a point). Returns R (..., 3, 3) (a proper rotation) and t (..., 3)."""
+    w = np.ones(world.shape[:-1]) if weights is None else weights
+    wsum = np.maximum(w.sum(-1, keepdims=True), 1e-300)
+    ca = (w[..., None] * local).sum(-2) / wsum
+    cb = (w[..., None] * world).sum(-2) / wsum
+    H = np.einsum("...m,...mi,...mj->...ij", w, local - ca[..., None, :], world - cb[..., None, :])
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(np.swapaxes(Vt, -1, -2) @ np.swapaxes(U, -1, -2)))
+    D = np.broadcast_to(np.eye(3), H.shape).copy()
+    D[..., 2, 2] = np.where(d == 0, 1.0, d)
+    R = np.swapaxes(Vt, -1, -2) @ D @ np.swapaxes(U, -1, -2)
+    return R, cb - np.einsum("...ij,...j->...i", R, ca)
+
+
+def euler_from_matrix(R, order: str) -> np.ndarray:
+    """Intrinsic Euler angles (..., 3) in degrees, ``R = Rot(order[0]) Rot(order[1]) Rot(order[2])``,
+    for a Tait-Bryan ``order`` of three distinct axes such as ``"ZXY"``. Middle angle in [-90, 90].
+
+    With axes (i, j, k) and e = +1 for a cyclic order (XYZ, YZX, ZXY), -1 otherwise:
+    ``R[i, k] = e sin b``, ``a = atan2(-e R[j, k], R[k, k])``, ``c = atan2(-e R[i, j], R[i, i])``.
+    """
+    order = str(order).upper()
+    if len(order) != 3 or set(order) != set("XYZ"):
+        raise ValueError(f"order={order!r} must be three distinct axes, e.g. 'ZXY'")
+    R = float_array("R", R, "of shape (..., 3, 3)")
+    i, j, k = ("XYZ".index(c) for c in order)
+    e = 1.0 if (j - i) % 3 == 1 else -1.0
+    b = np.arcsin(np.clip(e * R[..., i, k], -1.0, 1.0))
+    a = np.arctan2(-e * R[..., j, k], R[..., k, k])
+    c = np.arctan2(-e * R[..., i, j], R[..., i, i])
+    return np.rad2deg(np.stack([a, b, c], axis=-1))
+
+
+def _markers_array(markers, M):
+    x = numeric_array("markers", markers, "pass marker positions (frames, markers, 3) in metres, NaN for drop-outs")
+    if x.ndim != 3 or x.shape[1:] != (M, 3):
+        raise ValueError(f"markers has shape {x.shape}; pass (frames, {M}, 3) metres, one column per attached marker")
+    if np.any(np.isinf(x)):
+        raise ValueError("markers contains inf; use NaN for a missing marker")
+    return x
+
+
+def euler_matrix(order: str, angles: np.ndarray) -> np.ndarray:
+    """``Rot(order[0], a0) Rot(order[1], a1) ...`` (..., 3, 3) for angles (..., len(order)) in degrees."""
+    R = np.broadcast_to(np.eye(3), angles.shape[:-1] + (3, 3))
+    for k, axis in enumerate(order):
+        t = np.deg2rad(angles[..., k])
+        c, s_ = np.cos(t), np.sin(t)
+        i, j = [(1, 2), (2, 0), (0, 1)]["XYZ".index(axis)]
+        E = np.zeros(angles.shape[:-1] + (3, 3))
+        E[..., "XYZ".index(axis), "XYZ".index(axis)] = 1.0
+        E[..., i, i], E[..., j, j], E[..., i, j], E[..., j, i] = c, c, -s_, s_
+        R = R @ E
+    return R
+
+
+def segment_fit(skeleton: Skeleton, markers: np.ndarray, joints: np.ndarray, local: np.ndarray,
+                fallback: np.ndarray | None = None) -> np.ndarray:
+    """A starting motion (F, C) fitted segment by segment, parents first (batched over frames).
+
+    Root: Kabsch (1976) on its markers (>= 3 seen; without a ``fallback``, with fewer, on its and its
+    children's markers placed as at rest: a rough first guess). Every other joint with three rotation channels: Kabsch on its pivot (known from the fitted
+    parent) and its markers (>= 2 seen), giving its local rotation and Euler angles. Channels that
+    cannot be fitted (too few markers, 1- or 2-rotation joints, non-root position channels) keep the
+    values of ``fallback`` (F, C) (default 0). Exact for noise-free markers on fully marked segments.
+    """
+    F, C, J = markers.shape[0], skeleton.n_channels, skeleton.n_joints
+    motion = np.zeros((F, C)) if fallback is None else np.array(fallback, dtype=np.float64)
+    seen = np.all(np.isfinite(markers), axis=-1)
+    x = np.where(seen[..., None], markers, 0.0)
+    rest = skeleton.fk(skeleton.rest_pose())[0][0]  # rest rotations are all identity
+    Rg = np.empty((J, F, 3, 3))
+    pg = np.empty((J, F, 3))
+    for j in range(J):
+        chans, c0, par = skeleton.channels[j], int(skeleton.channel_start[j]), int(skeleton.parents[j])
+        rots = [c for c in chans if c in ROTATION_CHANNELS]
+        cols = [c0 + chans.index(c) for c in rots]
+        mine = joints == j
+        if par < 0:
+            w = (seen & mine).astype(float)
+            if fallback is None:  # a first guess: with < 3 root markers, its children's as at rest too
+                few = w.sum(1) < 3
+                w[few] = (seen[few] & (mine | np.isin(joints, skeleton.children(j)))).astype(float)
+            loc = rest[joints] - rest[j] + local
+            R, t = kabsch(loc, x, w)
+            ok = (w.sum(1) >= 3) & np.isfinite(R).all(axis=(1, 2))
+            for d, axis in enumerate("XYZ"):
+                if f"{axis}position" in chans:
+                    k = c0 + chans.index(f"{axis}position")
+                    motion[ok, k] = t[ok, d] - skeleton.offsets[j, d]
+            pos_now = skeleton.offsets[j] + np.stack([motion[:, c0 + chans.index(f"{a}position")]
+                                                      if f"{a}position" in chans else np.zeros(F) for a in "XYZ"], 1)
+            Rp, pivot = np.broadcast_to(np.eye(3), (F, 3, 3)), pos_now
+        else:
+            Rp = Rg[par]
+            pivot = pg[par] + Rp @ skeleton.offsets[j]
+            if any(c.endswith("position") for c in chans):  # a sliding joint: its translation from fallback
+                tr = np.stack([motion[:, c0 + chans.index(f"{a}position")] if f"{a}position" in chans
+                               else np.zeros(F) for a in "XYZ"], 1)
+                pivot = pivot + (Rp @ tr[..., None])[..., 0]
+            idx = np.flatnonzero(mine)
+            w = np.concatenate([np.ones((F, 1)), seen[:, idx].astype(float)], axis=1)
+            ok = w.sum(1) >= 3
+            if len(rots) == 3 and ok.any():
+                loc = np.concatenate([np.zeros((1, 3)), local[idx]])
+                world = np.concatenate([pivot[:, None], x[:, idx]], axis=1)
+                R, _ = kabsch(loc, world - pivot[:, None], w)
+        if len(rots) == 3 and ok.any():
+            Rl = np.swapaxes(Rp, -1, -2) @ R
+            motion[np.ix_(ok, cols)] = euler_from_matrix(Rl[ok], "".join(c[0] for c in rots))
+        local_R = euler_matrix("".join(c[0] for c in rots), motion[:, cols]) if rots else np.eye(3)
+        Rg[j] = Rp @ local_R
+        pg[j] = pivot
+    return motion
+
+
+def initial_pose(skeleton: Skeleton, markers: np.ndarray, joints: np.ndarray, local: np.ndarray) -> np.ndarray:
+    """A starting motion (F, C): :func:`segment_fit` from the rest pose."""
+    return segment_fit(skeleton, markers, joints, local)
+
+
+def solve_markers(skeleton: Skeleton, markers, joints, local, q0=None, block: int = 16, iterations: int = 40,
+                  tol: float = 1e-9, init: str = "segments") -> SolveResult:
+    """Channel values (F, C) that best place the attached markers on ``markers`` (F, M, 3) [m].
+
+    ``joints`` (M,), ``local`` (M, 3): where each marker sits (see :func:`tianim.mocap.virtual.marker_set`).
+    ``q0``: a starting motion (C,) or (F, C) (default: :func:`initial_pose` of the first frame). Frames
+    are solved ``block`` at a time, each block started from the previous block's last solution;
+    iteration stops when every frame's step is below ``tol`` (radians / metres) or lowers its squared
+    residual by less than a relative 1e-10, or after ``iterations``.
+    ``init="segments"`` (default) starts every frame from :func:`segment_fit` (what the markers determine
+    segment by segment, the rest from the warm start); ``"previous"``: from the warm start only.
+    """
+    if not isinstance(skeleton, Skeleton):
+        raise TypeError(f"skeleton={skeleton!r} must be a tianim.mocap.Skeleton")
+    J = skeleton.n_joints
+    idx = as_index_array("joints", joints, J, of="joints").astype(np.int64)
+    M = idx.size
+    if M == 0:
+        raise ValueError("joints is empty; attach at least one marker")
+    loc = float_array("local", local, f"of shape ({M}, 3), metres")
+    if loc.shape != (M, 3):
+        raise ValueError(f"local has shape {loc.shape}; pass ({M}, 3) metres, one row per marker")
+    x_obs = _markers_array(markers, M)
+    F = x_obs.shape[0]
+    if F == 0:
+        raise ValueError("markers has no frames; pass (frames >= 1, markers, 3)")
+    block = check_positive_int("block", block, hi=100_000)
+    iterations = check_positive_int("iterations", iterations, hi=10_000)
+    tol = check_finite_scalar("tol", tol, lo=0.0, lo_open=True)
+    init = check_choice("init", init, ("segments", "previous"))
+    seen = np.all(np.isfinite(x_obs), axis=-1)  # (F, M)
+    first = 0
+    if q0 is None:  # the root pose fitted in the first frame that sees three of the root's markers
+        on_root = (seen & (idx == 0)).sum(1)
+        first = int(np.argmax(on_root >= 3)) if np.any(on_root >= 3) else 0
+        start = initial_pose(skeleton, x_obs[first:first + 1], idx, loc)[0]
+        start_all = None
+    else:
+        q0m = skeleton.motion_array(q0, "q0")
+        if q0m.shape[0] not in (1, F):
+            raise ValueError(f"q0 has {q0m.shape[0]} frames; pass one pose (C,) or one per frame ({F}, C)")
+        start, start_all = q0m[0], (q0m if q0m.shape[0] == F else None)
+
+    tree = skeleton.tree
+    dof = skeleton.channel_tree_joint  # (C,) tree joints with a channel
+    tj = skeleton.tree_joint[idx]  # (M,) tree joint each marker rides on
+    anc = np.stack([tree.ancestors(int(t)) for t in tj])[:, dof]  # (M, C) channel moves marker
+    rev = tree.revolute[dof]
+    x_obs = np.where(seen[..., None], x_obs, 0.0)
+    motion = np.empty((F, skeleton.n_channels))
+    rms = np.empty(F)
+    iters = np.zeros(F, dtype=np.int64)
+    prev, prev_frame = skeleton.to_q(start)[0], first
+    # the root's position channels (prismatic tree joints on world axes) follow the markers' centroid
+    root_pos = [int(skeleton.channel_tree_joint[skeleton.channel_start[0] + k])
+                for k, c in enumerate(skeleton.channels[0]) if c.endswith("position")]
+    root_axis = [int(np.argmax(np.abs(tree.axes[i]))) for i in root_pos]
+    for s in range(0, F, block):
+        e = min(F, s + block)
+        if start_all is None:
+            q = np.tile(prev, (e - s, 1))
+            both = seen[s:e] & seen[prev_frame]  # markers seen now and in the frame q was solved for
+            shift = ((x_obs[s:e] - x_obs[prev_frame]) * both[..., None]).sum(1) / np.maximum(both.sum(1), 1)[:, None]
+            for i, d in zip(root_pos, root_axis):
+                q[:, i] += shift[:, d] * np.sign(tree.axes[i][d])
+            if init == "segments":  # what the markers determine segment by segment; the rest warm-started
+                raw = np.where(seen[s:e, :, None], x_obs[s:e], np.nan)
+                q = skeleton.to_q(segment_fit(skeleton, raw, idx, loc, fallback=skeleton.from_q(q)))
+        else:
+            q = skeleton.to_q(start_all[s:e])
+        q, r, it = _levenberg_marquardt(tree, q, dof, rev, anc, tj, loc, x_obs[s:e], seen[s:e], iterations, tol)
+        motion[s:e] = skeleton.from_q(q)
+        rms[s:e] = np.sqrt(r / np.maximum(seen[s:e].sum(1), 1))
+        iters[s:e] = it
+        prev, prev_frame = q[-1], e - 1
+    rot = skeleton.rotation_channel  # continuous angle curves: no 360-degree jumps between frames
+    motion[:, rot] = np.unwrap(motion[:, rot], period=360.0, axis=0)
+    return SolveResult(motion, rms, iters)
+
+
+def _residual(tree, q, tj, loc, x_obs, w):
+    pos, rot, ax = tree.frames(q)
+    x = pos[:, tj] + (rot[:, tj] @ loc[:, :, None])[..., 0]
+    res = (x - x_obs) * w[..., None]
+    return pos, ax, x, res, (res * res).sum(axis=(1, 2))
+
+
+def _levenberg_marquardt(tree, q, dof, rev, anc, tj, loc, x_obs, seen, iterations, tol):
+    """LM on a block: q (B, n_tree) updated on the channel columns ``dof``; returns q, cost (B,), iterations."""
+    w = seen.astype(np.float64)
+    pos, ax, x, res, cost = _residual(tree, q, tj, loc, x_obs, w)
+    lam = np.full(q.shape[0], 1e-3)
+    n = dof.size
+    eye = np.eye(n)
+    for it in range(1, iterations + 1):
+        a, p = ax[:, dof], pos[:, dof]  # (B, n, 3)
+        cols = np.where(rev[None, None, :, None], np.cross(a[:, None], x[:, :, None] - p[:, None]),
+                        a[:, None])  # (B, M, n, 3)
+        cols *= (anc[None, :, :, None] * w[:, :, None, None])
+        Jm = cols.transpose(0, 1, 3, 2).reshape(q.shape[0], -1, n)  # (B, 3M, n)
+        # einsum, not matmul: OpenBLAS threads these (66 x 189) products and, on a busy machine, its
+        # threads' hand-offs cost 10x the arithmetic; einsum's own loop is steady
+        JtJ = np.einsum("bki,bkj->bij", Jm, Jm)
+        g = np.einsum("bki,bk->bi", Jm, res.reshape(q.shape[0], -1))
+        diag = np.einsum("bii->bi", JtJ)
+        A = JtJ + lam[:, None, None] * (eye * (diag[:, None, :] + 1e-9))
+        step = -np.linalg.solve(A, g[..., None])[..., 0]
+        q_new = q.copy()
+        q_new[:, dof] += step
+        pos2, ax2, x2, res2, cost2 = _residual(tree, q_new, tj, loc, x_obs, w)
+        ok = cost2 <= cost
+        # a frame is done when its step is below tol, or an accepted step no longer lowers its cost
+        # measurably (noisy markers: Gauss-Newton then creeps towards the minimum in ever smaller steps)
+        done = (np.abs(step).max(axis=1) < tol) | (ok & (cost - cost2 <= 1e-10 * cost))
+        q = np.where(ok[:, None], q_new, q)
+        pos = np.where(ok[:, None, None], pos2, pos)
+        ax = np.where(ok[:, None, None], ax2, ax)
+        x = np.where(ok[:, None, None], x2, x)
+        res = np.where(ok[:, None, None], res2, res)
+        cost = np.where(ok, cost2, cost)
+        lam = np.where(ok, np.maximum(lam * 0.3, 1e-12), np.minimum(lam * 10.0, 1e12))
+        if np.all(done):
+            break
+    return q, cost, it
