@@ -4,7 +4,8 @@ per float type and dimension; no atomics (each thread writes only its own partic
 bit-identical for any thread count.
 
 Particle status (``alive``): 0 dead (a free slot), 1 flying, 2 stuck to a collider.
-Events written per step (``event``): 0 none, 1 died of age, 2 killed by a collider, 3 stuck.
+Events written per step (``event``): 0 none, 1 died of age, 2 killed by a collider, 3 stuck,
+4 bounced off a collider at more than the resting speed (still flying; the first event of the launch wins, a death or stick over a bounce).
 """
 
 from tianim.physics.contact import contact_parts
@@ -77,13 +78,16 @@ def particle_kernels(real_name: str, dim: int):
         return a
 
     @ti.func
-    def collide(xi, vi, coll: ti.template(), modes: ti.template(), g_norm, h):
+    def collide(xi, vi, coll: ti.template(), modes: ti.template(), g_norm, h, prad):
         """Collider response of tianim.physics.contact (restitution, Coulomb friction as an impulse,
-        e = 0 below the resting speed 2 |g| h), plus the modes: returns (x, v, event)."""
+        e = 0 below the resting speed 2 |g| h), plus the modes: returns (x, v, event, hit), hit = 1
+        when the particle bounced with a normal speed above the resting speed (resting contact is no event). ``prad`` [m]: the particle's radius (contact when phi < prad)."""
         event = 0
+        hit = 0
         v_rest = 2 * g_norm * h
         for c in range(coll.shape[0]):
             phi, n = surface(xi, coll, c)
+            phi -= prad
             if phi < 0 and event == 0:
                 if modes[c] == KILL:
                     event = 2
@@ -93,15 +97,18 @@ def particle_kernels(real_name: str, dim: int):
                         vi = ti.Vector.zero(real, dim)
                         event = 3
                     else:
+                        if vi.dot(n) < -v_rest:  # an impact, not resting contact
+                            hit = 1
                         vi = bounce(vi, n, coll[c, 1], coll[c, 2], v_rest)
-        return xi, vi, event
+        return xi, vi, event, hit
 
     @ti.kernel
     def step(x: t.vec_arr, v: t.vec_arr, age: real2d, life: real2d, alive: t.mask_arr, event: t.mask_arr,
              extra: t.vec_arr, use_extra: ti.i32, g: t.real_arr, forces: real2d, noise: real2d,
-             coll: real2d, modes: t.int_arr, h: real, substeps: ti.i32):
+             coll: real2d, modes: t.int_arr, h: real, substeps: ti.i32, prad: real):
         """``substeps`` symplectic-Euler steps of h [s] for every live particle (one thread each):
-        v += h (g + a(x, v) + extra), x += h v, colliders, age += h, death at age >= life."""
+        v += h (g + a(x, v) + extra), x += h v, colliders (contact at distance ``prad`` [m]), age += h,
+        death at age >= life."""
         gv = ti.Vector.zero(real, dim)
         for k in ti.static(range(dim)):
             gv[k] = g[k]
@@ -110,18 +117,23 @@ def particle_kernels(real_name: str, dim: int):
             if alive[b, i] == 1:
                 xi, vi, ai = x[b, i], v[b, i], age[b, i]
                 ev = 0
+                hits = 0
                 for _ in range(substeps):
                     acc = gv + accel(xi, vi, forces, noise, b, i)
                     if use_extra != 0:
                         acc += extra[b, i]
                     vi += h * acc
                     xi += h * vi
-                    xi, vi, ev = collide(xi, vi, coll, modes, g_norm, h)
+                    hit = 0
+                    xi, vi, ev, hit = collide(xi, vi, coll, modes, g_norm, h, prad)
+                    hits += hit
                     ai += h
                     if ai >= life[b, i] and ev == 0:
                         ev = 1
                     if ev != 0:
                         break
+                if ev == 0 and hits > 0:
+                    ev = 4
                 x[b, i], v[b, i], age[b, i] = xi, vi, ai
                 event[b, i] = ti.cast(ev, ti.u8)
                 if ev == 1 or ev == 2:

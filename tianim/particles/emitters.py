@@ -1,7 +1,7 @@
 """Emitters: where, when and how fast particles are born (Reeves 1983, "Particle systems").
 
 Every emitter has a shape (:class:`PointEmitter`, :class:`BoxEmitter`, :class:`SphereEmitter`,
-:class:`DiscEmitter`) and the same timing and velocity options:
+:class:`DiscEmitter`, :class:`MeshEmitter` on the triangles of a (moving) mesh) and the same timing and velocity options:
 
 * ``rate`` [particles/s] from ``start`` [s]: particle k = 1, 2, ... is born at
   ``t_k = start + k / rate``, so a step (t0, t1] births ``floor(rate (t1 - start)) -
@@ -68,6 +68,10 @@ class Emitter:
     def _check_shape(self, name) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
 
+    def _surface_velocity(self, v):
+        """Velocities plus the velocity of the shape where each particle was placed (moving shapes)."""
+        return v
+
     def check(self, name: str = "emitter") -> "Emitter":
         """Validate every option (ValueError/TypeError naming ``name.option``); returns self."""
         self._check_shape(name)
@@ -114,7 +118,10 @@ class Emitter:
 
     def emit(self, t0: float, t1: float, rng: np.random.Generator) -> Births:
         """The particles born in (t0, t1] [s], drawn from ``rng``."""
-        t = self._birth_times(t0, t1)
+        return self.draw(self._birth_times(t0, t1), rng)
+
+    def draw(self, t: np.ndarray, rng: np.random.Generator) -> Births:
+        """Particles born at times ``t`` (n,) [s]: positions on the shape, velocities, lifetimes from ``rng``."""
         n, d = len(t), self.dim
         x = self._positions(rng, n)
         dirs = _cone_directions(rng, n, np.asarray(self.direction[:d], dtype=np.float64), float(self.cone))
@@ -122,6 +129,7 @@ class Emitter:
         v = dirs * speed[:, None]
         if self.velocity is not None:
             v = v + np.asarray(self.velocity, dtype=np.float64)
+        v = self._surface_velocity(v)
         life = self.lifetime * (1 + self.lifetime_variance * rng.uniform(-1, 1, n)) if n else np.zeros(0)
         return Births(x, v, t, life)
 
