@@ -212,3 +212,61 @@ def test_inactive_points_are_left_out():
         assert [got[i] for i in keep] == [keep[r].tolist() for r in ref]
     with pytest.raises(ValueError, match="active"):
         grid.build(x, active=active[:1])
+
+
+@pytest.mark.parametrize("dim, dtype", [(2, np.float64), (3, np.float32), (3, np.float64)])
+def test_half_query_gives_each_pair_once_as_brute_force(dim, dtype):
+    rng = np.random.default_rng(10 + dim)
+    B, N, r = 2, 700, 0.07 if dim == 2 else 0.12
+    x = rng.uniform(-0.1, 1.1, (B, N, dim)).astype(dtype)  # some points outside the domain
+    grid = NeighbourGrid(np.zeros(dim), np.ones(dim), r, N, batch=B, max_neighbours=N, dtype=dtype)
+    grid.build(x)
+    full = [grid_sets(grid.query(r), b) for b in range(B)]
+    half = grid.query_half(r)
+    for b in range(B):
+        d = x[b][:, None, :] - x[b][None, :, :]
+        d2 = (d * d).sum(-1)  # in the positions' dtype, as the grid's test
+        i, j = np.nonzero(np.triu(d2 <= dtype(r) * dtype(r), k=1))
+        got = half.pairs(b)
+        assert np.all(got[:, 0] < got[:, 1])
+        assert sorted(map(tuple, got.tolist())) == sorted(zip(i.tolist(), j.tolist()))
+        # the same neighbour sets as the full query, each split into j > i and j < i
+        assert [sorted(set(row) - set(range(k + 1))) for k, row in enumerate(full[b])] == grid_sets(half, b)
+
+
+def test_half_query_leaves_full_query_results_unchanged():
+    rng = np.random.default_rng(5)
+    x = rng.random((1, 2000, 3))
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.1, 2000, max_neighbours=64, dtype=np.float64)
+    before = grid.build(x).query(0.1)
+    idx, cnt = before.indices.copy(), before.counts.copy()
+    grid.query_half(0.1)
+    after = grid.query(0.1)
+    assert np.array_equal(after.counts, cnt) and np.array_equal(after.indices, idx)
+
+
+def test_half_query_pairs_match_ckdtree_query_pairs():
+    rng = np.random.default_rng(6)
+    x = rng.random((3000, 3))
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.06, 3000, max_neighbours=16, dtype=np.float64)
+    got = grid.build(x[None]).query_half(0.06).pairs()
+    ref = cKDTree(x).query_pairs(0.06, output_type="ndarray")
+    assert np.array_equal(np.sort(got[:, 0] * 3000 + got[:, 1]), np.sort(ref[:, 0] * 3000 + ref[:, 1]))
+
+
+def test_half_query_bad_input_and_overflow():
+    grid = NeighbourGrid((0, 0), (1, 1), 0.5, 50, max_neighbours=2, dtype=np.float64)
+    with pytest.raises(RuntimeError, match="build"):
+        grid.query_half(0.5)
+    grid.build(np.full((1, 50, 2), 0.5))
+    for r in (-1.0, 0.0, float("nan")):
+        with pytest.raises(ValueError, match="radius"):
+            grid.query_half(r)
+    with pytest.raises(ValueError, match="on_overflow"):
+        grid.query_half(0.1, on_overflow="ignore")
+    with pytest.raises(NeighbourOverflowError, match="max_neighbours=2"):
+        grid.query_half(0.1)
+    nb = grid.query_half(0.1, on_overflow="report")
+    assert nb.overflow == 47 and nb.counts[0, 0] == 49 and nb.counts[0, 47] == 2  # row i: the 49 - i after it
+    with pytest.raises(NeighbourOverflowError):
+        nb.pairs()

@@ -85,14 +85,17 @@ def grid_kernels(real_name: str, dim: int):
 
     @ti.kernel
     def query(q: t.vec_arr, xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1,
-              r: ti.f64, exclude_self: ti.i32, nbr: i32_3, count: i32_2):
+              r: ti.f64, exclude_self: ti.i32, half: ti.i32, nbr: i32_3, count: i32_2):
         """For each query point q[b, i]: the indices j with |x_j - q_i|^2 <= r^2 (in ``real``).
 
         Cells are visited in fixed order (z, then y ascending; a row of cells along x is one
         contiguous span of the sorted arrays), within a cell by particle index. The first K =
         nbr.shape[2] neighbours are stored in nbr[b, i]; count[b, i] is the total (> K: overflow).
         With ``exclude_self`` the queries are the built points themselves (``q`` is ignored but must
-        have their shape), visited in cell order, and i is not its own neighbour.
+        have their shape), visited in cell order, and i is not its own neighbour. With ``half``
+        (only with ``exclude_self``) row i keeps only the neighbours j > i: each pair once, as
+        ``scipy.spatial.cKDTree.query_pairs`` gives them (the cells visited are the same; the distance
+        test is skipped for j < i).
         """
         r2 = ti.cast(r, real) * ti.cast(r, real)
         pad = r * (1 + BOX_PAD)
@@ -133,7 +136,7 @@ def grid_kernels(real_name: str, dim: int):
                 s1 = start[b, base + hi[0] + 1]
                 for k in range(s0, s1):
                     j = order[b, k]
-                    if exclude_self == 0 or j != i:
+                    if (exclude_self == 0 or j != i) and (half == 0 or j > i):
                         d = xs[b, k] - p
                         if d.dot(d) <= r2:
                             if n < cap:
