@@ -16,8 +16,14 @@ BOUNCE, STICK, KILL = 0, 1, 2
 
 
 @cached_variants
-def particle_kernels(real_name: str, dim: int):
-    """``step`` and ``dem_accel`` for ``real_name`` positions in ``dim`` D."""
+def particle_kernels(real_name: str, dim: int, kinds: tuple = ()):
+    """``step`` and ``dem_accel`` for ``real_name`` positions in ``dim`` D.
+
+    ``kinds``: the force kinds of the system's force table, row by row (a tuple of DRAG, ATTRACTOR,
+    ...): the force loop is unrolled at compile time for them (each row's values are still run-time
+    arguments, read from the table), so a system pays only for the forces it has (one compile per
+    distinct tuple of kinds).
+    """
     t = kernel_types(real_name, dim)
     surface, bounce = contact_parts(real_name, dim)
     ti, real = t.ti, t.real
@@ -49,32 +55,44 @@ def particle_kernels(real_name: str, dim: int):
         return fr[1] * u
 
     @ti.func
-    def accel(x, v, forces: ti.template(), noise: ti.template(), b, i):
+    def force(x, v, forces: ti.template(), noise: ti.template(), f: ti.template(), kind: ti.template()):
+        """The acceleration of force row f, of kind ``kind`` (static)."""
         a = ti.Vector.zero(real, dim)
-        for f in range(forces.shape[0]):
-            kind = ti.cast(forces[f, 0], ti.i32)
+        if ti.static(kind == DRAG):
+            w = ti.Vector.zero(real, dim)
+            for k in ti.static(range(dim)):
+                w[k] = forces[f, 6 + k]
+            rel = v - w
+            a = -forces[f, 1] * rel - forces[f, 2] * rel.norm() * rel
+        elif ti.static(kind == ATTRACTOR):
+            c = ti.Vector.zero(real, dim)
+            for k in ti.static(range(dim)):
+                c[k] = forces[f, 3 + k]
+            d = c - x
+            s2 = d.dot(d) + forces[f, 2] * forces[f, 2]
+            a = forces[f, 1] * d / (s2 * ti.sqrt(s2))
+        elif ti.static(kind == VORTEX):
             c = ti.Vector.zero(real, dim)
             w = ti.Vector.zero(real, dim)
             for k in ti.static(range(dim)):
                 c[k] = forces[f, 3 + k]
                 w[k] = forces[f, 6 + k]
-            if kind == DRAG:
-                rel = v - w
-                a += -forces[f, 1] * rel - forces[f, 2] * rel.norm() * rel
-            elif kind == ATTRACTOR:
-                d = c - x
-                s2 = d.dot(d) + forces[f, 2] * forces[f, 2]
-                a += forces[f, 1] * d / (s2 * ti.sqrt(s2))
-            elif kind == VORTEX:
-                d = x - c
-                if ti.static(dim == 3):
-                    dp = d - d.dot(w) * w
-                    a += forces[f, 1] * w.cross(dp) / (dp.dot(dp) + forces[f, 2] * forces[f, 2])
-                else:
-                    a += forces[f, 1] * ti.Vector([-d[1], d[0]]) / (d.dot(d) + forces[f, 2] * forces[f, 2])
-            elif kind == CURL:
-                fr = ti.Vector([forces[f, 0], forces[f, 1], forces[f, 2]])
-                a += curl(x, fr, noise)
+            d = x - c
+            if ti.static(dim == 3):
+                dp = d - d.dot(w) * w
+                a = forces[f, 1] * w.cross(dp) / (dp.dot(dp) + forces[f, 2] * forces[f, 2])
+            else:
+                a = forces[f, 1] * ti.Vector([-d[1], d[0]]) / (d.dot(d) + forces[f, 2] * forces[f, 2])
+        elif ti.static(kind == CURL):
+            fr = ti.Vector([forces[f, 0], forces[f, 1], forces[f, 2]])
+            a = curl(x, fr, noise)
+        return a
+
+    @ti.func
+    def accel(x, v, forces: ti.template(), noise: ti.template(), b, i):
+        a = ti.Vector.zero(real, dim)
+        for f in ti.static(range(len(kinds))):
+            a += force(x, v, forces, noise, f, kinds[f])
         return a
 
     @ti.func

@@ -172,6 +172,7 @@ class ParticleSystem:
             gravity = (0.0, -9.81, 0.0)[: self.dim]
         self.gravity = as_float_array("gravity", gravity, shape=(self.dim,))
         self._forces, self._noise = force_table(list(forces), self.dim)
+        self._kinds = tuple(int(k) for k in self._forces[:, 0])  # the kernel's force loop is unrolled for these
         self._coll, self._modes = _colliders(list(colliders), self.dim, self.gravity)
         if seeds is None:
             seed = check_int("seed", seed, lo=0, hi=None)
@@ -288,7 +289,7 @@ class ParticleSystem:
         dt = h * substeps
         from tianim.particles._kernels import particle_kernels
 
-        step, dem_accel = particle_kernels(np.dtype(self.dtype).name, self.dim)
+        step, dem_accel = particle_kernels(np.dtype(self.dtype).name, self.dim, self._kinds)
         t0, t1 = self.t, self.t + dt
         k = self._k
         died = np.zeros(self.batch, np.int64)
