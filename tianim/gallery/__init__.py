@@ -17,6 +17,7 @@ DEMOS = {
     "arm-ik": "arm_ik",
     "stiff": "stiff",
     "fountain": "fountain",
+    "fireworks": "fireworks",
 }
 
 
