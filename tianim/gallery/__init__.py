@@ -18,6 +18,7 @@ DEMOS = {
     "stiff": "stiff",
     "fountain": "fountain",
     "fireworks": "fireworks",
+    "smoke": "smoke",
 }
 
 
