@@ -19,6 +19,7 @@ DEMOS = {
     "fountain": "fountain",
     "fireworks": "fireworks",
     "smoke": "smoke",
+    "sandpile": "sandpile",
 }
 
 
