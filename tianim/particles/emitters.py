@@ -19,6 +19,7 @@ directions, speeds, lifetimes), so a seed fixes every particle.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -148,11 +149,20 @@ def _cone_directions(rng, n, axis, cone):
 
 
 def _basis(n):
-    """Two unit vectors orthogonal to the unit 3-vector n and to each other."""
+    """Two unit vectors orthogonal to the unit 3-vector n and to each other (cached per n: emitters ask
+    for the same axis every step)."""
+    return _basis_of(tuple(float(c) for c in n))
+
+
+@functools.lru_cache(maxsize=256)
+def _basis_of(n):
+    n = np.array(n)
     a = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
     u = np.cross(n, a)
     u /= np.linalg.norm(u)
-    return u, np.cross(n, u)
+    w = np.cross(n, u)
+    u.flags.writeable = w.flags.writeable = False
+    return u, w
 
 
 def _dim_of(name, value):

@@ -230,21 +230,37 @@ class ParticleSystem:
         """Live particles per copy (B,)."""
         return np.count_nonzero(self.alive, axis=1)
 
-    def _place(self, b, xs, vs, ts, ls, src, t1):
-        """Put births of copy b (born at ``ts`` <= t1) into its lowest free slots, advanced ballistically
-        to t1; returns (placed, dropped)."""
-        n = len(ts)
-        free = np.flatnonzero(self.alive[b] == 0)  # the prefix sum of the free flags, in slot order
-        take = min(n, len(free))
-        slots = free[:take]
-        tau = t1 - ts[:take]
-        self.x[b, slots] = xs[:take] + vs[:take] * tau[:, None] + 0.5 * self.gravity * tau[:, None] ** 2
-        self.v[b, slots] = vs[:take] + self.gravity * tau[:, None]
-        self.age[b, slots] = tau
-        self.lifetime[b, slots] = ls[:take]
-        self.alive[b, slots] = 1
-        self.source[b, slots] = src[:take]
-        return take, n - take
+    def _place(self, births, t1):
+        """Put each copy's births into its lowest free slots, advanced ballistically to t1, all copies
+        at once. ``births[b]``: None or (x (n, D), v (n, D), t (n,) <= t1, life (n,), source (n,)) of copy b,
+        in placement order. Returns (placed, dropped) per copy (B,)."""
+        B, C = self.batch, self.capacity
+        n = np.array([0 if p is None else len(p[2]) for p in births], np.int64)
+        placed = np.zeros(B, np.int64)
+        if not n.any():
+            return placed, placed.copy()
+        free = self.alive == 0
+        n_free = np.count_nonzero(free, axis=1)
+        placed = np.minimum(n, n_free)
+        parts = [p for p in births if p is not None and len(p[2])]
+        cat = [np.concatenate([p[k] for p in parts]) for k in range(5)]
+        copy = np.repeat(np.arange(B), n)
+        rank = np.arange(len(copy)) - np.repeat(np.cumsum(n) - n, n)  # index of a birth within its copy
+        keep = rank < placed[copy]
+        # free slots of all copies in (copy, slot) order: the k-th free slot of copy b is at offset_b + k
+        slots = np.flatnonzero(free.ravel())
+        offset = np.cumsum(n_free) - n_free
+        flat = slots[offset[copy[keep]] + rank[keep]]
+        xs, vs, ts, ls, src = (a[keep] for a in cat)
+        tau = (t1 - ts)[:, None]
+        g = self.gravity
+        self.x.reshape(B * C, -1)[flat] = xs + vs * tau + 0.5 * g * tau ** 2
+        self.v.reshape(B * C, -1)[flat] = vs + g * tau
+        self.age.reshape(-1)[flat] = tau[:, 0]
+        self.lifetime.reshape(-1)[flat] = ls
+        self.alive.reshape(-1)[flat] = 1
+        self.source.reshape(-1)[flat] = src
+        return placed, n - placed
 
     def _warn_dropped(self, dropped, t1, what="births"):
         if dropped.any():
@@ -254,15 +270,15 @@ class ParticleSystem:
                           RuntimeWarning, stacklevel=4)
 
     def _emit(self, t0, t1):
-        born = np.zeros(self.batch, np.int64)
-        dropped = np.zeros(self.batch, np.int64)
-        for b in range(self.batch):
+        births = []
+        for b in range(self.batch):  # each copy draws from its own generator, emitters in order
             parts = [e.emit(t0, t1, self.rngs[b]) for e in self.emitters]
             if sum(len(p) for p in parts) == 0:
+                births.append(None)
                 continue
             cat = [np.concatenate([getattr(p, f) for p in parts]) for f in ("x", "v", "t", "life")]
-            src = np.concatenate([np.full(len(p), k, np.int32) for k, p in enumerate(parts)])
-            born[b], dropped[b] = self._place(b, *cat, src, t1)
+            births.append((*cat, np.concatenate([np.full(len(p), k, np.int32) for k, p in enumerate(parts)])))
+        born, dropped = self._place(births, t1)
         self._warn_dropped(dropped, t1)
         return born, dropped
 
@@ -270,14 +286,12 @@ class ParticleSystem:
         """Sub-emitter children of the events of the launch that ended at ``t`` [s]: (placed, dropped) (B,)."""
         from tianim.particles.subemitters import spawn_children
 
-        placed = np.zeros(self.batch, np.int64)
-        dropped = np.zeros(self.batch, np.int64)
+        births = []
         for b in range(self.batch):
             kids = spawn_children(self.sub_emitters, len(self.emitters), self.event[b], self.source[b], self.x[b],
                                   self.v[b], t, self.rngs[b])
-            if kids is not None:
-                xs, vs, ls, src = kids
-                placed[b], dropped[b] = self._place(b, xs, vs, np.full(len(ls), t), ls, src, t)
+            births.append(None if kids is None else (kids[0], kids[1], np.full(len(kids[2]), t), kids[2], kids[3]))
+        placed, dropped = self._place(births, t)
         self._warn_dropped(dropped, t, "sub-emitter children")
         return placed, dropped
 
