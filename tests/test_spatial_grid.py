@@ -229,9 +229,14 @@ def test_half_query_gives_each_pair_once_as_brute_force(dim, dtype):
         i, j = np.nonzero(np.triu(d2 <= dtype(r) * dtype(r), k=1))
         got = half.pairs(b)
         assert np.all(got[:, 0] < got[:, 1])
-        assert sorted(map(tuple, got.tolist())) == sorted(zip(i.tolist(), j.tolist()))
-        # the same neighbour sets as the full query, each split into j > i and j < i
-        assert [sorted(set(row) - set(range(k + 1))) for k, row in enumerate(full[b])] == grid_sets(half, b)
+        assert sorted(map(tuple, got.tolist())) == sorted(zip(i.tolist(), j.tolist()))  # each pair once
+        # the rows and their mirror images are exactly the full query's neighbour sets
+        rows = grid_sets(half, b)
+        both = [set(row) for row in rows]
+        for k, row in enumerate(rows):
+            for m in row:
+                both[m].add(k)
+        assert [sorted(nbrs) for nbrs in both] == full[b]
 
 
 def test_half_query_leaves_full_query_results_unchanged():
@@ -267,6 +272,20 @@ def test_half_query_bad_input_and_overflow():
     with pytest.raises(NeighbourOverflowError, match="max_neighbours=2"):
         grid.query_half(0.1)
     nb = grid.query_half(0.1, on_overflow="report")
-    assert nb.overflow == 47 and nb.counts[0, 0] == 49 and nb.counts[0, 47] == 2  # row i: the 49 - i after it
+    # all in one cell: the point at sorted position s has the 49 - s after it (sorted = index order here)
+    assert nb.overflow == 47 and nb.counts[0, 0] == 49 and nb.counts[0, 47] == 2
     with pytest.raises(NeighbourOverflowError):
         nb.pairs()
+
+
+def test_half_query_on_cell_borders_radius_larger_than_a_cell_and_clamped_points():
+    h = 0.25
+    g = np.arange(-1, 6) * h  # lattice points exactly on cell borders, some outside [0, 1]
+    x = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    for r, cell in ((1.01 * h, h), (2.2 * h, h), (1.01 * h, 0.4 * h)):
+        grid = NeighbourGrid((0, 0, 0), (1, 1, 1), cell, len(x), max_neighbours=200, dtype=np.float64)
+        got = grid.build(x[None]).query_half(r).pairs()
+        ref = cKDTree(x).query_pairs(r, output_type="ndarray")
+        n = len(x)
+        assert len(got) == len(ref)
+        assert np.array_equal(np.sort(got[:, 0] * n + got[:, 1]), np.sort(ref.min(1) * n + ref.max(1)))

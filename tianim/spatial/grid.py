@@ -86,17 +86,19 @@ class NeighbourList:
         return offsets, self.indices[mask]
 
     def pairs(self, b: int = 0) -> np.ndarray:
-        """The (P, 2) int64 pairs ``(i, j)`` of copy ``b``: row i's neighbours j, rows in point order
-        (from :meth:`NeighbourGrid.query_half`, each pair once with i < j). Raises on overflow, as :meth:`csr`."""
+        """The (P, 2) int64 pairs of copy ``b``, each row ``(min(i, j), max(i, j))`` for row i's neighbours j,
+        in row order (from :meth:`NeighbourGrid.query_half`: each pair once). Raises on overflow, as :meth:`csr`."""
         if self.overflow:
             raise NeighbourOverflowError(_overflow_message(self))
         check_int("b", b, lo=0, hi=self.counts.shape[0] - 1)
+        from tianim.spatial._kernels import pair_kernels
+
         counts = self.counts[b]
-        k = int(counts.max()) if counts.size else 0
-        mask = np.arange(k)[None, :] < counts[:, None]
-        out = np.empty((int(counts.sum()), 2), np.int64)
-        out[:, 0] = np.repeat(np.arange(counts.size), counts)
-        out[:, 1] = self.indices[b, :, :k][mask]
+        offsets = np.zeros(counts.size, np.int64)
+        np.cumsum(counts[:-1], out=offsets[1:])
+        out = np.empty((int(offsets[-1] + counts[-1]) if counts.size else 0, 2), np.int64)
+        if len(out):
+            pair_kernels()(self.indices[b], counts, offsets, out)
         return out
 
 
@@ -244,11 +246,10 @@ class NeighbourGrid:
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
 
     def query_half(self, radius, on_overflow: str = "raise") -> NeighbourList:
-        """Each pair of built points within ``radius`` [m] once: row i holds only the neighbours j > i
-        (in the grid's order), as ``cKDTree.query_pairs``; :meth:`NeighbourList.pairs` lists them.
-
-        The same cells are visited as by :meth:`query` (the distance test is skipped for j < i), about
-        half its work; the rows fit a smaller ``max_neighbours``. Overflow as in :meth:`query`.
+        """Each pair of built points within ``radius`` [m] once, as ``cKDTree.query_pairs``:
+        row i holds the neighbours j that come after i in the grid's (cell, index) order (a half-shell
+        query, about half the work of :meth:`query`); :meth:`NeighbourList.pairs` lists them as (i < j).
+        The rows fit a smaller ``max_neighbours``. Overflow as in :meth:`query`.
         """
         r = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
         check_choice("on_overflow", on_overflow, ("raise", "warn", "report"))
