@@ -1,6 +1,7 @@
 """Particle systems (Reeves 1983): a fixed-capacity pool for B copies, emitters (point, box, sphere,
-disc, mesh surface), sub-emitters on death and collision, forces (drag toward wind, attractors, vortices, curl noise), colliders (tianim.physics Ground
-and Sphere in bounce/stick/kill modes) and DEM soft-sphere contact through
+disc, mesh surface), sub-emitters on death and collision, forces (drag toward wind, attractors,
+vortices, curl noise), colliders (tianim.physics Ground and Sphere in bounce/stick/kill modes) and
+DEM soft-sphere contact through
 :class:`tianim.spatial.NeighbourGrid`. See :mod:`tianim.particles.system`.
 """
 

@@ -5,7 +5,8 @@ bit-identical for any thread count.
 
 Particle status (``alive``): 0 dead (a free slot), 1 flying, 2 stuck to a collider.
 Events written per step (``event``): 0 none, 1 died of age, 2 killed by a collider, 3 stuck,
-4 bounced off a collider at more than the resting speed (still flying; the first event of the launch wins, a death or stick over a bounce).
+4 bounced off a collider at more than the resting speed (still flying; a death or a stick in the
+same launch wins over a bounce).
 """
 
 from tianim.physics.contact import contact_parts
@@ -99,7 +100,8 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = ()):
     def collide(xi, vi, coll: ti.template(), modes: ti.template(), g_norm, h, prad):
         """Collider response of tianim.physics.contact (restitution, Coulomb friction as an impulse,
         e = 0 below the resting speed 2 |g| h), plus the modes: returns (x, v, event, hit), hit = 1
-        when the particle bounced with a normal speed above the resting speed (resting contact is no event). ``prad`` [m]: the particle's radius (contact when phi < prad)."""
+        when the particle bounced with a normal speed above the resting speed (resting contact is no
+        event). ``prad`` [m]: the particle's radius (contact when phi < prad)."""
         event = 0
         hit = 0
         v_rest = 2 * g_norm * h

@@ -11,8 +11,10 @@ Usage::
 The pool
 --------
 Arrays of shape (B, capacity[, D]) allocated once: ``x`` [m], ``v`` [m/s], ``age`` [s],
-``lifetime`` [s], ``alive`` (0 dead, 1 flying, 2 stuck). Births and deaths change values only:
-nothing is reallocated or recompiled. Births of a step go, in emitter order and birth-time order,
+``lifetime`` [s], ``alive`` (0 dead, 1 flying, 2 stuck), ``source`` (which emitter made the slot:
+k for ``emitters[k]``, ``len(emitters) + k`` for ``sub_emitters[k]``, -1 placed by hand) and
+``event`` (what happened to the slot in the last launch, :mod:`tianim.particles._kernels`).
+Births and deaths change values only: nothing is reallocated or recompiled. Births of a step go, in emitter order and birth-time order,
 into the free slots of lowest index (the exclusive prefix sum of the free flags, ``np.flatnonzero``):
 a deterministic reuse order. If a step births more than there are free slots, the extra births are
 dropped and counted: ``overflow`` (B,) accumulates them and a ``RuntimeWarning`` names the count.
