@@ -14,16 +14,18 @@ from tianim.physics.kernel_types import cached_variants, kernel_types
 from tianim.particles.forces import ATTRACTOR, CURL, DRAG, VORTEX
 
 BOUNCE, STICK, KILL = 0, 1, 2
+#: particles per thread of the step kernel, stepped in lock-step (see ``step``)
+LANES = 8
 
 
 @cached_variants
-def particle_kernels(real_name: str, dim: int, kinds: tuple = ()):
+def particle_kernels(real_name: str, dim: int, kinds: tuple = (), n_colliders: int = 0):
     """``step`` and ``dem_accel`` for ``real_name`` positions in ``dim`` D.
 
     ``kinds``: the force kinds of the system's force table, row by row (a tuple of DRAG, ATTRACTOR,
     ...): the force loop is unrolled at compile time for them (each row's values are still run-time
     arguments, read from the table), so a system pays only for the forces it has (one compile per
-    distinct tuple of kinds).
+    distinct tuple of kinds). ``n_colliders``: the number of collider rows, unrolled the same way.
     """
     t = kernel_types(real_name, dim)
     surface, bounce = contact_parts(real_name, dim)
@@ -105,7 +107,7 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = ()):
         event = 0
         hit = 0
         v_rest = 2 * g_norm * h
-        for c in range(coll.shape[0]):
+        for c in ti.static(range(n_colliders)):
             phi, n = surface(xi, coll, c)
             phi -= prad
             if phi < 0 and event == 0:
@@ -126,49 +128,86 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = ()):
     def step(x: t.vec_arr, v: t.vec_arr, age: real2d, life: real2d, alive: t.mask_arr, event: t.mask_arr,
              extra: t.vec_arr, use_extra: ti.i32, g: t.real_arr, forces: real2d, noise: real2d,
              coll: real2d, modes: t.int_arr, h: real, substeps: ti.i32, prad: real):
-        """``substeps`` symplectic-Euler steps of h [s] for every live particle (one thread each):
+        """``substeps`` symplectic-Euler steps of h [s] for every live particle (LANES per thread):
         v += h (g + a(x, v) + extra), x += h v, colliders (contact at distance ``prad`` [m]), age += h,
         death at age >= life."""
         gv = ti.Vector.zero(real, dim)
         for k in ti.static(range(dim)):
             gv[k] = g[k]
         g_norm = gv.norm()
-        for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-            if alive[b, i] == 1:
-                xi, vi, ai = x[b, i], v[b, i], age[b, i]
-                ev = 0
-                hits = 0
-                for _ in range(substeps):
-                    acc = gv + accel(xi, vi, forces, noise, b, i)
-                    if use_extra != 0:
-                        acc += extra[b, i]
-                    vi += h * acc
-                    xi += h * vi
-                    hit = 0
-                    xi, vi, ev, hit = collide(xi, vi, coll, modes, g_norm, h, prad)
-                    hits += hit
-                    ai += h
-                    if ai >= life[b, i] and ev == 0:
-                        ev = 1
-                    if ev != 0:
-                        break
-                if ev == 0 and hits > 0:
-                    ev = 4
-                x[b, i], v[b, i], age[b, i] = xi, vi, ai
-                event[b, i] = ti.cast(ev, ti.u8)
-                if ev == 1 or ev == 2:
-                    alive[b, i] = ti.cast(0, ti.u8)
-                elif ev == 3:
-                    alive[b, i] = ti.cast(2, ti.u8)
-            elif alive[b, i] == 2:  # stuck: only ages
-                age[b, i] += h * substeps
-                ev = 0
-                if age[b, i] >= life[b, i]:
-                    alive[b, i] = ti.cast(0, ti.u8)
-                    ev = 1
-                event[b, i] = ti.cast(ev, ti.u8)
-            else:
-                event[b, i] = ti.cast(0, ti.u8)
+        n = x.shape[1]
+        for b, q in ti.ndrange(x.shape[0], (n + LANES - 1) // LANES):
+            # LANES particles per thread, their substeps interleaved: independent dependency chains the
+            # CPU overlaps (instruction-level parallelism); each particle's arithmetic is unchanged
+            xs = ti.Matrix.zero(real, LANES, dim)
+            vs = ti.Matrix.zero(real, LANES, dim)
+            ages = ti.Vector.zero(real, LANES)
+            lives = ti.Vector.zero(real, LANES)
+            run = ti.Vector.zero(ti.i32, LANES)
+            evs = ti.Vector.zero(ti.i32, LANES)
+            hits = ti.Vector.zero(ti.i32, LANES)
+            for u in ti.static(range(LANES)):
+                i = q * LANES + u
+                if i < n:
+                    if alive[b, i] == 1:
+                        run[u] = 1
+                        xi, vi = x[b, i], v[b, i]
+                        for a in ti.static(range(dim)):
+                            xs[u, a] = xi[a]
+                            vs[u, a] = vi[a]
+                        ages[u] = age[b, i]
+                        lives[u] = life[b, i]
+            for _ in range(substeps):
+                for u in ti.static(range(LANES)):
+                    if run[u] == 1 and evs[u] == 0:  # flying and no event yet (an event ends its launch)
+                        xi = ti.Vector.zero(real, dim)
+                        vi = ti.Vector.zero(real, dim)
+                        for a in ti.static(range(dim)):
+                            xi[a] = xs[u, a]
+                            vi[a] = vs[u, a]
+                        acc = gv + accel(xi, vi, forces, noise, b, q * LANES + u)
+                        if use_extra != 0:
+                            acc += extra[b, q * LANES + u]
+                        vi += h * acc
+                        xi += h * vi
+                        ev = 0
+                        hit = 0
+                        xi, vi, ev, hit = collide(xi, vi, coll, modes, g_norm, h, prad)
+                        hits[u] += hit
+                        ages[u] += h
+                        if ages[u] >= lives[u] and ev == 0:
+                            ev = 1
+                        evs[u] = ev
+                        for a in ti.static(range(dim)):
+                            xs[u, a] = xi[a]
+                            vs[u, a] = vi[a]
+            for u in ti.static(range(LANES)):
+                i = q * LANES + u
+                if i < n:
+                    if run[u] == 1:
+                        ev = evs[u]
+                        if ev == 0 and hits[u] > 0:
+                            ev = 4
+                        xi = ti.Vector.zero(real, dim)
+                        vi = ti.Vector.zero(real, dim)
+                        for a in ti.static(range(dim)):
+                            xi[a] = xs[u, a]
+                            vi[a] = vs[u, a]
+                        x[b, i], v[b, i], age[b, i] = xi, vi, ages[u]
+                        event[b, i] = ti.cast(ev, ti.u8)
+                        if ev == 1 or ev == 2:
+                            alive[b, i] = ti.cast(0, ti.u8)
+                        elif ev == 3:
+                            alive[b, i] = ti.cast(2, ti.u8)
+                    elif alive[b, i] == 2:  # stuck: only ages
+                        age[b, i] += h * substeps
+                        ev = 0
+                        if age[b, i] >= life[b, i]:
+                            alive[b, i] = ti.cast(0, ti.u8)
+                            ev = 1
+                        event[b, i] = ti.cast(ev, ti.u8)
+                    else:
+                        event[b, i] = ti.cast(0, ti.u8)
 
     @ti.kernel
     def dem_accel(x: t.vec_arr, v: t.vec_arr, alive: t.mask_arr, nbr: i32_3, count: i32_2, prm: t.real_arr,

@@ -305,7 +305,7 @@ class ParticleSystem:
         dt = h * substeps
         from tianim.particles._kernels import particle_kernels
 
-        step, dem_accel = particle_kernels(np.dtype(self.dtype).name, self.dim, self._kinds)
+        step, dem_accel = particle_kernels(np.dtype(self.dtype).name, self.dim, self._kinds, len(self._modes))
         t0, t1 = self.t, self.t + dt
         k = self._k
         died = np.zeros(self.batch, np.int64)
