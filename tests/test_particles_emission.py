@@ -54,7 +54,7 @@ def test_every_death_spawns_exactly_n_children_at_the_death_position_and_time():
     assert spawned == n * deaths and ps.n_alive[0] == n * deaths + np.count_nonzero(ps.alive[0][ps.source[0] == 0])
 
 
-def test_children_of_deaths_inherit_the_parent_time_exactly_in_total():
+def test_children_total_is_count_times_the_rockets_that_died():
     # closed form count: every rocket born in (0, T - life_max] is dead by T, and only those can be
     ps = _fireworks(count=4)
     for _ in range(48):
