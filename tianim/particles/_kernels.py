@@ -14,8 +14,12 @@ from tianim.physics.kernel_types import cached_variants, kernel_types
 from tianim.particles.forces import ATTRACTOR, CURL, DRAG, VORTEX
 
 BOUNCE, STICK, KILL = 0, 1, 2
-#: particles per thread of the step kernel, stepped in lock-step (see ``step``)
-LANES = 8
+#: particles per thread of the step kernel, stepped in lock-step (see ``step``), for light force sets
+#: (at most two forces, no curl noise); heavier kernels use one. Measured on the bench model (drag +
+#: ground, 1 thread, noisy machine): 2 lanes 1.3x faster steps for 1.2x the compile time; 4 lanes
+#: ~1.4x for ~4x the compile time; 8 lanes ~1.6x but a minute to compile: compile time grows
+#: faster than the lanes help.
+LANES = 2
 
 
 @cached_variants
@@ -28,6 +32,7 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), n_colliders: i
     distinct tuple of kinds). ``n_colliders``: the number of collider rows, unrolled the same way.
     """
     t = kernel_types(real_name, dim)
+    lanes = LANES if CURL not in kinds and len(kinds) <= 2 else 1
     surface, bounce = contact_parts(real_name, dim)
     ti, real = t.ti, t.real
     i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
@@ -128,7 +133,7 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), n_colliders: i
     def step(x: t.vec_arr, v: t.vec_arr, age: real2d, life: real2d, alive: t.mask_arr, event: t.mask_arr,
              extra: t.vec_arr, use_extra: ti.i32, g: t.real_arr, forces: real2d, noise: real2d,
              coll: real2d, modes: t.int_arr, h: real, substeps: ti.i32, prad: real):
-        """``substeps`` symplectic-Euler steps of h [s] for every live particle (LANES per thread):
+        """``substeps`` symplectic-Euler steps of h [s] for every live particle (``lanes`` per thread):
         v += h (g + a(x, v) + extra), x += h v, colliders (contact at distance ``prad`` [m]), age += h,
         death at age >= life."""
         gv = ti.Vector.zero(real, dim)
@@ -136,18 +141,18 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), n_colliders: i
             gv[k] = g[k]
         g_norm = gv.norm()
         n = x.shape[1]
-        for b, q in ti.ndrange(x.shape[0], (n + LANES - 1) // LANES):
-            # LANES particles per thread, their substeps interleaved: independent dependency chains the
+        for b, q in ti.ndrange(x.shape[0], (n + lanes - 1) // lanes):
+            # `lanes` particles per thread, their substeps interleaved: independent dependency chains the
             # CPU overlaps (instruction-level parallelism); each particle's arithmetic is unchanged
-            xs = ti.Matrix.zero(real, LANES, dim)
-            vs = ti.Matrix.zero(real, LANES, dim)
-            ages = ti.Vector.zero(real, LANES)
-            lives = ti.Vector.zero(real, LANES)
-            run = ti.Vector.zero(ti.i32, LANES)
-            evs = ti.Vector.zero(ti.i32, LANES)
-            hits = ti.Vector.zero(ti.i32, LANES)
-            for u in ti.static(range(LANES)):
-                i = q * LANES + u
+            xs = ti.Matrix.zero(real, lanes, dim)
+            vs = ti.Matrix.zero(real, lanes, dim)
+            ages = ti.Vector.zero(real, lanes)
+            lives = ti.Vector.zero(real, lanes)
+            run = ti.Vector.zero(ti.i32, lanes)
+            evs = ti.Vector.zero(ti.i32, lanes)
+            hits = ti.Vector.zero(ti.i32, lanes)
+            for u in ti.static(range(lanes)):
+                i = q * lanes + u
                 if i < n:
                     if alive[b, i] == 1:
                         run[u] = 1
@@ -158,16 +163,16 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), n_colliders: i
                         ages[u] = age[b, i]
                         lives[u] = life[b, i]
             for _ in range(substeps):
-                for u in ti.static(range(LANES)):
+                for u in ti.static(range(lanes)):
                     if run[u] == 1 and evs[u] == 0:  # flying and no event yet (an event ends its launch)
                         xi = ti.Vector.zero(real, dim)
                         vi = ti.Vector.zero(real, dim)
                         for a in ti.static(range(dim)):
                             xi[a] = xs[u, a]
                             vi[a] = vs[u, a]
-                        acc = gv + accel(xi, vi, forces, noise, b, q * LANES + u)
+                        acc = gv + accel(xi, vi, forces, noise, b, q * lanes + u)
                         if use_extra != 0:
-                            acc += extra[b, q * LANES + u]
+                            acc += extra[b, q * lanes + u]
                         vi += h * acc
                         xi += h * vi
                         ev = 0
@@ -181,8 +186,8 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), n_colliders: i
                         for a in ti.static(range(dim)):
                             xs[u, a] = xi[a]
                             vs[u, a] = vi[a]
-            for u in ti.static(range(LANES)):
-                i = q * LANES + u
+            for u in ti.static(range(lanes)):
+                i = q * lanes + u
                 if i < n:
                     if run[u] == 1:
                         ev = evs[u]
