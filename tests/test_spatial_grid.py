@@ -212,3 +212,80 @@ def test_inactive_points_are_left_out():
         assert [got[i] for i in keep] == [keep[r].tolist() for r in ref]
     with pytest.raises(ValueError, match="active"):
         grid.build(x, active=active[:1])
+
+
+@pytest.mark.parametrize("dim, dtype", [(2, np.float64), (3, np.float32), (3, np.float64)])
+def test_half_query_gives_each_pair_once_as_brute_force(dim, dtype):
+    rng = np.random.default_rng(10 + dim)
+    B, N, r = 2, 700, 0.07 if dim == 2 else 0.12
+    x = rng.uniform(-0.1, 1.1, (B, N, dim)).astype(dtype)  # some points outside the domain
+    grid = NeighbourGrid(np.zeros(dim), np.ones(dim), r, N, batch=B, max_neighbours=N, dtype=dtype)
+    grid.build(x)
+    full = [grid_sets(grid.query(r), b) for b in range(B)]
+    half = grid.query_half(r)
+    for b in range(B):
+        d = x[b][:, None, :] - x[b][None, :, :]
+        d2 = (d * d).sum(-1)  # in the positions' dtype, as the grid's test
+        i, j = np.nonzero(np.triu(d2 <= dtype(r) * dtype(r), k=1))
+        got = half.pairs(b)
+        assert np.all(got[:, 0] < got[:, 1])
+        assert sorted(map(tuple, got.tolist())) == sorted(zip(i.tolist(), j.tolist()))  # each pair once
+        # the rows and their mirror images are exactly the full query's neighbour sets
+        rows = grid_sets(half, b)
+        both = [set(row) for row in rows]
+        for k, row in enumerate(rows):
+            for m in row:
+                both[m].add(k)
+        assert [sorted(nbrs) for nbrs in both] == full[b]
+
+
+def test_half_query_leaves_full_query_results_unchanged():
+    rng = np.random.default_rng(5)
+    x = rng.random((1, 2000, 3))
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.1, 2000, max_neighbours=64, dtype=np.float64)
+    before = grid.build(x).query(0.1)
+    idx, cnt = before.indices.copy(), before.counts.copy()
+    grid.query_half(0.1)
+    after = grid.query(0.1)
+    assert np.array_equal(after.counts, cnt) and np.array_equal(after.indices, idx)
+
+
+def test_half_query_pairs_match_ckdtree_query_pairs():
+    rng = np.random.default_rng(6)
+    x = rng.random((3000, 3))
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.06, 3000, max_neighbours=16, dtype=np.float64)
+    got = grid.build(x[None]).query_half(0.06).pairs()
+    ref = cKDTree(x).query_pairs(0.06, output_type="ndarray")
+    assert np.array_equal(np.sort(got[:, 0] * 3000 + got[:, 1]), np.sort(ref[:, 0] * 3000 + ref[:, 1]))
+
+
+def test_half_query_bad_input_and_overflow():
+    grid = NeighbourGrid((0, 0), (1, 1), 0.5, 50, max_neighbours=2, dtype=np.float64)
+    with pytest.raises(RuntimeError, match="build"):
+        grid.query_half(0.5)
+    grid.build(np.full((1, 50, 2), 0.5))
+    for r in (-1.0, 0.0, float("nan")):
+        with pytest.raises(ValueError, match="radius"):
+            grid.query_half(r)
+    with pytest.raises(ValueError, match="on_overflow"):
+        grid.query_half(0.1, on_overflow="ignore")
+    with pytest.raises(NeighbourOverflowError, match="max_neighbours=2"):
+        grid.query_half(0.1)
+    nb = grid.query_half(0.1, on_overflow="report")
+    # all in one cell: the point at sorted position s has the 49 - s after it (sorted = index order here)
+    assert nb.overflow == 47 and nb.counts[0, 0] == 49 and nb.counts[0, 47] == 2
+    with pytest.raises(NeighbourOverflowError):
+        nb.pairs()
+
+
+def test_half_query_on_cell_borders_radius_larger_than_a_cell_and_clamped_points():
+    h = 0.25
+    g = np.arange(-1, 6) * h  # lattice points exactly on cell borders, some outside [0, 1]
+    x = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
+    for r, cell in ((1.01 * h, h), (2.2 * h, h), (1.01 * h, 0.4 * h)):
+        grid = NeighbourGrid((0, 0, 0), (1, 1, 1), cell, len(x), max_neighbours=200, dtype=np.float64)
+        got = grid.build(x[None]).query_half(r).pairs()
+        ref = cKDTree(x).query_pairs(r, output_type="ndarray")
+        n = len(x)
+        assert len(got) == len(ref)
+        assert np.array_equal(np.sort(got[:, 0] * n + got[:, 1]), np.sort(ref.min(1) * n + ref.max(1)))

@@ -20,6 +20,9 @@ DEMOS = {
     "flock": "flock",
     "crossing": "crossing",
     "mocap": "mocap",
+    "fireworks": "fireworks",
+    "smoke": "smoke",
+    "sandpile": "sandpile",
 }
 
 

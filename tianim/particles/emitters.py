@@ -1,7 +1,7 @@
 """Emitters: where, when and how fast particles are born (Reeves 1983, "Particle systems").
 
 Every emitter has a shape (:class:`PointEmitter`, :class:`BoxEmitter`, :class:`SphereEmitter`,
-:class:`DiscEmitter`) and the same timing and velocity options:
+:class:`DiscEmitter`, :class:`MeshEmitter` on the triangles of a (moving) mesh) and the same timing and velocity options:
 
 * ``rate`` [particles/s] from ``start`` [s]: particle k = 1, 2, ... is born at
   ``t_k = start + k / rate``, so a step (t0, t1] births ``floor(rate (t1 - start)) -
@@ -19,6 +19,7 @@ directions, speeds, lifetimes), so a seed fixes every particle.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -68,6 +69,10 @@ class Emitter:
     def _check_shape(self, name) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
 
+    def _surface_velocity(self, v):
+        """Velocities plus the velocity of the shape where each particle was placed (moving shapes)."""
+        return v
+
     def check(self, name: str = "emitter") -> "Emitter":
         """Validate every option (ValueError/TypeError naming ``name.option``); returns self."""
         self._check_shape(name)
@@ -114,7 +119,10 @@ class Emitter:
 
     def emit(self, t0: float, t1: float, rng: np.random.Generator) -> Births:
         """The particles born in (t0, t1] [s], drawn from ``rng``."""
-        t = self._birth_times(t0, t1)
+        return self.draw(self._birth_times(t0, t1), rng)
+
+    def draw(self, t: np.ndarray, rng: np.random.Generator) -> Births:
+        """Particles born at times ``t`` (n,) [s]: positions on the shape, velocities, lifetimes from ``rng``."""
         n, d = len(t), self.dim
         x = self._positions(rng, n)
         dirs = _cone_directions(rng, n, np.asarray(self.direction[:d], dtype=np.float64), float(self.cone))
@@ -122,6 +130,7 @@ class Emitter:
         v = dirs * speed[:, None]
         if self.velocity is not None:
             v = v + np.asarray(self.velocity, dtype=np.float64)
+        v = self._surface_velocity(v)
         life = self.lifetime * (1 + self.lifetime_variance * rng.uniform(-1, 1, n)) if n else np.zeros(0)
         return Births(x, v, t, life)
 
@@ -140,11 +149,20 @@ def _cone_directions(rng, n, axis, cone):
 
 
 def _basis(n):
-    """Two unit vectors orthogonal to the unit 3-vector n and to each other."""
+    """Two unit vectors orthogonal to the unit 3-vector n and to each other (cached per n: emitters ask
+    for the same axis every step)."""
+    return _basis_of(tuple(float(c) for c in n))
+
+
+@functools.lru_cache(maxsize=256)
+def _basis_of(n):
+    n = np.array(n)
     a = np.array([1.0, 0, 0]) if abs(n[0]) < 0.9 else np.array([0, 1.0, 0])
     u = np.cross(n, a)
     u /= np.linalg.norm(u)
-    return u, np.cross(n, u)
+    w = np.cross(n, u)
+    u.flags.writeable = w.flags.writeable = False
+    return u, w
 
 
 def _dim_of(name, value):

@@ -53,6 +53,27 @@ def _box(points: np.ndarray):
     return t.min(axis=1).astype(np.float64), t.max(axis=1).astype(np.float64)
 
 
+def _alpha_mask(alpha, ids, n: int) -> np.ndarray:
+    """(n,) bool: which particles an ``alpha`` (scalar or (n,)) in [0, 1] keeps (see Scene3D.particles)."""
+    a = np.asarray(alpha, dtype=np.float64)
+    if a.ndim > 1 or (a.ndim == 1 and a.shape != (n,)) or not np.all(np.isfinite(a)) or np.any((a < 0) | (a > 1)):
+        raise ValueError(f"alpha must be a number or ({n},) values in [0, 1], got shape {a.shape}; "
+                         "clip opacities to [0, 1]")
+    if ids is None:
+        k = np.arange(n, dtype=np.uint64)
+    else:
+        k = np.asarray(ids)
+        if k.shape != (n,) or not np.issubdtype(k.dtype, np.integer):
+            raise ValueError(f"ids must be ({n},) integers (stable particle ids, e.g. pool slots), got shape {k.shape}")
+        k = k.astype(np.uint64)
+    with np.errstate(over="ignore"):  # splitmix64 finaliser (Steele, Lea & Flood 2014)
+        z = (k + np.uint64(0x9E3779B97F4A7C15)) * np.uint64(0xBF58476D1CE4E5B9)
+        z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+        z ^= z >> np.uint64(31)
+    u = (z >> np.uint64(11)).astype(np.float64) / float(1 << 53)
+    return u < a
+
+
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Area-weighted vertex normals (V, 3) float32 of a triangle mesh (sum of face cross products)."""
     v = np.asarray(vertices, dtype=np.float32)
@@ -199,13 +220,25 @@ class Scene3D:
         self._add_mesh(g.reshape(-1, 3), grid_faces(g.shape[0], g.shape[1]), None, color, back_color, g.shape[:2])
         return self
 
-    def particles(self, points, radius=0.01, color="orange") -> "Scene3D":
-        """Particles as shaded spheres: points (N, 3) [m], radius [m] (scalar or (N,))."""
+    def particles(self, points, radius=0.01, color="orange", alpha=None, ids=None) -> "Scene3D":
+        """Particles as shaded spheres: points (N, 3) [m], radius [m] (scalar or (N,)), ``color`` one
+        colour or (N, 3).
+
+        ``alpha`` (scalar or (N,) in [0, 1]): opacity as stochastic transparency at particle granularity
+        (Enderton et al. 2010, "Stochastic transparency", one sample per particle): particle i is
+        drawn iff ``u_i < alpha_i``, with ``u_i`` a fixed hash of ``ids[i]`` (default ``arange(N)``) in
+        [0, 1). Many particles then show a density proportional to alpha; pass stable ``ids`` (pool
+        slots) so that a fading particle disappears once instead of flickering.
+        """
         p = points_array(points, "points", dim=3)
         r = np.broadcast_to(np.asarray(radius, dtype=np.float32), (len(p),))
         if r.size and not np.all(r > 0):
             raise ValueError(f"radius must be > 0 metres, got min {float(r.min())!r}")
-        self._spheres.append((p, r.astype(np.float32), rgb_array(color, len(p), "color")))
+        c = rgb_array(color, len(p), "color")
+        if alpha is not None:
+            keep = _alpha_mask(alpha, ids, len(p))
+            p, r, c = p[keep], r[keep], c[keep]
+        self._spheres.append((p, r.astype(np.float32), c))
         return self
 
     def sphere(self, center, radius, color="orange") -> "Scene3D":

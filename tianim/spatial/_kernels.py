@@ -85,14 +85,18 @@ def grid_kernels(real_name: str, dim: int):
 
     @ti.kernel
     def query(q: t.vec_arr, xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1,
-              r: ti.f64, exclude_self: ti.i32, nbr: i32_3, count: i32_2):
+              r: ti.f64, exclude_self: ti.i32, half: ti.i32, nbr: i32_3, count: i32_2):
         """For each query point q[b, i]: the indices j with |x_j - q_i|^2 <= r^2 (in ``real``).
 
         Cells are visited in fixed order (z, then y ascending; a row of cells along x is one
         contiguous span of the sorted arrays), within a cell by particle index. The first K =
         nbr.shape[2] neighbours are stored in nbr[b, i]; count[b, i] is the total (> K: overflow).
         With ``exclude_self`` the queries are the built points themselves (``q`` is ignored but must
-        have their shape), visited in cell order, and i is not its own neighbour.
+        have their shape), visited in cell order, and i is not its own neighbour. With ``half``
+        (only with ``exclude_self``) a half shell: the point at sorted position s visits only the
+        sorted positions after s among the cells of its box (its own cell from s + 1 on, the rest of its
+        own row of cells, and the rows after it in (z, y) order), so each pair is found once, by the
+        point that comes first in the grid's (cell, index) order: about half the work of a full query.
         """
         r2 = ti.cast(r, real) * ti.cast(r, real)
         pad = r * (1 + BOX_PAD)
@@ -110,6 +114,11 @@ def grid_kernels(real_name: str, dim: int):
             for a in ti.static(range(dim)):
                 lo[a] = coord(ti.cast(p[a], ti.f64) - pad, a, geom, dims)
                 hi[a] = coord(ti.cast(p[a], ti.f64) + pad, a, geom, dims)
+            own_base = 0  # flat id of the first cell of the point's own row (half shell)
+            for k in ti.static(range(1, dim)):
+                a = ti.static(dim - k)
+                own_base = own_base * dims[a] + coord(p[a], a, geom, dims)
+            own_base = own_base * dims[0]
             n = 0
             cap = nbr.shape[2]
             rows = 1
@@ -131,6 +140,11 @@ def grid_kernels(real_name: str, dim: int):
                 base = base * dims[0]
                 s0 = start[b, base + lo[0]]
                 s1 = start[b, base + hi[0] + 1]
+                if half != 0:
+                    if base < own_base:
+                        s1 = s0  # a row before the point's own: its pairs were found from there
+                    elif base == own_base:
+                        s0 = s + 1
                 for k in range(s0, s1):
                     j = order[b, k]
                     if exclude_self == 0 or j != i:
@@ -142,3 +156,24 @@ def grid_kernels(real_name: str, dim: int):
             count[b, i] = n
 
     return cell_ids, counting_sort, query
+
+
+@cached_variants
+def pair_kernels():
+    """``pairs``: the neighbour rows of one copy written out as (min, max) index pairs in row order."""
+    from tianim import _ti
+
+    ti = _ti.get()
+
+    @ti.kernel
+    def pairs(nbr: ti.types.ndarray(dtype=ti.i32, ndim=2), count: ti.types.ndarray(dtype=ti.i32, ndim=1),
+              offsets: ti.types.ndarray(dtype=ti.i64, ndim=1), out: ti.types.ndarray(dtype=ti.i64, ndim=2)):
+        """Row i's count[i] neighbours j go to out[offsets[i] + k] = (min(i, j), max(i, j)); one thread per row."""
+        for i in range(nbr.shape[0]):
+            o = offsets[i]
+            for k in range(count[i]):
+                j = nbr[i, k]
+                out[o + k, 0] = ti.cast(ti.min(i, j), ti.i64)
+                out[o + k, 1] = ti.cast(ti.max(i, j), ti.i64)
+
+    return pairs

@@ -6,6 +6,7 @@ Usage::
     grid.build(x)                         # x: (B, N, D) float32 or float64 [m]
     nb = grid.query(0.05)                 # neighbours within 0.05 m of every built point
     offsets, idx = nb.csr()               # CSR rows in (copy, point) order
+    pairs = grid.query_half(0.05).pairs() # each pair (i, j), i < j, once (as cKDTree.query_pairs)
 
 Rules
 -----
@@ -83,6 +84,22 @@ class NeighbourList:
         np.cumsum(counts, out=offsets[1:])
         mask = np.arange(self.max_neighbours)[None, None, :] < self.counts[:, :, None]
         return offsets, self.indices[mask]
+
+    def pairs(self, b: int = 0) -> np.ndarray:
+        """The (P, 2) int64 pairs of copy ``b``, each row ``(min(i, j), max(i, j))`` for row i's neighbours j,
+        in row order (from :meth:`NeighbourGrid.query_half`: each pair once). Raises on overflow, as :meth:`csr`."""
+        if self.overflow:
+            raise NeighbourOverflowError(_overflow_message(self))
+        check_int("b", b, lo=0, hi=self.counts.shape[0] - 1)
+        from tianim.spatial._kernels import pair_kernels
+
+        counts = self.counts[b]
+        offsets = np.zeros(counts.size, np.int64)
+        np.cumsum(counts[:-1], out=offsets[1:])
+        out = np.empty((int(offsets[-1] + counts[-1]) if counts.size else 0, 2), np.int64)
+        if len(out):
+            pair_kernels()(self.indices[b], counts, offsets, out)
+        return out
 
 
 def _overflow_message(nb: NeighbourList) -> str:
@@ -225,12 +242,29 @@ class NeighbourGrid:
             q, exclude = self._points("points", points, None), 0
         nbr, count = self._buffers(q.shape[1])
         _, _, query = self._kernels()
-        query(q, self.sorted_x, self.order, self.start, self._geom, self.dims, r, exclude, nbr, count)
-        out = NeighbourList(nbr, count, self.max_neighbours)
+        query(q, self.sorted_x, self.order, self.start, self._geom, self.dims, r, exclude, 0, nbr, count)
+        return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
+
+    def query_half(self, radius, on_overflow: str = "raise") -> NeighbourList:
+        """Each pair of built points within ``radius`` [m] once, as ``cKDTree.query_pairs``:
+        row i holds the neighbours j that come after i in the grid's (cell, index) order (a half-shell
+        query, about half the work of :meth:`query`); :meth:`NeighbourList.pairs` lists them as (i < j).
+        The rows fit a smaller ``max_neighbours``. Overflow as in :meth:`query`.
+        """
+        r = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
+        check_choice("on_overflow", on_overflow, ("raise", "warn", "report"))
+        if self._built is None:
+            raise RuntimeError("query_half before build: call grid.build(x) first")
+        nbr, count = self._buffers(self.n_points)
+        _, _, query = self._kernels()
+        query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, nbr, count)
+        return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
+
+    def _checked(self, out, on_overflow):
         if on_overflow != "report" and out.overflow:
             if on_overflow == "raise":
                 raise NeighbourOverflowError(_overflow_message(out))
-            warnings.warn(_overflow_message(out), RuntimeWarning, stacklevel=2)
+            warnings.warn(_overflow_message(out), RuntimeWarning, stacklevel=3)
         return out
 
     def _buffers(self, q: int):
