@@ -23,3 +23,18 @@ def test_fast_numpy_cloth_reference_agrees_with_the_kernels():
     from tianim.bench.cloth import fast_numpy_agreement
 
     assert fast_numpy_agreement(n=16, substeps=50) < 1e-5  # float32 rounding only
+
+
+def test_warp_reference_agrees_with_tianim_where_installed():
+    """`tianim bench cloth`'s Warp reference (bench extra) computes the same cloth; without Warp it
+    cannot be built, and the bench reports null warp keys instead of a number."""
+    import pytest
+
+    from tianim.bench import _warp_cloth
+    from tianim.bench.cloth import warp_agreement
+
+    if _warp_cloth.available():
+        assert warp_agreement() < 1e-5   # float32, a different order of the same operations
+    else:
+        with pytest.raises(ImportError):
+            _warp_cloth.WarpCloth(cloth_model(4), np.zeros((16, 3)), np.zeros((16, 3)), np.zeros(16, bool))

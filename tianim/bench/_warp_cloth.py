@@ -37,6 +37,8 @@ def _build():
         import warp as wp
 
         wp.config.quiet = True
+        if hasattr(wp, "LOG_WARNING"):   # no "Module ... load on device" lines (Warp >= 1.10)
+            wp.config.log_level = wp.LOG_WARNING
         wp.init()
 
     @wp.kernel

@@ -13,8 +13,12 @@ tianim before anything is timed, then timed in the same process:
 
 ``bandwidth_fraction``: the bytes a substep must move at least (read and write x and v,
 ``4 D`` values per particle) per second, over the copy bandwidth of a large NumPy copy
-measured in the same run. Warp is not measured (not installed in this project's
-environments).
+measured in the same run.
+
+* ``warp``: NVIDIA Warp on the CPU (:mod:`tianim.bench._warp_cloth`: one fused launch per substep,
+  a per-particle gather over the 12 stencil neighbours, no atomics), where ``warp-lang`` is
+  installed (the ``bench`` extra); checked against tianim on a 16x16 cloth first. Warp's CPU
+  kernels run on one thread. Without Warp the ``warp_*`` keys are null and the reason is printed.
 
 Self-collision (``selfcollision_*`` keys): the 128x128 cloth, symplectic Euler, with
 ``SelfCollision(thickness=0.8 dx)`` against the same cloth without it, from rest, in the same run.
@@ -29,6 +33,7 @@ from __future__ import annotations
 import numpy as np
 
 import tianim.physics as tp
+from tianim.bench import _warp_cloth
 from tianim.bench._numpy_cloth import FastNumpyCloth
 from tianim.bench._physics import check_agreement, perturbed_state, time_numpy, time_tianim
 from tianim.bench.common import median_time, parser, print_table, write_json
@@ -114,11 +119,25 @@ def selfcollision_row(n: int = 128, repeats: int = 5, substeps: int = 64, method
     }
 
 
+def warp_agreement(n: int = 16, substeps: int = 50) -> float:
+    """Max |x_tianim - x_warp| [m] after ``substeps`` from the same perturbed state (float32)."""
+    model = cloth_model(n)
+    dt = 0.5 * tp.stable_dt(model, "symplectic_euler")
+    state = perturbed_state(model)
+    ref = _warp_cloth.WarpCloth(model, state.x[0], state.v[0], state.pinned[0])
+    tp.step(model, state, dt, substeps=substeps)
+    ref.step(dt, substeps)
+    return float(np.max(np.abs(state.x[0].astype(np.float64) - ref.positions())))
+
+
 def run(sizes=(128, 256, 512), repeats=5, numpy_max=256) -> dict:
     rows = []
     fast_err = fast_numpy_agreement()
     if fast_err > 1e-4:
         raise RuntimeError(f"tianim and the fast NumPy reference disagree by {fast_err:.3g} m on a 16x16 cloth")
+    warp_err = warp_agreement() if _warp_cloth.available() else None
+    if warp_err is not None and warp_err > 1e-4:
+        raise RuntimeError(f"tianim and the Warp reference disagree by {warp_err:.3g} m on a 16x16 cloth")
     bandwidth = copy_bandwidth()
     for n in sizes:
         model = cloth_model(n)
@@ -142,6 +161,12 @@ def run(sizes=(128, 256, 512), repeats=5, numpy_max=256) -> dict:
         t_fast = median_time(lambda: fast.step(dt, kf), repeats=repeats)
         row["numpy_substeps_per_s"] = kf / t_fast
         row["speedup_vs_numpy"] = row["substeps_per_s"] / row["numpy_substeps_per_s"]
+        if warp_err is not None:
+            wc = _warp_cloth.WarpCloth(model, state.x[0], state.v[0], state.pinned[0])
+            kw = max(2, k // 4)
+            t_warp = median_time(lambda: wc.step(dt, kw), repeats=repeats)
+            row["warp_substeps_per_s"] = kw / t_warp
+            row["speedup_vs_warp"] = row["substeps_per_s"] / row["warp_substeps_per_s"]
         if n <= numpy_max:
             kn = max(2, k // 8)
             t_np = time_numpy(model, state, dt, kn, max(3, repeats // 2))
@@ -149,7 +174,7 @@ def run(sizes=(128, 256, 512), repeats=5, numpy_max=256) -> dict:
             row["speedup_vs_numpy_simple"] = row["substeps_per_s"] / row["numpy_simple_substeps_per_s"]
         rows.append(row)
     return {"rows": rows, "agreement_max_abs_m": err, "fast_numpy_agreement_max_abs_m": fast_err,
-            "copy_bandwidth_bytes_per_s": bandwidth}
+            "warp_agreement_max_abs_m": warp_err, "copy_bandwidth_bytes_per_s": bandwidth}
 
 
 def main(argv) -> int:
@@ -158,11 +183,15 @@ def main(argv) -> int:
     sizes = (64, 128) if args.quick else (32, 64, 128, 256, 512)
     res = run(sizes=sizes, repeats=2 if args.quick else args.repeats)
     print_table(res["rows"], ["size", "particles", "substeps_per_s", "numpy_substeps_per_s", "speedup_vs_numpy",
-                              "numpy_simple_substeps_per_s", "speedup_vs_numpy_simple", "bandwidth_fraction"])
+                              "warp_substeps_per_s", "speedup_vs_warp", "numpy_simple_substeps_per_s",
+                              "speedup_vs_numpy_simple", "bandwidth_fraction"])
     main_row = next(r for r in res["rows"] if r["size"] == "128x128")
     summary = {k: main_row.get(k) for k in ("substeps_per_s", "numpy_substeps_per_s", "speedup_vs_numpy",
                                             "numpy_simple_substeps_per_s", "bandwidth_fraction", "spring_updates_per_s")}
-    summary["warp_substeps_per_s"] = summary["speedup_vs_warp"] = None  # Warp not installed here
+    summary["warp_substeps_per_s"] = main_row.get("warp_substeps_per_s")
+    summary["speedup_vs_warp"] = main_row.get("speedup_vs_warp")
+    if res["warp_agreement_max_abs_m"] is None:
+        print("warp: not installed (pip install warp-lang, or the bench extra); warp_* keys are null")
     sc = selfcollision_row(128, repeats=2 if args.quick else args.repeats)
     sc_xpbd = selfcollision_row(128, repeats=2 if args.quick else args.repeats, substeps=16, method="xpbd")
     summary["selfcollision_substeps_per_s"] = sc["selfcollision_substeps_per_s"]
@@ -171,10 +200,12 @@ def main(argv) -> int:
     print_table([sc, sc_xpbd], ["size", "method", "substeps_per_s", "selfcollision_substeps_per_s", "selfcollision_cost_ratio",
                        "ms_one_substep_launch", "ms_passes_estimate", "ms_grid_build",
                        "ms_grid_query", "rebuilds_per_call"])
+    warp_txt = "n/a" if res["warp_agreement_max_abs_m"] is None else f"{res['warp_agreement_max_abs_m']:.2e} m"
     print(f"references on 16x16 after 50 substeps: fast NumPy {res['fast_numpy_agreement_max_abs_m']:.2e} m, "
-          f"simple NumPy {res['agreement_max_abs_m']:.2e} m; copy bandwidth "
+          f"Warp {warp_txt}, simple NumPy {res['agreement_max_abs_m']:.2e} m; copy bandwidth "
           f"{res['copy_bandwidth_bytes_per_s'] / 1e9:.1f} GB/s")
     write_json(args.json, summary, rows=res["rows"], agreement_max_abs_m=res["agreement_max_abs_m"],
                fast_numpy_agreement_max_abs_m=res["fast_numpy_agreement_max_abs_m"],
+               warp_agreement_max_abs_m=res["warp_agreement_max_abs_m"],
                copy_bandwidth_bytes_per_s=res["copy_bandwidth_bytes_per_s"], selfcollision=[sc, sc_xpbd])
     return 0
