@@ -1,0 +1,201 @@
+"""RopeFlatten-v0: SoftGym's RopeFlatten (two pickers straighten a tangled rope), on the CPU.
+
+## Description
+
+SoftGym's RopeFlatten (Lin et al. 2020; ``softgym/envs/rope_flatten.py``, ``rope_env.py``)
+re-created on tianim: a rope of 41 particles (40 segments of 12.5 mm, rest length
+``L = 40 x 0.025 x 0.5 = 0.5 m``, as SoftGym's ``segment x radius x 0.5``) lies tangled on a
+table. Two pickers, as in SoftGym (radius 2 cm, picking within 5 cm), must straighten it:
+bring its end particles ``L`` apart.
+
+## Action space
+
+``Box(-1, 1, (8,), float32)``, per picker ``(dx, dy, dz, pick)`` (SoftGym's ``picker``):
+
+| index   | action                                         | min | max | unit |
+|---------|------------------------------------------------|-----|-----|------|
+| 0-2     | picker 0 move per repeat, times 1 cm           | -1  | 1   | cm   |
+| 3       | picker 0 picks if > 0, releases otherwise      | -1  | 1   |      |
+| 4-7     | picker 1, as 0-3                               | -1  | 1   |      |
+
+8 repeats of 0.01 s per env step. The pickers stay in SoftGym's rope box
+``(-0.35, 0, -0.35) .. (0.35, 0.3, 0.35)`` re-centred in x, z on the reset centre, less their radius.
+Finite actions outside [-1, 1] are clipped; NaN or infinite ones raise ``ValueError``.
+
+## Observation space
+
+``Box(-3, 3, (36,), float32)``, SoftGym's ``key_point`` observation:
+
+| index  | observation                                                      | unit |
+|--------|------------------------------------------------------------------|------|
+| 0-29   | particles 0, 4, 8, ..., 32, 40 (SoftGym's ``_get_key_point_idx``), x y z | m |
+| 30-35  | picker 0 and picker 1 positions                                  | m    |
+
+## Rewards
+
+As SoftGym, after the 8 repeats, with ``d`` the distance between particles 0 and 40:
+
+| quantity                 | value                                                          |
+|--------------------------|----------------------------------------------------------------|
+| reward = performance p   | ``-|d - L|`` [m]                                                |
+| normalized_performance   | ``(p - (-L)) / (0 - (-L))`` (SoftGym normalises by its reward range ``[-L, 0]``, not by the start) |
+
+``info``: ``performance``, ``normalized_performance``, ``end_point_distance`` (d), ``diverged``.
+
+## Starting state
+
+SoftGym's ``random_pick_and_place(pick_num=4, pick_scale=0.005)`` on the straight rope along
+x: four times, a particle drawn uniformly is carried for 60 frames by ``0.005 u`` per frame,
+``u = (U(-1, 1), U(0, 2), U(-1, 1))``, released, and the rope left until every velocity
+component is below 0.01 m/s (SoftGym's test, which compares signed values) or 100 frames;
+then at most 500 more frames under the same test; then centred in (x, z). Pickers at the
+centre of the rope's bounding box, 0.1 m up, 4 cm apart along z. All draws from
+``np_random``; every start is simulated at reset (about 1000 frames of 41 particles at most).
+
+## Episode end
+
+Terminates only if a copy's simulation fails (``info["diverged"]``); truncated after 75
+steps (SoftGym's RopeFlatten horizon).
+
+## Physics (fixed for version 0)
+
+XPBD (4 substeps x 2 symmetric sweeps per 0.01 s frame, float32) on 41 particles of 0.5/41 kg:
+stretch constraints of 10^6 N/m between neighbours and bend springs of 2000 N/m between
+particles two apart (FleX's ``CreateRope``: stretch and bending distance constraints), viscous
+damping 1/s, gravity 9.8 m/s^2, table contact with friction 1.0 (FleX's ``dynamicFriction``) at
+1 mm (its ``collisionDistance``). Single env and batch run the same code (``RopeFlattenSim``).
+
+## Differences from SoftGym (what remains)
+
+* No self-collision (FleX's rope particles of radius 2.5 cm collide): crossing strands pass
+  through each other. tianim.physics is gaining self-collision (branch ``deform``);
+  :data:`ROPE_EXTRA` switches it on in one line.
+* FleX's rope springs have 7.5% "give" (rest length 1.075 x spacing); here the rest length is the
+  spacing, so the straight rope's end distance is exactly L.
+* One rope (SoftGym's variations also all have 40 segments); pickers are not collision spheres;
+  observations have finite bounds.
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import numpy as np
+from gymnasium.vector import AutoresetMode
+
+import tianim.physics as tp
+
+from . import _softgym as sg
+
+SEGMENTS = 40
+RADIUS = 0.025
+LENGTH = SEGMENTS * RADIUS * 0.5      # 0.5 m, SoftGym's rope_length
+N = SEGMENTS + 1
+MASS = 0.5                            # kg, SoftGym's config mass (here the whole rope)
+STIFFNESS, BEND_STIFFNESS = 1.0e6, 2000.0
+REST_HEIGHT = 0.001
+FRICTION = 1.0
+DAMPING = 1.0                         # 1/s
+MAX_EPISODE_STEPS = 75
+KEYPOINTS = np.array([0] + [i * ((N - 2) // 8) for i in range(1, 9)] + [N - 1])
+PICKER = dict(count=2, radius=0.02, threshold=0.005, particle_radius=RADIUS,
+              low=(-0.35, 0.0, -0.35), high=(0.35, 0.3, 0.35))
+PICK_NUM, PICK_SCALE, PICK_FRAMES, SETTLE_FRAMES, FINAL_FRAMES = 4, 0.005, 60, 100, 500
+STILL = 0.01  # m/s
+#: Self-collision of the rope when tianim.physics offers it (branch ``deform``), e.g. ``{"self_collision": RADIUS}``.
+ROPE_EXTRA: dict = {}
+CAMERA = dict(eye=(0.0, 0.75, 0.45), target=(0.0, 0.0, 0.0), fov=50.0)
+
+
+@lru_cache(maxsize=None)
+def make_model() -> tp.Model:
+    """The straight rope along x, centred, at rest on the table (shared)."""
+    seg = LENGTH / SEGMENTS
+    x = np.zeros((N, 3))
+    x[:, 0] = np.arange(N) * seg - LENGTH / 2
+    x[:, 1] = REST_HEIGHT
+    stretch = np.stack([np.arange(N - 1), np.arange(1, N)], axis=1)
+    bend = np.stack([np.arange(N - 2), np.arange(2, N)], axis=1)
+    k = np.r_[np.full(N - 1, STIFFNESS), np.full(N - 2, BEND_STIFFNESS)]
+    return tp.from_edges(x, np.vstack([stretch, bend]), mass=MASS / N, stiffness=k,
+                         medium_damping=DAMPING * MASS / N, gravity=sg.GRAVITY,
+                         colliders=[tp.Ground(height=REST_HEIGHT, restitution=0.0, friction=FRICTION)],
+                         name="softgym_rope", **ROPE_EXTRA)
+
+
+class RopeFlattenSim(sg.PickerSim):
+    """B copies of RopeFlatten-v0 (see the module docstring)."""
+
+    MODEL = staticmethod(make_model)
+    SUBSTEPS, ITERATIONS = 4, 2
+    PICKER = PICKER
+    KEYPOINTS = KEYPOINTS
+
+    def __init__(self, batch: int):
+        super().__init__(batch)
+        self._gen = None  # a one-copy state for generating starts (the same in single env and batch)
+
+    def _start(self, k, rng):
+        if self._gen is None:
+            self._gen = self.model.state(batch=1, dtype=np.float32)
+        g = self._gen
+        g.x[0], g.v[0], g.t[0], g.pinned[0] = self.model.positions, 0.0, 0.0, False
+        self.solver.watchdog.forget(g)
+        for _ in range(PICK_NUM):  # SoftGym's random_pick_and_place
+            i = int(rng.integers(N))
+            move = rng.random(3) * 2 - 1
+            move[1] += 1
+            move = (move * PICK_SCALE).astype(np.float32)
+            g.pinned[0, i], g.v[0, i] = True, 0.0
+            for _ in range(PICK_FRAMES):
+                g.x[0, i] += move
+                self._frame(g)
+            g.pinned[0, i] = False
+            self._frame(g)
+            self._settle(g, SETTLE_FRAMES)
+        self._settle(g, FINAL_FRAMES)
+        xz = g.x[0][:, [0, 2]]
+        g.x[0][:, [0, 2]] = xz - xz.mean(axis=0)  # center_object
+        self.state.x[k], self.state.v[k] = g.x[0], 0.0
+        lo, hi = g.x[0].min(axis=0).astype(np.float64), g.x[0].max(axis=0).astype(np.float64)
+        self.pickers.reset(k, (0.5 * (lo[0] + hi[0]), 0.1, 0.5 * (lo[2] + hi[2])))
+
+    def _frame(self, g):
+        self.solver.step(self.model, g, sg.FRAME_DT / self.SUBSTEPS, self.SUBSTEPS)
+
+    def _settle(self, g, frames):
+        for _ in range(frames):
+            self._frame(g)
+            if np.all(g.v < STILL):  # SoftGym: np.alltrue(curr_vel < 0.01), signed
+                break
+
+    def _metrics(self):
+        d = sg.endpoint_distance(self.state.x)
+        p = -np.abs(d - LENGTH)
+        return {"performance": p, "normalized_performance": sg.normalized(p, -LENGTH, 0.0), "end_point_distance": d}
+
+    def frame(self, k):
+        from tianim.render import Camera, Scene3D
+
+        scene = Scene3D(256, 256, camera=Camera(**CAMERA), ssaa=1, shadow_size=512)
+        scene.ground(height=0.0, size=1.2)
+        scene.rope(self.state.x[k], radius=0.006, color="blue")
+        for p, held in zip(self.pickers.pos[k], self.pickers.held[k]):
+            scene.sphere(p, 0.012, color="red" if held >= 0 else "orange")
+        return scene.render()
+
+
+class RopeFlattenEnv(sg.PickerEnv):
+    """Single RopeFlatten-v0 environment (see the module docstring)."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / (sg.FRAME_DT * sg.ACTION_REPEAT))}
+    sim_class = RopeFlattenSim
+
+
+class RopeFlattenVectorEnv(sg.PickerVectorEnv):
+    """``num_envs`` RopeFlatten-v0 copies, all stepped in one physics launch per frame."""
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / (sg.FRAME_DT * sg.ACTION_REPEAT)),
+                "autoreset_mode": AutoresetMode.NEXT_STEP}
+    sim_class = RopeFlattenSim
+    default_max_episode_steps = MAX_EPISODE_STEPS
