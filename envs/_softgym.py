@@ -87,6 +87,12 @@ def _norm(d: np.ndarray) -> np.ndarray:
     return np.sqrt(d[..., 0] * d[..., 0] + d[..., 1] * d[..., 1] + d[..., 2] * d[..., 2])
 
 
+def _row_means(a: np.ndarray) -> np.ndarray:
+    """Mean of each row (B, M) -> (B,), row by row: NumPy's reduction along axis 1 of a (B, M) array
+    sums in an order that depends on B, and copy k of a batch must equal a single env bit for bit."""
+    return np.array([np.mean(np.ascontiguousarray(row)) for row in a])
+
+
 def fold_metrics(x: np.ndarray, group_a: np.ndarray, group_b: np.ndarray, b0: np.ndarray):
     """ClothFold's two distances per copy, float64 (B,) each [m].
 
@@ -94,8 +100,8 @@ def fold_metrics(x: np.ndarray, group_a: np.ndarray, group_b: np.ndarray, b0: np
     (B, M, 3) group b's positions at reset. Returns ``(mean_i |a_i - b_i|, mean_i |b_i - b0_i|)``;
     SoftGym's performance is ``-first - 1.2 second``."""
     x = np.asarray(x, np.float64)
-    group = _norm(x[:, group_a] - x[:, group_b]).mean(axis=1)
-    fixation = _norm(x[:, group_b] - np.asarray(b0, np.float64)).mean(axis=1)
+    group = _row_means(_norm(x[:, group_a] - x[:, group_b]))
+    fixation = _row_means(_norm(x[:, group_b] - np.asarray(b0, np.float64)))
     return group, fixation
 
 
