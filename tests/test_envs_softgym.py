@@ -326,3 +326,15 @@ def test_lifecycle_errors(env_id):
         venv.step(bad)
     with pytest.raises(ValueError, match="shape"):
         venv.step(np.zeros((3, 8), np.float32))
+
+
+def test_env_bench_summary_keys_at_a_tiny_size(tmp_path):
+    import json
+
+    from envs import bench
+
+    assert bench.main(["--quick", "--only-softgym", "--repeats", "1", "--json", str(tmp_path / "b.json")]) == 0
+    summary = json.loads((tmp_path / "b.json").read_text())["summary"]
+    for prefix in ("clothfold_v1", "clothflatten_v0", "ropeflatten_v0"):
+        for suffix in ("_steps_per_s", "_vec_steps_per_s", "_vec_speedup"):
+            assert summary[prefix + suffix] > 0, prefix + suffix
