@@ -338,3 +338,31 @@ def test_env_bench_summary_keys_at_a_tiny_size(tmp_path):
     for prefix in ("clothfold_v1", "clothflatten_v0", "ropeflatten_v0"):
         for suffix in ("_steps_per_s", "_vec_steps_per_s", "_vec_speedup"):
             assert summary[prefix + suffix] > 0, prefix + suffix
+
+
+def test_a_diverged_copy_goes_back_to_the_start_of_its_step_and_ends_alone():
+    """NaN injected inside the solver in copy 1 during the 5th frame of the first step: that copy is put
+    back to where the step began (cloth and pickers), terminates, and the other copies are untouched."""
+    n = 3
+    disturbed = gym.make_vec("tianim/ClothFold-v1", num_envs=n)
+    calm = gym.make_vec("tianim/ClothFold-v1", num_envs=n)
+    sim = disturbed.unwrapped._sim
+    advance, calls = sim.solver._advance, {"n": 0}
+
+    def wrapped(model, state, dt, substeps):
+        out = advance(model, state, dt, substeps)
+        calls["n"] += 1
+        if calls["n"] == 5:
+            state.x[1, 7] = np.nan
+        return out
+
+    sim.solver._advance = wrapped
+    start, _ = disturbed.reset(seed=3)
+    calm.reset(seed=3)
+    a = np.random.default_rng(2).uniform(-1, 1, (n, 8)).astype(np.float32)
+    obs_d, r_d, term_d, trunc_d, info_d = disturbed.step(a)
+    obs_c, r_c, *_ = calm.step(a)
+    assert term_d.tolist() == [False, True, False] and info_d["diverged"].tolist() == [False, True, False]
+    assert np.array_equal(obs_d[1], start[1])  # back to the start of the step, pickers included
+    assert np.isfinite(sim.state.x).all() and (sim.pickers.held[1] == -1).all()
+    assert np.array_equal(obs_d[[0, 2]], obs_c[[0, 2]]) and np.array_equal(r_d[[0, 2]], r_c[[0, 2]])
