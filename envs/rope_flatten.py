@@ -48,9 +48,12 @@ SoftGym's ``random_pick_and_place(pick_num=4, pick_scale=0.005)`` on the straigh
 x: four times, a particle drawn uniformly is carried for 60 frames by ``0.005 u`` per frame,
 ``u = (U(-1, 1), U(0, 2), U(-1, 1))``, released, and the rope left until every velocity
 component is below 0.01 m/s (SoftGym's test, which compares signed values) or 100 frames;
-then at most 500 more frames under the same test; then centred in (x, z). Pickers at the
-centre of the rope's bounding box, 0.1 m up, 4 cm apart along z. All draws from
-``np_random``; every start is simulated at reset (about 1000 frames of 41 particles at most).
+then at most 500 more frames under the same test; then centred in (x, z). As SoftGym, which
+caches 1000 such variations and draws one per reset, :data:`VARIATIONS` = 100 are generated
+once per process (``np.random.default_rng(j)`` for variation j, all in one batched run of about
+a second, each settling phase lasting until every variation is still); each reset draws one
+and turns it about the vertical by an angle uniform in [-pi, pi). Pickers at the centre of the
+rope's bounding box, 0.1 m up, 4 cm apart along z. Draws from ``np_random``.
 
 ## Episode end
 
@@ -72,6 +75,7 @@ damping 1/s, gravity 9.8 m/s^2, table contact with friction 1.0 (FleX's ``dynami
   :data:`ROPE_EXTRA` switches it on in one line.
 * FleX's rope springs have 7.5% "give" (rest length 1.075 x spacing); here the rest length is the
   spacing, so the straight rope's end distance is exactly L.
+* 100 generated variations turned at random instead of 1000 cached ones, settled together.
 * One rope (SoftGym's variations also all have 40 segments); pickers are not collision spheres;
   observations have finite bounds.
 """
@@ -102,6 +106,7 @@ PICKER = dict(count=2, radius=0.02, threshold=0.005, particle_radius=RADIUS,
               low=(-0.35, 0.0, -0.35), high=(0.35, 0.3, 0.35))
 PICK_NUM, PICK_SCALE, PICK_FRAMES, SETTLE_FRAMES, FINAL_FRAMES = 4, 0.005, 60, 100, 500
 STILL = 0.01  # m/s
+VARIATIONS = 100
 #: Self-collision of the rope when tianim.physics offers it (branch ``deform``), e.g. ``{"self_collision": RADIUS}``.
 ROPE_EXTRA: dict = {}
 CAMERA = dict(eye=(0.0, 0.75, 0.45), target=(0.0, 0.0, 0.0), fov=50.0)
@@ -123,6 +128,44 @@ def make_model() -> tp.Model:
                          name="softgym_rope", **ROPE_EXTRA)
 
 
+@lru_cache(maxsize=None)
+def start_variations() -> np.ndarray:
+    """The tangled starts (VARIATIONS, N, 3) float32, centred in (x, z): SoftGym's
+    ``random_pick_and_place`` (module docstring) with ``np.random.default_rng(j)`` for variation j,
+    all variations in one batched run (each settling phase lasts until every variation is still)."""
+    model = make_model()
+    g = model.state(batch=VARIATIONS, dtype=np.float32)
+    solver = tp.XPBD(iterations=RopeFlattenSim.ITERATIONS, watchdog=False)
+    rows = np.arange(VARIATIONS)
+    rngs = [np.random.default_rng(j) for j in range(VARIATIONS)]
+
+    def frame():
+        solver.step(model, g, sg.FRAME_DT / RopeFlattenSim.SUBSTEPS, RopeFlattenSim.SUBSTEPS)
+
+    def settle(frames):
+        for _ in range(frames):
+            frame()
+            if np.all(g.v < STILL):  # SoftGym: np.alltrue(curr_vel < 0.01), signed
+                break
+
+    for _ in range(PICK_NUM):
+        picks = np.array([r.integers(N) for r in rngs])
+        moves = np.array([r.random(3) * 2 - 1 for r in rngs])
+        moves[:, 1] += 1
+        moves = (moves * PICK_SCALE).astype(np.float32)
+        g.pinned[rows, picks], g.v[rows, picks] = True, 0.0
+        for _ in range(PICK_FRAMES):
+            g.x[rows, picks] += moves
+            frame()
+        g.pinned[rows, picks] = False
+        frame()
+        settle(SETTLE_FRAMES)
+    settle(FINAL_FRAMES)
+    x = g.x.copy()
+    x[..., [0, 2]] -= x[..., [0, 2]].mean(axis=1, keepdims=True)  # center_object
+    return x
+
+
 class RopeFlattenSim(sg.PickerSim):
     """B copies of RopeFlatten-v0 (see the module docstring)."""
 
@@ -131,43 +174,17 @@ class RopeFlattenSim(sg.PickerSim):
     PICKER = PICKER
     KEYPOINTS = KEYPOINTS
 
-    def __init__(self, batch: int):
-        super().__init__(batch)
-        self._gen = None  # a one-copy state for generating starts (the same in single env and batch)
-
     def _start(self, k, rng):
-        if self._gen is None:
-            self._gen = self.model.state(batch=1, dtype=np.float32)
-        g = self._gen
-        g.x[0], g.v[0], g.t[0], g.pinned[0] = self.model.positions, 0.0, 0.0, False
-        self.solver.watchdog.forget(g)
-        for _ in range(PICK_NUM):  # SoftGym's random_pick_and_place
-            i = int(rng.integers(N))
-            move = rng.random(3) * 2 - 1
-            move[1] += 1
-            move = (move * PICK_SCALE).astype(np.float32)
-            g.pinned[0, i], g.v[0, i] = True, 0.0
-            for _ in range(PICK_FRAMES):
-                g.x[0, i] += move
-                self._frame(g)
-            g.pinned[0, i] = False
-            self._frame(g)
-            self._settle(g, SETTLE_FRAMES)
-        self._settle(g, FINAL_FRAMES)
-        xz = g.x[0][:, [0, 2]]
-        g.x[0][:, [0, 2]] = xz - xz.mean(axis=0)  # center_object
-        self.state.x[k], self.state.v[k] = g.x[0], 0.0
-        lo, hi = g.x[0].min(axis=0).astype(np.float64), g.x[0].max(axis=0).astype(np.float64)
+        j = int(rng.integers(VARIATIONS))
+        angle = rng.uniform(-np.pi, np.pi)
+        base = start_variations()[j].astype(np.float64)
+        c, s = np.cos(angle), np.sin(angle)
+        x = base.copy()
+        x[:, 0] = c * base[:, 0] - s * base[:, 2]
+        x[:, 2] = s * base[:, 0] + c * base[:, 2]
+        self.state.x[k] = x
+        lo, hi = self.state.x[k].min(axis=0).astype(np.float64), self.state.x[k].max(axis=0).astype(np.float64)
         self.pickers.reset(k, (0.5 * (lo[0] + hi[0]), 0.1, 0.5 * (lo[2] + hi[2])))
-
-    def _frame(self, g):
-        self.solver.step(self.model, g, sg.FRAME_DT / self.SUBSTEPS, self.SUBSTEPS)
-
-    def _settle(self, g, frames):
-        for _ in range(frames):
-            self._frame(g)
-            if np.all(g.v < STILL):  # SoftGym: np.alltrue(curr_vel < 0.01), signed
-                break
 
     def _metrics(self):
         d = sg.endpoint_distance(self.state.x)
