@@ -64,18 +64,22 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--address", default=None, help="Ray cluster address ('auto' on a cluster node); default: a local cluster")
     p.add_argument("--ship-code", action="store_true",
                    help="send the envs and tianim packages to the cluster's nodes (runtime_env py_modules)")
+    p.add_argument("--threads-per-runner", type=int, default=None,
+                   help="Taichi CPU threads in each runner (TIANIM_NUM_THREADS; default Taichi's choice, all cores)")
     p.add_argument("--out", default=None, help="write the returns per iteration to this JSON file")
     args = p.parse_args(argv)
 
     import ray
 
-    runtime_env = None
+    runtime_env = {}
     if args.ship_code:
         import envs
         import tianim
 
-        runtime_env = {"py_modules": [envs, tianim]}
-    ray.init(address=args.address, runtime_env=runtime_env, include_dashboard=False, log_to_driver=False)
+        runtime_env["py_modules"] = [envs, tianim]
+    if args.threads_per_runner is not None:  # several runners per node: do not oversubscribe the cores
+        runtime_env["env_vars"] = {"TIANIM_NUM_THREADS": str(args.threads_per_runner)}
+    ray.init(address=args.address, runtime_env=runtime_env or None, include_dashboard=False, log_to_driver=False)
     try:
         algo = build_config(args.env, args.env_runners, args.envs_per_runner, args.rollout).build_algo()
         curve = []
