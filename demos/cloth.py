@@ -17,7 +17,8 @@ sphere = tp.Sphere(center=(0.0, 0.35, 0.0), radius=0.3, friction=0.6)
 model = tp.cloth(nx=n, ny=n, size=(1.2, 1.2), total_mass=0.3, stiffness=(800.0, 300.0, 20.0),
                  damping=(0.02, 0.01, 0.002), medium_damping=2e-4, origin=(-0.6, 1.1, -0.1),
                  pins="top-corners", colliders=[tp.Ground(height=0.0, friction=0.5), sphere])
-plan = tp.plan_steps(model, frame_dt=1 / 24)                      # solver and substeps from the stiffest spring
+contact = tp.SelfCollision(thickness=0.025)                      # layers keep 2.5 cm apart (0.8 x particle spacing)
+plan = tp.plan_steps(model, frame_dt=1 / 24, self_collision=contact)  # solver and substeps from the stiffest spring
 print(plan.why)
 state = model.state(batch=1, dtype=np.float32)
 sim = Simulation(plan, state)
@@ -34,7 +35,7 @@ scene = Scene3D(640, 480)
 
 
 def draw(x, t):
-    scene.clear().ground(0.0, cell=0.15).sphere(sphere.center, 0.985 * sphere.radius, color="orange")
+    scene.clear().ground(-0.005, cell=0.15).sphere(sphere.center, 0.985 * sphere.radius, color="orange")
     scene.surface(x.reshape(n, n, 3), color="#3f7fc7", back_color="#f0c05a")
     if scene.camera is None:
         scene.frame(azimuth=210.0, elevation=24.0, margin=0.95)  # frame the first pose, then keep it

@@ -15,6 +15,13 @@ tianim before anything is timed, then timed in the same process:
 ``4 D`` values per particle) per second, over the copy bandwidth of a large NumPy copy
 measured in the same run. Warp is not measured (not installed in this project's
 environments).
+
+Self-collision (``selfcollision_*`` keys): the 128x128 cloth, symplectic Euler, with
+``SelfCollision(thickness=0.8 dx)`` against the same cloth without it, from rest, in the same run.
+Before timing, both runs are checked bit-identical over the timed substeps (the hanging cloth has no
+contacts, so the contact projection must change nothing) and the neighbour list must never miss a
+pair; the cost is then the full price of the feature (the list, the projection over every candidate)
+without contacts to resolve. ``selfcollision_cost_ratio`` = time per substep with / without.
 """
 
 from __future__ import annotations
@@ -49,6 +56,62 @@ def fast_numpy_agreement(n: int = 16, substeps: int = 50) -> float:
 def cloth_model(n: int):
     """The benchmark cloth: n x n particles, 1 m square, 0.2 kg, pinned at the two top corners."""
     return tp.cloth(n, n, size=(1.0, 1.0), total_mass=0.2, stiffness=(400.0, 100.0, 10.0), plane="xy", pins="top-corners")
+
+
+def selfcollision_solver(n: int, method: str = "symplectic_euler"):
+    """``method`` with self-collision at 0.8 x the particle spacing of the n x n bench cloth."""
+    return tp.make_solver(method, watchdog=False, self_collision=tp.SelfCollision(thickness=0.8 / (n - 1)))
+
+
+def selfcollision_agreement(n: int = 16, substeps: int = 64) -> float:
+    """Max |x_with - x_without| [m] after ``substeps`` of the hanging n x n cloth from rest (0: identical)."""
+    model = cloth_model(n)
+    dt = 0.5 * tp.stable_dt(model, "symplectic_euler")
+    a, b = model.state(), model.state()
+    tp.SymplecticEuler(watchdog=False).step(model, a, dt, substeps)
+    selfcollision_solver(n).step(model, b, dt, substeps)
+    return float(np.max(np.abs(a.x.astype(np.float64) - b.x)))
+
+
+def selfcollision_row(n: int = 128, repeats: int = 5, substeps: int = 64, method: str = "symplectic_euler") -> dict:
+    """Substeps/s of the n x n cloth with and without self-collision (``method``: symplectic_euler at half
+    its stable step, or xpbd at the same step), and where the time goes."""
+    import time
+
+    from tianim.physics.selfcollision import contacts_for
+
+    model = cloth_model(n)
+    dt = 0.5 * tp.stable_dt(model, "symplectic_euler")
+    plain, sc = tp.make_solver(method, watchdog=False), selfcollision_solver(n, method)
+    a, b = model.state(), model.state()
+    plain.step(model, a, dt, substeps)  # warm up (compiles) and check agreement over the same substeps
+    sc.step(model, b, dt, substeps)
+    if not (np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)):
+        raise RuntimeError("the contact-free cloth moved differently with self-collision: refusing to time it")
+    t_plain = median_time(lambda: plain.step(model, a, dt, substeps), repeats=repeats) / substeps
+    contacts = contacts_for(sc.self_collision, model, b)
+    before = contacts.rebuilds
+    t_sc = median_time(lambda: sc.step(model, b, dt, substeps), repeats=repeats) / substeps
+    rebuilds = (contacts.rebuilds - before) / (repeats + 1)  # median_time runs the call once to warm up
+    # where the time goes: one substep without the passes (1 launch), a rebuild, the spread check
+    one = median_time(lambda: plain.step(model, a, dt, 1), repeats=repeats)
+    grid = contacts.grid
+    t_build = median_time(lambda: grid.build(b.x, check=False), repeats=repeats)
+    t_query = median_time(lambda: grid.query(contacts.radius, on_overflow="report"), repeats=repeats)
+    t0 = time.perf_counter()
+    for _ in range(20):
+        contacts._needs_rebuild(b.x)
+    t_check = (time.perf_counter() - t0) / 20
+    return {
+        "size": f"{n}x{n}", "method": method, "thickness_m": sc.self_collision.thickness,
+        "substeps_per_s": 1.0 / t_plain, "selfcollision_substeps_per_s": 1.0 / t_sc,
+        "selfcollision_cost_ratio": t_sc / t_plain, "rebuilds_per_call": rebuilds, "substeps_per_call": substeps,
+        "ms_per_substep_plain": 1e3 * t_plain, "ms_per_substep_selfcollision": 1e3 * t_sc,
+        "ms_one_substep_launch": 1e3 * one, "ms_spread_check": 1e3 * t_check,
+        "ms_passes_estimate": 1e3 * (t_sc - one - t_check - rebuilds / substeps * (t_build + t_query)),
+        "ms_grid_build": 1e3 * t_build, "ms_grid_query": 1e3 * t_query,
+        "neighbour_capacity": contacts.capacity,
+    }
 
 
 def run(sizes=(128, 256, 512), repeats=5, numpy_max=256) -> dict:
@@ -100,10 +163,18 @@ def main(argv) -> int:
     summary = {k: main_row.get(k) for k in ("substeps_per_s", "numpy_substeps_per_s", "speedup_vs_numpy",
                                             "numpy_simple_substeps_per_s", "bandwidth_fraction", "spring_updates_per_s")}
     summary["warp_substeps_per_s"] = summary["speedup_vs_warp"] = None  # Warp not installed here
+    sc = selfcollision_row(128, repeats=2 if args.quick else args.repeats)
+    sc_xpbd = selfcollision_row(128, repeats=2 if args.quick else args.repeats, substeps=16, method="xpbd")
+    summary["selfcollision_substeps_per_s"] = sc["selfcollision_substeps_per_s"]
+    summary["selfcollision_cost_ratio"] = sc["selfcollision_cost_ratio"]
+    summary["xpbd_selfcollision_cost_ratio"] = sc_xpbd["selfcollision_cost_ratio"]
+    print_table([sc, sc_xpbd], ["size", "method", "substeps_per_s", "selfcollision_substeps_per_s", "selfcollision_cost_ratio",
+                       "ms_one_substep_launch", "ms_passes_estimate", "ms_spread_check", "ms_grid_build",
+                       "ms_grid_query", "rebuilds_per_call"])
     print(f"references on 16x16 after 50 substeps: fast NumPy {res['fast_numpy_agreement_max_abs_m']:.2e} m, "
           f"simple NumPy {res['agreement_max_abs_m']:.2e} m; copy bandwidth "
           f"{res['copy_bandwidth_bytes_per_s'] / 1e9:.1f} GB/s")
     write_json(args.json, summary, rows=res["rows"], agreement_max_abs_m=res["agreement_max_abs_m"],
                fast_numpy_agreement_max_abs_m=res["fast_numpy_agreement_max_abs_m"],
-               copy_bandwidth_bytes_per_s=res["copy_bandwidth_bytes_per_s"])
+               copy_bandwidth_bytes_per_s=res["copy_bandwidth_bytes_per_s"], selfcollision=[sc, sc_xpbd])
     return 0

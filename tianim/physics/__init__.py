@@ -15,6 +15,8 @@ See docs/architecture.md for the layers and how to add a solver or a builder.
 from tianim.physics.builders import chain, cloth, from_edges, lattice, particles, rope, spring1d
 from tianim.physics.diagnostics import energy, max_strain, momentum, spring_lengths
 from tianim.physics.model import Ground, GridTopology, Model, Sphere
+from tianim.physics.selfcollision import SelfCollision
+from tianim.physics.strain import StrainLimit
 from tianim.physics.planner import StepPlan, omega_max, plan_steps
 from tianim.physics.solvers import (
     EXPLICIT_METHODS, METHODS, RK4, SOLVERS, STIFF_METHODS, ExplicitEuler, ImplicitEuler, Solver, StepStats,
@@ -28,7 +30,7 @@ __all__ = [
     "Solver", "ExplicitEuler", "SymplecticEuler", "VelocityVerlet", "RK4", "ImplicitEuler", "XPBD",
     "SOLVERS", "METHODS", "EXPLICIT_METHODS", "STIFF_METHODS", "make_solver", "StepStats",
     "step", "stable_dt", "plan_steps", "StepPlan", "omega_max", "accelerations", "choose_layout",
-    "Watchdog", "DivergenceError",
+    "Watchdog", "DivergenceError", "SelfCollision", "StrainLimit",
     "energy", "max_strain", "momentum", "spring_lengths",
 ]
 

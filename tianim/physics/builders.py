@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from tianim.physics.bending import chain_bending, grid_bending
 from tianim.physics.model import GRID_STENCIL, GridTopology, Model
 from tianim._checks import as_float_array, as_index_array, check_finite_scalar, check_positive_int, fmt
 
@@ -52,7 +53,7 @@ def spring1d(mass=1.0, stiffness=10.0, rest_length=1.0, medium_damping=0.0, damp
 
 
 def chain(n=10, length=1.0, mass=0.1, stiffness=1000.0, damping=0.0, medium_damping=0.0, gravity=9.81, dim=3,
-          direction=None, origin=None, pins=(0,), colliders=(), name="chain"):
+          direction=None, origin=None, pins=(0,), colliders=(), name="chain", bending=0.0):
     """A chain of ``n`` particles joined by ``n - 1`` springs (a pendulum for n = 2, a rope for larger n).
 
     Parameters
@@ -78,6 +79,9 @@ def chain(n=10, length=1.0, mass=0.1, stiffness=1000.0, damping=0.0, medium_damp
         Position of particle 0 [m] (default origin).
     pins : sequence of int
         Pinned particles (default the first).
+    bending : float
+        Flexural rigidity EI >= 0 [N m^2] of the chain (:mod:`tianim.physics.bending`: every three
+        consecutive particles get ``k = EI / l^3``); 0 (default): no bending, a chain of springs.
     """
     n = check_positive_int("n", n, lo=2)
     dim = check_positive_int("dim", dim)
@@ -94,15 +98,16 @@ def chain(n=10, length=1.0, mass=0.1, stiffness=1000.0, damping=0.0, medium_damp
     s = np.linspace(0.0, length, n)[:, None]
     positions = origin + s * direction / norm
     springs = np.stack([np.arange(n - 1), np.arange(1, n)], axis=1)
+    bend = chain_bending(bending, n, length / (n - 1))
     return Model(positions, mass=mass, springs=springs, stiffness=stiffness, damping=damping, gravity=gravity,
-                 medium_damping=medium_damping, pins=pins, colliders=colliders, name=name)
+                 medium_damping=medium_damping, pins=pins, colliders=colliders, name=name, bending=bend)
 
 
 def rope(n=32, length=1.0, mass=0.01, stiffness=None, damping=0.0, medium_damping=0.0, gravity=9.81, dim=3,
-         direction=None, origin=None, pins=(0,), colliders=(), name="rope"):
+         direction=None, origin=None, pins=(0,), colliders=(), name="rope", bending=0.0):
     """A rope of ``n`` particles of ``mass`` kg each, hanging from particle 0.
 
-    See :func:`chain` for the parameters. The default stiffness makes the top
+    See :func:`chain` for the parameters (``bending``: EI [N m^2]). The default stiffness makes the top
     spring, which carries the whole rope, stretch by about 1%:
     ``k = 100 * n * m * g / l_seg``.
     """
@@ -115,7 +120,7 @@ def rope(n=32, length=1.0, mass=0.01, stiffness=None, damping=0.0, medium_dampin
         stiffness = 100.0 * m_total * max(float(gravity), 1.0) / seg
     return chain(n=n, length=length, mass=mass, stiffness=stiffness, damping=damping, medium_damping=medium_damping,
                  gravity=gravity, dim=dim, direction=direction, origin=origin, pins=pins, colliders=colliders,
-                 name=name)
+                 name=name, bending=bending)
 
 
 _CORNERS = ("top-corners", "corners", "top-edge", "none")
@@ -123,7 +128,7 @@ _CORNERS = ("top-corners", "corners", "top-edge", "none")
 
 def cloth(nx=32, ny=32, size=(1.0, 1.0), mass=None, total_mass=0.2, stiffness=(500.0, 200.0, 20.0),
           damping=(0.0, 0.0, 0.0), medium_damping=0.0, gravity=9.81, plane="xz", origin=None,
-          pins="top-corners", colliders=(), name="cloth"):
+          pins="top-corners", colliders=(), name="cloth", bending=0.0):
     """A rectangular cloth of ``nx`` x ``ny`` particles with structural, shear and bend springs.
 
     Particle ``row * nx + col`` starts at ``origin + col * dx * u + row * dy * w``,
@@ -151,6 +156,10 @@ def cloth(nx=32, ny=32, size=(1.0, 1.0), mass=None, total_mass=0.2, stiffness=(5
         (``"xz"``), or hangs it from height 1 (``"xy"``).
     pins : "top-corners", "corners", "top-edge", "none" or sequence of int
         "top-corners" pins particles 0 and nx - 1 (row 0).
+    bending : float
+        Bending rigidity B >= 0 [N m] per unit width (:mod:`tianim.physics.bending`: curvature along
+        the rows and columns, a strip of width W bends with EI = B W); 0 (default): only the bend
+        springs resist folding.
     """
     nx = check_positive_int("nx", nx, lo=2)
     ny = check_positive_int("ny", ny, lo=2)
@@ -169,6 +178,7 @@ def cloth(nx=32, ny=32, size=(1.0, 1.0), mass=None, total_mass=0.2, stiffness=(5
     if mass is None:
         mass = check_finite_scalar("total_mass", total_mass, lo=0.0, lo_open=True) / n
     dx, dy = size[0] / (nx - 1), size[1] / (ny - 1)
+    bend = grid_bending(bending, nx, ny, dx, dy)
     u, w = (np.array([1.0, 0, 0]), np.array([0, 0, 1.0])) if plane == "xz" else (np.array([1.0, 0, 0]), np.array([0, -1.0, 0]))
     if origin is None:
         origin = np.array([-size[0] / 2, 1.0, -size[1] / 2]) if plane == "xz" else np.array([-size[0] / 2, 1.0, 0.0])
@@ -215,7 +225,7 @@ def cloth(nx=32, ny=32, size=(1.0, 1.0), mass=None, total_mass=0.2, stiffness=(5
     faces = np.concatenate([np.stack([a, a + 1, a + nx + 1], 1), np.stack([a, a + nx + 1, a + nx], 1)])
     return Model(positions, mass=mass, springs=springs, stiffness=k3[kind], rest_length=rest, damping=c3[kind],
                  gravity=gravity, medium_damping=medium_damping, pins=pins, colliders=colliders, faces=faces,
-                 grid=grid, name=name)
+                 grid=grid, name=name, bending=bend)
 
 
 def lattice(nx=6, ny=6, nz=6, size=(0.5, 0.5, 0.5), total_mass=1.0, stiffness=2000.0, damping=0.0,

@@ -176,6 +176,9 @@ class Model:
     grid : GridTopology, optional
         Set by the cloth builder: kernels then use the implicit 12-neighbour stencil.
     name : str
+    bending : tianim.physics.bending.Bending, optional
+        Set by the cloth, chain and rope builders when given a bending rigidity
+        (:mod:`tianim.physics.bending`); None: no bending code runs.
     """
 
     def __init__(
@@ -193,6 +196,7 @@ class Model:
         faces=None,
         grid: GridTopology | None = None,
         name: str = "model",
+        bending=None,
     ):
         pos = np.asarray(positions) if not isinstance(positions, np.ndarray) else positions
         if pos.ndim == 1:
@@ -303,6 +307,14 @@ class Model:
         self.collider_table = _frozen(table)
         self.faces = None if faces is None else _frozen(faces.astype(np.int32))
         self.grid = grid
+        from tianim.physics.bending import Bending
+
+        if bending is not None and not isinstance(bending, Bending):
+            raise TypeError(f"bending={fmt(bending)} must be None or a tianim.physics.bending.Bending; give the "
+                            "rigidity to a builder instead: tp.cloth(..., bending=B) or tp.rope(..., bending=EI)")
+        if bending is not None and bending.nx * bending.ny != n:
+            raise ValueError(f"bending is for {bending.nx * bending.ny} particles; this model has {n}")
+        self.bending = bending
         self._csr = None
         self._kernel_data: dict = {}
 

@@ -190,6 +190,8 @@ def plan_steps(model, frame_dt: float = 1 / 24, accuracy: float | None = None, m
         accuracy = check_finite_scalar("accuracy", accuracy, lo=0.0, lo_open=True)
     if methods is None:
         methods = ("symplectic_euler", "verlet", "rk4") + (() if accuracy is None else STIFF_METHODS)
+        if getattr(model, "bending", None) is not None:  # backward Euler does not model bending
+            methods = tuple(m for m in methods if m != "implicit_euler")
     methods = (methods,) if isinstance(methods, str) else tuple(methods)
     for m in methods:
         if m not in METHODS:

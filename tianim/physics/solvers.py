@@ -38,6 +38,10 @@ import numpy as np
 from tianim._checks import check_choice, check_finite_scalar, check_positive_int
 from tianim.physics import theory
 from tianim.physics.kernels import SUBSTEPS_PER_LAUNCH, WORK, frame_kernel
+from tianim.physics.passes import has_passes, run_with_passes
+from tianim.physics.selfcollision import SelfCollision, as_self_collision
+from tianim.physics.selfcollision import check_model as check_sc_model
+from tianim.physics.strain import StrainLimit, as_strain_limit
 from tianim.physics.watchdog import DivergenceError, Watchdog
 
 #: Loop layouts of the explicit kernels (all give bit-identical results).
@@ -130,6 +134,10 @@ class Solver:
         if math.isinf(self.stability_limit):
             return math.inf
         w = theory.omega_bound(model, positions, pinned)
+        if model.bending is not None:  # Weyl: the bending modes' bound adds in quadrature
+            from tianim.physics.bending import omega_bound as bending_omega
+
+            w = math.sqrt(w * w + bending_omega(model, pinned) ** 2)
         g = theory.gamma_bound(model, positions, pinned)
         ratio = theory.damping_ratio_bound(model, w, pinned) if self.name == "explicit_euler" else 0.0
         return theory.stable_step(self.name, w, g, ratio)
@@ -232,18 +240,44 @@ class _Explicit(Solver):
     layout : str
         ``"auto"`` (:func:`choose_layout`), ``"serial"``, ``"frame"`` or ``"substep"``; all give
         bit-identical results.
+    self_collision : SelfCollision, optional
+        Particle-particle self-collision after every substep (:mod:`tianim.physics.selfcollision`).
+    strain_limit : float or StrainLimit, optional
+        Largest spring stretch (0.1: 10%), enforced after every substep (:mod:`tianim.physics.strain`).
     watchdog : bool or Watchdog
+
+    A model with bending (``tp.cloth(..., bending=B)``) gets the bending force as a kick before
+    each substep (:mod:`tianim.physics.bending`). With any of the three the call runs one substep
+    per launch (:mod:`tianim.physics.passes`); without them nothing changes.
     """
 
-    def __init__(self, layout: str = "auto", watchdog=True):
+    def __init__(self, layout: str = "auto", watchdog=True, self_collision=None, strain_limit=None):
         super().__init__(watchdog)
         self.layout = check_choice("layout", layout, LAYOUTS)
+        self.self_collision = as_self_collision(self_collision)
+        self.strain_limit = as_strain_limit(strain_limit)
 
     def options(self) -> dict:
-        return {"layout": self.layout}
+        return _with_passes({"layout": self.layout}, self)
 
     def _advance(self, model, state, dt, substeps):
-        launch(model, state, dt, substeps, self.name, self.layout, self._buffer)
+        if not has_passes(model, self.self_collision, self.strain_limit):
+            launch(model, state, dt, substeps, self.name, self.layout, self._buffer)
+            return
+        if self.self_collision is not None:
+            check_sc_model(self.self_collision, model)
+        run_with_passes(model, state, dt, substeps,
+                        lambda: launch(model, state, dt, 1, self.name, self.layout, self._buffer),
+                        True, self.self_collision, self.strain_limit, self._buffer)
+
+
+def _with_passes(opts: dict, solver) -> dict:
+    """``opts`` plus the solver's self_collision / strain_limit when set (so reprs stay as before)."""
+    if solver.self_collision is not None:
+        opts["self_collision"] = solver.self_collision
+    if solver.strain_limit is not None:
+        opts["strain_limit"] = solver.strain_limit
+    return opts
 
 
 class ExplicitEuler(_Explicit):
@@ -364,6 +398,10 @@ class ImplicitEuler(Solver):
     def _advance(self, model, state, dt, substeps):
         from tianim.physics.implicit import run_implicit_euler
 
+        if model.bending is not None:
+            raise ValueError(f"implicit_euler does not model bending, and model {model.name!r} has bending; "
+                             "use xpbd or an explicit solver (symplectic_euler), or build the model with bending=0")
+
         return run_implicit_euler(model, state, dt, substeps, self.options(), self._buffer)
 
 
@@ -377,27 +415,44 @@ class XPBD(Solver):
         Symmetric Gauss-Seidel sweeps (forward + backward) per substep, >= 1.
     layout : str
         ``"auto"``, ``"per_copy"`` or ``"parallel"`` (grids only); bit-identical results.
+    self_collision : SelfCollision, optional
+        Particle-particle self-collision after every substep (:mod:`tianim.physics.selfcollision`).
+    strain_limit : float or StrainLimit, optional
+        Largest spring stretch (0.1: 10%), enforced after every substep (:mod:`tianim.physics.strain`).
     watchdog : bool or Watchdog
+
+    A model with bending gets one XPBD bending pass after each substep (:mod:`tianim.physics.bending`).
+    With any of the three the call runs one substep per launch (:mod:`tianim.physics.passes`).
     """
 
     name, order, stability_limit = "xpbd", 1, math.inf
     watched_energy = ("kinetic", "gravity")
 
-    def __init__(self, iterations: int = 1, layout: str = "auto", watchdog=True):
+    def __init__(self, iterations: int = 1, layout: str = "auto", watchdog=True, self_collision=None,
+                 strain_limit=None):
         super().__init__(watchdog)
         self.iterations = check_positive_int("iterations", iterations)
         self.layout = check_choice("layout", layout, XPBD_LAYOUTS)
+        self.self_collision = as_self_collision(self_collision)
+        self.strain_limit = as_strain_limit(strain_limit)
         self.evals_per_substep = 2.0 * self.iterations  # a symmetric sweep visits every spring twice
 
     def options(self) -> dict:
-        return {"iterations": self.iterations, "layout": self.layout}
+        return _with_passes({"iterations": self.iterations, "layout": self.layout}, self)
 
     def _advance(self, model, state, dt, substeps):
         from tianim.physics.xpbd import run_xpbd
 
         if self.layout == "parallel" and model.grid is None:
             raise ValueError("layout='parallel' needs a cloth grid model; use 'auto' or 'per_copy'")
-        run_xpbd(model, state, dt, substeps, self.iterations, self.layout, self._buffer)
+        if not has_passes(model, self.self_collision, self.strain_limit):
+            run_xpbd(model, state, dt, substeps, self.iterations, self.layout, self._buffer)
+            return
+        if self.self_collision is not None:
+            check_sc_model(self.self_collision, model)
+        run_with_passes(model, state, dt, substeps,
+                        lambda: run_xpbd(model, state, dt, 1, self.iterations, self.layout, self._buffer),
+                        False, self.self_collision, self.strain_limit, self._buffer)
 
 
 # --------------------------------------------------------------------------- registry and the convenience

@@ -1,0 +1,225 @@
+"""Self-collision (tianim.physics.selfcollision): folded and dropped cloths keep their thickness, results
+are bit-identical across threads, batches and neighbour-list schedules; bad options name the argument."""
+
+import textwrap
+
+import numpy as np
+import pytest
+
+import tianim.physics as tp
+from _threads import digests_by_thread_count
+
+THICKNESS = 0.016
+#: Stated tolerance: every non-neighbour pair stays at least THICKNESS * (1 - TOL) apart in every frame.
+TOL = 0.05
+N = 12
+
+
+def min_gap(model, x, k):
+    """Smallest distance between particles more than k grid steps apart (brute force, independent of the grid)."""
+    nx = model.grid.nx
+    d = np.linalg.norm(x[:, None].astype(np.float64) - x[None], axis=2)
+    r, c = np.divmod(np.arange(x.shape[0]), nx)
+    excl = (np.abs(r[:, None] - r[None]) <= k) & (np.abs(c[:, None] - c[None]) <= k)
+    return d[~excl].min()
+
+
+def fold(solver, frames=48, fps=30):
+    """SoftGym-style fold: two pickers lift the corners of one edge of a cloth lying on the ground, carry
+    them over in an arc and drop them near the far edge."""
+    model = tp.cloth(N, N, size=(0.3, 0.3), total_mass=0.05, stiffness=(200.0, 50.0, 5.0), pins="none",
+                     origin=(-0.15, 0.002, -0.15), colliders=[tp.Ground(friction=0.5)], medium_damping=2e-3,
+                     bending=1e-4)
+    state = model.state()
+    dt = 1e-3 if solver.name == "xpbd" else 0.5 * solver.stable_dt(model)
+    sub = int(round(1 / fps / dt))
+    picks = [0, N - 1]
+    p0 = model.positions[picks]
+    gaps, T = [], 1.2
+    for f in range(frames):
+        t = (f + 1) / fps
+        if t <= T:
+            a = np.pi * t / T
+            pos = p0.copy()
+            pos[:, 2] = -0.15 + 0.125 * (1 - np.cos(a))
+            pos[:, 1] = 0.002 + 0.12 * np.sin(a) + 0.02 * t / T
+            state.move_pins(picks, pos)
+        elif state.pinned[0, picks].any():
+            state.release(picks)
+        solver.step(model, state, dt, sub)
+        gaps.append(min_gap(model, state.x[0], 2))
+    return np.array(gaps), model, state
+
+
+def drop_scene():
+    model = tp.cloth(N, N, size=(0.3, 0.3), total_mass=0.05, stiffness=(100.0, 30.0, 3.0), pins="none", plane="xy",
+                     origin=(-0.15, 0.32, 0.0), colliders=[tp.Ground(friction=0.5)], medium_damping=2e-3)
+    state = model.state()
+    state.x[0, :, 2] += np.random.default_rng(0).normal(0, 0.003, N * N).astype(np.float32)
+    return model, state
+
+
+def drop(solver, frames=30, fps=30):
+    """A vertical cloth dropped onto the ground crumples onto itself."""
+    model, state = drop_scene()
+    dt = 1e-3 if solver.name == "xpbd" else 0.5 * solver.stable_dt(model)
+    gaps = []
+    for _ in range(frames):
+        solver.step(model, state, dt, int(round(1 / fps / dt)))  # the default watchdog raises on a blow-up
+        gaps.append(min_gap(model, state.x[0], 2))
+    return np.array(gaps), state
+
+
+def test_folded_cloth_keeps_its_thickness():
+    plain, _, _ = fold(tp.XPBD(iterations=2))
+    gaps, model, state = fold(tp.XPBD(iterations=2, self_collision=tp.SelfCollision(THICKNESS)))
+    assert plain.min() < 0.1 * THICKNESS  # without self-collision the layers pass through each other
+    assert gaps.min() >= THICKNESS * (1 - TOL)
+    assert state.x[0, :, 1].max() > 1.5 * THICKNESS  # it really is folded: a layer lies on top
+    assert np.abs(state.v).max() < 1.0  # no explosion
+
+
+@pytest.mark.parametrize("method", ["symplectic_euler", "xpbd"])
+def test_dropped_cloth_keeps_its_thickness(method):
+    plain, _ = drop(tp.make_solver(method))
+    gaps, state = drop(tp.make_solver(method, self_collision=tp.SelfCollision(THICKNESS)))
+    assert plain.min() < 0.6 * THICKNESS
+    assert gaps.min() >= THICKNESS * (1 - TOL)
+    assert np.abs(state.v).max() < 1.0
+
+
+def test_results_do_not_depend_on_the_neighbour_list_schedule():
+    """A small margin rebuilds the lists often, a large one rarely, with other candidates in another order:
+    the fixed-point sums make the results bit-identical."""
+    out = []
+    for margin in (0.002, 0.03):
+        model, state = drop_scene()
+        tp.XPBD(self_collision=tp.SelfCollision(THICKNESS, margin=margin)).step(model, state, 1e-3, 400)
+        out.append(state.x.copy())
+    assert np.array_equal(out[0], out[1])
+
+
+def test_batch_equals_separate_runs_with_every_feature_on():
+    model, _ = drop_scene()
+    model = tp.cloth(N, N, size=(0.3, 0.3), total_mass=0.05, stiffness=(100.0, 30.0, 3.0), pins="none", plane="xy",
+                     origin=(-0.15, 0.32, 0.0), colliders=[tp.Ground(friction=0.5)], bending=1e-4)
+    rng = np.random.default_rng(1)
+    batch = model.state(batch=3)
+    batch.x[:, :, 2] += rng.normal(0, 0.003, batch.x.shape[:2]).astype(np.float32)
+    for method in ("xpbd", "symplectic_euler"):
+        solver = tp.make_solver(method, self_collision=tp.SelfCollision(THICKNESS), strain_limit=0.1)
+        b = batch.copy()
+        singles = []
+        for k in range(3):
+            s = model.state()
+            s.x[0] = b.x[k]
+            singles.append(s)
+        dt = 1e-3 if method == "xpbd" else 0.5 * solver.stable_dt(model)
+        solver.step(model, b, dt, 100)
+        for k, s in enumerate(singles):
+            solver.step(model, s, dt, 100)
+            assert np.array_equal(s.x[0], b.x[k]) and np.array_equal(s.v[0], b.v[k]), (method, k)
+
+
+def test_bit_identical_with_one_and_two_threads():
+    script = textwrap.dedent("""
+        import hashlib, numpy as np, tianim.physics as tp
+        m = tp.cloth(12, 12, size=(0.3, 0.3), total_mass=0.05, stiffness=(100.0, 30.0, 3.0), pins="none",
+                     plane="xy", origin=(-0.15, 0.32, 0.0), colliders=[tp.Ground(friction=0.5)], bending=1e-4)
+        h = hashlib.sha256()
+        for method in ("xpbd", "symplectic_euler"):
+            s = m.state(batch=2)
+            s.x[..., 2] += np.random.default_rng(0).normal(0, 0.003, s.x.shape[:2]).astype(np.float32)
+            solver = tp.make_solver(method, self_collision=tp.SelfCollision(0.016), strain_limit=0.1)
+            solver.step(m, s, 1e-3 if method == "xpbd" else 2e-4, 100)
+            h.update(s.x.tobytes()); h.update(s.v.tobytes())
+        print(h.hexdigest())
+    """)
+    one, two = digests_by_thread_count(script)
+    assert one == two
+
+
+def test_exclusion_rule():
+    from tianim.physics.selfcollision import exclusion_lists, exclusion_steps
+
+    cloth = tp.cloth(10, 10, size=(0.9, 0.9))  # dx = 0.1
+    assert exclusion_steps(tp.SelfCollision(0.05), cloth) == 2
+    assert exclusion_steps(tp.SelfCollision(0.25), cloth) == 3
+    assert exclusion_steps(tp.SelfCollision(0.05, exclude=5), cloth) == 5
+    rope = tp.rope(n=6, length=0.5)  # segments 0.1
+    assert exclusion_steps(tp.SelfCollision(0.05), rope) == 1
+    assert exclusion_steps(tp.SelfCollision(0.25), rope) == 3
+    off, idx = exclusion_lists(rope, 2)
+    assert [idx[off[i]:off[i + 1]].tolist() for i in (0, 3)] == [[1, 2], [1, 2, 4, 5]]
+
+
+def test_features_off_change_nothing():
+    """No option, no bending: the solvers run their old kernels (the other test files pin those down bit for
+    bit); the option objects and the repr of an option-free solver are as before."""
+    assert repr(tp.XPBD()) == "XPBD(iterations=1, layout='auto')"
+    assert repr(tp.SymplecticEuler()) == "SymplecticEuler(layout='auto')"
+    model = tp.cloth(6, 6)
+    a, b = model.state(), model.state()
+    tp.XPBD().step(model, a, 1e-3, 20)
+    tp.step(model, b, 1e-3, 20, method="xpbd")
+    assert np.array_equal(a.x, b.x)
+
+
+BAD = [
+    (lambda: tp.SelfCollision(0.0), "SelfCollision.thickness"),
+    (lambda: tp.SelfCollision(-0.01), "SelfCollision.thickness"),
+    (lambda: tp.SelfCollision(float("nan")), "SelfCollision.thickness"),
+    (lambda: tp.SelfCollision("thick"), "SelfCollision.thickness"),
+    (lambda: tp.SelfCollision(0.01, margin=0.0), "SelfCollision.margin"),
+    (lambda: tp.SelfCollision(0.01, margin=-1.0), "SelfCollision.margin"),
+    (lambda: tp.SelfCollision(0.01, iterations=0), "SelfCollision.iterations"),
+    (lambda: tp.SelfCollision(0.01, iterations=1.5), "SelfCollision.iterations"),
+    (lambda: tp.SelfCollision(0.01, exclude=-1), "SelfCollision.exclude"),
+    (lambda: tp.SelfCollision(0.01, max_neighbours=0), "SelfCollision.max_neighbours"),
+    (lambda: tp.XPBD(self_collision=0.01), "self_collision"),
+    (lambda: tp.SymplecticEuler(self_collision="yes"), "self_collision"),
+    (lambda: tp.StrainLimit(0.0), "StrainLimit.max_stretch"),
+    (lambda: tp.StrainLimit(-0.1), "StrainLimit.max_stretch"),
+    (lambda: tp.StrainLimit(float("inf")), "StrainLimit.max_stretch"),
+    (lambda: tp.StrainLimit(0.1, iterations=0), "StrainLimit.iterations"),
+    (lambda: tp.XPBD(strain_limit="10%"), "strain_limit"),
+    (lambda: tp.XPBD(strain_limit=True), "strain_limit"),
+    (lambda: tp.RK4(strain_limit=-0.1), "strain_limit"),
+    (lambda: tp.cloth(4, 4, bending=-1.0), "bending"),
+    (lambda: tp.cloth(4, 4, bending=float("nan")), "bending"),
+    (lambda: tp.cloth(4, 4, bending="stiff"), "bending"),
+    (lambda: tp.rope(n=5, bending=-1e-3), "bending"),
+    (lambda: tp.chain(n=5, bending=float("inf")), "bending"),
+    (lambda: tp.Model([[0.0, 0.0], [1.0, 0.0]], bending=1.0), "bending"),
+]
+
+
+@pytest.mark.parametrize("make, name", BAD, ids=[f"{i}-{n}" for i, (_, n) in enumerate(BAD)])
+def test_bad_options_name_the_argument(make, name):
+    with pytest.raises((ValueError, TypeError)) as err:
+        make()
+    assert name in str(err.value)
+
+
+def test_bad_scenes_are_refused_before_anything_changes():
+    spring = tp.spring1d()
+    state = spring.state()
+    x0 = state.x.copy()
+    with pytest.raises(ValueError, match="self_collision needs a 2D or 3D model"):
+        tp.XPBD(self_collision=tp.SelfCollision(0.01)).step(spring, state, 1e-3, 5)
+    assert np.array_equal(state.x, x0) and state.t[0] == 0
+    bent = tp.rope(n=5, bending=1e-3)
+    s = bent.state()
+    with pytest.raises(ValueError, match="implicit_euler does not model bending"):
+        tp.ImplicitEuler().step(bent, s, 1e-3, 2)
+    assert np.array_equal(s.x[0], bent.positions.astype(np.float32))
+
+
+def test_bench_scene_agrees_at_a_tiny_size():
+    """`tianim bench cloth`'s self-collision rows time a contact-free cloth: with and without the feature
+    the results must be bit-identical (the bench refuses to time otherwise)."""
+    from tianim.bench.cloth import selfcollision_agreement, selfcollision_row
+
+    assert selfcollision_agreement(n=16) == 0.0
+    row = selfcollision_row(n=12, repeats=1, substeps=8)
+    assert row["selfcollision_cost_ratio"] > 0 and row["rebuilds_per_call"] >= 0

@@ -1,0 +1,174 @@
+"""The per-substep passes that bending, strain limiting and self-collision add to a solver.
+
+A solver whose model has bending (:mod:`tianim.physics.bending`) or whose options ask for a strain
+limit (:mod:`tianim.physics.strain`) or self-collision (:mod:`tianim.physics.selfcollision`) runs
+its call one substep at a time, and around each substep:
+
+1. explicit solvers with bending: ``v += h f_bend / m`` (the ``pre`` kernel);
+2. the solver's own substep (springs, gravity, damping, colliders), unchanged;
+3. the ``post`` kernel, one launch, each loop parallel over (copy, particle) and ending in a
+   barrier: XPBD bending (6 colours), ``strain.iterations`` Jacobi sweeps of the strain limit,
+   ``self_collision.iterations`` Jacobi sweeps of the contact projection (on candidate lists the
+   neighbour grid rebuilds when needed), then the colliders again (so that nothing the passes moved
+   ends inside a collider).
+
+Without these features none of this runs: the solvers launch exactly the kernels they launched
+before, and results are bit-identical to theirs. Every pass gathers per particle in a fixed order
+(no atomics): results are the same for any thread count and batch layout.
+"""
+
+
+import numpy as np
+
+from tianim.physics.bending import bending_funcs
+from tianim.physics.contact import contact_response
+from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.physics.selfcollision import contact_funcs, contacts_for
+from tianim.physics.strain import SOR, strain_funcs
+
+#: Scenes with at most this many particles x copies run the passes' loops serially (no thread wake-up).
+SERIAL_MAX = 4096
+
+
+@cached_variants
+def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders, serial):
+    """``(pre, post)`` kernels; ``bend_kind``: None, "kick" (explicit) or "xpbd"."""
+    t = kernel_types(real_name, dim)
+    ti, real, vec_arr = t.ti, t.real, t.vec_arr
+    real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    kick, project_colour = bending_funcs(real_name, dim)
+    strain_gather = strain_funcs(real_name, dim, grid)
+    contact_gather = contact_funcs(real_name, dim, grid)
+    respond = contact_response(real_name, dim)
+
+    @ti.kernel
+    def pre(x: vec_arr, v: vec_arr, pinned: mask_arr, inv_mass: real_arr, bp: real_arr, h: real, nx: ti.i32,
+            ny: ti.i32):
+        ti.loop_config(serialize=serial)
+        for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+            kick(b, i, x, v, pinned, inv_mass, bp, nx, ny, h)
+
+    T = ti.template()
+
+    @ti.func
+    def strain_sweep(b, i, src: T, dst: T, v: T, pinned: T, inv_mass: T, topo: T, rest: T, eps, nx, inv_h):
+        corr, cnt = strain_gather(b, i, src, pinned, inv_mass, topo, rest, eps, nx)
+        corr *= SOR / ti.max(cnt, 1)
+        dst[b, i] = src[b, i] + corr
+        v[b, i] += inv_h * corr
+
+    @ti.func
+    def contact_sweep(b, i, src: T, dst: T, v: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T,
+                      excl_idx: T, k_excl, nx, thick, inv_h):
+        corr, cnt = contact_gather(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick)
+        corr /= ti.cast(ti.max(cnt, 1), real)
+        dst[b, i] = src[b, i] + corr
+        v[b, i] += inv_h * corr
+
+    @ti.kernel
+    def post(x: vec_arr, v: vec_arr, W: vec_arr, pinned: mask_arr, inv_mass: real_arr, bp: real_arr,
+             topo: int_arr, rest: real_arr, nbr: i32_3, count: i32_2, excl_off: int_arr, excl_idx: int_arr,
+             coll: real2_arr, h: real, eps: real, thick: real, g_norm: real, nx: ti.i32, ny: ti.i32,
+             k_excl: ti.i32):
+        inv_h = 1 / h
+        if ti.static(bend_kind == "xpbd"):
+            for c in ti.static(range(6)):
+                ti.loop_config(serialize=serial)
+                for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                    project_colour(b, i, c, x, v, pinned, inv_mass, bp, nx, ny, h)
+        # Jacobi sweeps ping-pong between x and W (the corrected positions), one parallel loop per sweep:
+        # sweep k reads src and writes dst = src + correction (and v += correction / h); an odd count
+        # ends with a copy back into x.
+        for it in ti.static(range(strain_iters)):
+            ti.loop_config(serialize=serial)
+            for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                if ti.static(it % 2 == 0):
+                    strain_sweep(b, i, x, W, v, pinned, inv_mass, topo, rest, eps, nx, inv_h)
+                else:
+                    strain_sweep(b, i, W, x, v, pinned, inv_mass, topo, rest, eps, nx, inv_h)
+        if ti.static(strain_iters % 2 == 1):
+            ti.loop_config(serialize=serial)
+            for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                x[b, i] = W[b, i]
+        for it in ti.static(range(sc_iters)):
+            ti.loop_config(serialize=serial)
+            for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                if ti.static(it % 2 == 0):
+                    contact_sweep(b, i, x, W, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick,
+                                  inv_h)
+                else:
+                    contact_sweep(b, i, W, x, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick,
+                                  inv_h)
+        if ti.static(sc_iters % 2 == 1):
+            ti.loop_config(serialize=serial)
+            for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                x[b, i] = W[b, i]
+        if ti.static(colliders):
+            ti.loop_config(serialize=serial)
+            for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                if pinned[b, i] == 0:
+                    x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, g_norm, h)
+
+    return pre, post
+
+
+def has_passes(model, self_collision, strain_limit) -> bool:
+    """Whether a solver step of ``model`` with these options runs any pass."""
+    return getattr(model, "bending", None) is not None or self_collision is not None or strain_limit is not None
+
+
+_EMPTY_I32 = {}
+
+
+def _empty(shape):
+    a = _EMPTY_I32.get(shape)
+    if a is None:
+        a = _EMPTY_I32[shape] = np.zeros(shape, np.int32)
+    return a
+
+
+def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_collision, strain_limit, buffer):
+    """Advance ``substeps`` substeps of ``dt``: ``advance_one()`` runs one substep of the solver, the
+    passes (module docstring) run around it. ``explicit``: bending as a kick before the substep
+    (explicit solvers) or as an XPBD pass after it."""
+    bend = model.bending
+    grid = model.grid is not None
+    bend_kind = None if bend is None else ("kick" if explicit else "xpbd")
+    strain_iters = 0 if strain_limit is None else int(strain_limit.iterations)
+    sc_iters = 0 if self_collision is None else int(self_collision.iterations)
+    post_needed = bend_kind == "xpbd" or strain_iters or sc_iters
+    dtype = state.dtype
+    real = dtype.type
+    serial = state.batch * model.n_particles <= SERIAL_MAX
+    pre, post = _kernels(dtype.name, model.dim, grid, bend_kind, strain_iters, sc_iters, len(model.colliders) > 0,
+                         serial)
+    data = model.kernel_data(dtype)
+    bp = (bend.params if bend is not None else np.zeros(4)).astype(dtype)
+    nx, ny = (bend.nx, bend.ny) if bend is not None else ((model.grid.nx, model.grid.ny) if grid else (1, 1))
+    if grid:
+        nx, ny = model.grid.nx, model.grid.ny
+    h = real(dt)
+    pinned = state.pinned.view(np.uint8)
+    contacts = contacts_for(self_collision, model, state) if sc_iters else None
+    W = buffer("passes_work", state.x.shape, dtype)
+    eps = real(strain_limit.max_stretch if strain_limit is not None else 0.0)
+    thick = real(self_collision.thickness if self_collision is not None else 0.0)
+    g_norm = real(float(np.linalg.norm(model.gravity)))
+    if contacts is not None:
+        excl_off, excl_idx, k_excl = contacts.excl_off, contacts.excl_idx, contacts.k_excl
+    else:
+        excl_off, excl_idx, k_excl = _empty((2,)), _empty((1,)), 0
+    for _ in range(int(substeps)):
+        if bend_kind == "kick":
+            pre(state.x, state.v, pinned, data["inv_mass"], bp, h, nx, ny)
+        advance_one()
+        if not post_needed:
+            continue
+        if contacts is not None:
+            nbr, count = contacts.update(state.x)
+        else:
+            nbr, count = _empty((1, 1, 1)), _empty((1, 1))
+        post(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], nbr, count, excl_off,
+             excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl)

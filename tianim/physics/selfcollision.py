@@ -1,0 +1,279 @@
+"""Self-collision: particles of one cloth or rope keep at least a ``thickness`` apart.
+
+Contact model. Two particles i, j that are not topological neighbours (below) and are closer than
+the thickness t are pushed apart along ``n = (x_i - x_j)/|x_i - x_j|`` to distance t, the push
+split by inverse mass (pinned particles do not move), and the velocities get the same
+displacement over the substep (``v += dx / h``: an inelastic contact, the position-based response
+of Mueller et al., "Position Based Dynamics", 2007, section 3.5; Bridson, Fedkiw and Anderson,
+"Robust Treatment of Collisions, Contact and Friction for Cloth Animation", SIGGRAPH 2002, use the
+same minimum separation ("thickness") between cloth particles). This runs after every substep, in
+XPBD and in the explicit solvers (:mod:`tianim.physics.passes`).
+
+Topological neighbours are never tested: on a cloth grid the particles within ``exclude`` grid
+steps (``|d_col| <= k and |d_row| <= k``), on other models the particles within ``exclude``
+springs (graph hops). The default k makes every excluded pair's rest distance cover the
+thickness: grids ``max(2, ceil(t / min(dx, dy)))`` (so every spring of the 12-stencil is excluded),
+edge models ``max(1, ceil(t / shortest spring))``.
+
+Neighbours come from :class:`tianim.spatial.NeighbourGrid` (the one neighbour grid) queried at
+radius ``t + margin``. The list is reused while the spread of the copy's displacements since the
+build, ``sqrt(sum_a (max_k d_ka - min_k d_ka)^2)`` with ``d = x - x_build``, stays below the margin:
+``|x_i - x_j|`` changes by at most ``|d_i - d_j|``, which that spread bounds, so no pair can have come
+within t without being listed and the candidate set always contains every contact. A cloth that
+moves as a whole (falls, is carried) keeps its list; the check costs three passes over the positions.
+
+Determinism. The corrections of a particle are summed in 64-bit fixed point
+(:data:`FIXED_POINT` steps per thickness): integer addition is associative, so the result does not
+depend on the order in which the neighbour list holds the contacts, hence not on the grid's box,
+on when it was rebuilt or on the batch; each particle's row is gathered by one thread (no atomics).
+Jacobi iterations, averaged over the particle's contacts (as :mod:`tianim.physics.strain`): same
+results for 1 and 2 threads and for a batch and its copies run separately, bit for bit.
+"""
+
+
+import math
+import weakref
+from dataclasses import dataclass
+
+import numpy as np
+
+from tianim._checks import check_finite_scalar, check_int, check_positive_int, fmt
+from tianim.physics.kernel_types import cached_variants, kernel_types
+
+#: Fixed-point steps per thickness of the correction sums (2^40: resolution 1e-12 t; sums up to 8e6 t).
+FIXED_POINT = float(2 ** 40)
+#: The query radius grows the grid cells; beyond this many cells per copy the cell size is increased.
+MAX_GRID_CELLS = 1 << 22
+
+
+@dataclass(frozen=True)
+class SelfCollision:
+    """A solver option: particle-particle self-collision with a thickness.
+
+    Parameters
+    ----------
+    thickness : float
+        Minimum distance t > 0 [m] kept between non-neighbour particles.
+    margin : float, optional
+        Extra query radius [m] (default ``t / 2``); the neighbour list is rebuilt when the particles of a
+        copy have moved relative to each other by up to ``margin`` since the last build.
+    iterations : int
+        Jacobi sweeps of the contact projection per substep (>= 1).
+    exclude : int, optional
+        Topological neighbours left out: grid steps (cloth) or spring hops (other models); default
+        from the thickness (module docstring).
+    max_neighbours : int, optional
+        Initial capacity of a neighbour row (grows by itself when a row overflows; nothing is dropped).
+    """
+
+    thickness: float
+    margin: float | None = None
+    iterations: int = 2
+    exclude: int | None = None
+    max_neighbours: int | None = None
+
+    def __post_init__(self):
+        t = check_finite_scalar("SelfCollision.thickness", self.thickness, lo=0.0, lo_open=True)
+        if self.margin is not None:
+            check_finite_scalar("SelfCollision.margin", self.margin, lo=0.0, lo_open=True)
+        check_positive_int("SelfCollision.iterations", self.iterations, hi=1000)
+        if self.exclude is not None:
+            check_int("SelfCollision.exclude", self.exclude, lo=0, hi=1000)
+        if self.max_neighbours is not None:
+            check_positive_int("SelfCollision.max_neighbours", self.max_neighbours, hi=4096)
+        del t
+
+    @property
+    def query_margin(self) -> float:
+        return 0.5 * self.thickness if self.margin is None else float(self.margin)
+
+
+def as_self_collision(value) -> SelfCollision | None:
+    if value is None or isinstance(value, SelfCollision):
+        return value
+    raise TypeError(f"self_collision={fmt(value)} must be None or tianim.physics.SelfCollision(thickness=...)")
+
+
+def check_model(sc: SelfCollision, model) -> None:
+    """Raise if ``model`` cannot run self-collision."""
+    if model.dim not in (2, 3):
+        raise ValueError(f"self_collision needs a 2D or 3D model; {model.name!r} is {model.dim}D")
+
+
+def exclusion_steps(sc: SelfCollision, model) -> int:
+    """k of the exclusion rule (module docstring) for ``model``."""
+    if sc.exclude is not None:
+        return int(sc.exclude)
+    t = sc.thickness
+    if model.grid is not None:
+        g = model.grid
+        spacing = min(g.rest_length[0], g.rest_length[2])  # (1, 0) and (0, 1) offsets
+        return max(2, int(math.ceil(t / spacing - 1e-9)))
+    if model.n_springs == 0:
+        return 0
+    return max(1, int(math.ceil(t / float(model.rest_length.min()) - 1e-9)))
+
+
+def exclusion_lists(model, hops: int):
+    """CSR ``(offsets (N+1,), idx)`` of the particles within ``hops`` springs of each particle
+    (itself excluded), rows sorted (edge models)."""
+    n = model.n_particles
+    off, _spr, oth = model.incidence()
+    rows = []
+    for i in range(n):
+        seen = {i}
+        front = [i]
+        for _ in range(hops):
+            nxt = []
+            for p in front:
+                for q in oth[off[p]:off[p + 1]]:
+                    q = int(q)
+                    if q not in seen:
+                        seen.add(q)
+                        nxt.append(q)
+            front = nxt
+        seen.discard(i)
+        rows.append(sorted(seen))
+    counts = np.array([len(r) for r in rows], np.int64)
+    offsets = np.zeros(n + 1, np.int32)
+    np.cumsum(counts, out=offsets[1:])
+    idx = np.array([j for r in rows for j in r], np.int32)
+    return offsets, (idx if idx.size else np.zeros(1, np.int32))
+
+
+class Contacts:
+    """The neighbour grid and candidate lists of one (model, state) pair: built and rebuilt on need."""
+
+    def __init__(self, sc: SelfCollision, model, state):
+        self.sc = sc
+        self.radius = sc.thickness + sc.query_margin
+        self.k_excl = exclusion_steps(sc, model)
+        if model.grid is None and model.n_springs:
+            self.excl_off, self.excl_idx = exclusion_lists(model, self.k_excl)
+        else:
+            self.excl_off, self.excl_idx = np.zeros(model.n_particles + 1, np.int32), np.zeros(1, np.int32)
+        if sc.max_neighbours is not None:
+            self.capacity = int(sc.max_neighbours)
+        else:
+            if model.grid is not None:
+                dx, dy = model.grid.rest_length[0], model.grid.rest_length[2]
+                per_layer = math.pi * self.radius ** 2 / (dx * dy)
+            else:
+                per_layer = 2 * self.radius / max(float(model.rest_length.min()), 1e-12) if model.n_springs else 1
+            self.capacity = int(min(4096, max(16, math.ceil(4 * (per_layer + 1)))))
+        self.grid = None
+        self.x_build = None
+        self.rebuilds = 0
+
+    def _new_grid(self, x):
+        from tianim.spatial import NeighbourGrid
+
+        lo = x.min(axis=(0, 1)).astype(np.float64)
+        hi = x.max(axis=(0, 1)).astype(np.float64)
+        pad = 0.25 * (hi - lo) + 2 * self.radius
+        lo, hi = lo - pad, hi + pad
+        h = self.radius
+        cells = float(np.prod(np.maximum(np.ceil((hi - lo) / h), 1)))
+        if cells > MAX_GRID_CELLS:
+            h *= (cells / MAX_GRID_CELLS) ** (1 / x.shape[2]) * 1.01
+        self.grid = NeighbourGrid(lo, hi, h, x.shape[1], batch=x.shape[0], max_neighbours=self.capacity,
+                                  dtype=x.dtype)
+
+    def _needs_rebuild(self, x) -> bool:
+        """True unless every pair's relative displacement since the build is below the margin: for any i, j,
+        ``|d_i - d_j|^2 <= sum_a (max_k d_ka - min_k d_ka)^2`` (d = x - x_build, per copy)."""
+        if self.x_build is None or self.x_build.shape != x.shape:
+            return True
+        d = np.subtract(x, self.x_build, out=self._disp)
+        spread = d.max(axis=1) - d.min(axis=1)  # (B, D)
+        worst = float(np.max(np.einsum("bd,bd->b", spread, spread)))
+        m = self.sc.query_margin * (1 - 1e-5)
+        return not worst <= m * m
+
+    def update(self, x):
+        """Rebuild the candidate lists if needed; returns ``(nbr (B, N, K), count (B, N))``."""
+        if not self._needs_rebuild(x):
+            return self.nbr, self.count
+        if self.grid is None or not (np.all(x.min(axis=(0, 1)) >= self.grid.lower)
+                                     and np.all(x.max(axis=(0, 1)) <= self.grid.upper)):
+            self._new_grid(x)
+        while True:
+            self.grid.build(x, check=False)
+            nb = self.grid.query(self.radius, on_overflow="report")
+            if not nb.overflow:
+                break
+            self.capacity = int(min(1 << 16, 2 * int(nb.counts.max())))
+            lo, hi, h = self.grid.lower, self.grid.upper, self.grid.cell_size
+            from tianim.spatial import NeighbourGrid
+
+            self.grid = NeighbourGrid(lo, hi, h, x.shape[1], batch=x.shape[0], max_neighbours=self.capacity,
+                                      dtype=x.dtype)
+        self.nbr, self.count = nb.indices, nb.counts
+        self.x_build = x.copy()
+        self._disp = np.empty_like(x)
+        self.rebuilds += 1
+        return self.nbr, self.count
+
+
+_CONTACTS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def contacts_for(sc: SelfCollision, model, state) -> Contacts:
+    """The :class:`Contacts` of ``state`` (cached per state, option set and model)."""
+    per_state = _CONTACTS.setdefault(state, {})
+    key = (sc, id(model), state.x.shape, state.dtype)
+    c = per_state.get(key)
+    if c is None:
+        if len(per_state) > 8:
+            per_state.clear()
+        c = per_state[key] = Contacts(sc, model, state)
+    return c
+
+
+@cached_variants
+def contact_funcs(real_name: str, dim: int, grid: bool):
+    """``ti.func gather(b, i, x, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, t)
+    -> (correction, contacts)``: particle i's summed (fixed-point) push away from the listed
+    non-neighbour particles closer than t, and their number."""
+    tt = kernel_types(real_name, dim)
+    ti, real = tt.ti, tt.real
+    T = ti.template()
+
+    @ti.func
+    def excluded(i, j, excl_off: T, excl_idx: T, k_excl, nx):
+        out = False
+        if ti.static(grid):
+            ri = i // nx
+            rj = j // nx
+            out = abs(ri - rj) <= k_excl and abs((i - ri * nx) - (j - rj * nx)) <= k_excl
+        else:
+            for e in range(excl_off[i], excl_off[i + 1]):
+                if excl_idx[e] == j:
+                    out = True
+        return out
+
+    @ti.func
+    def gather(b, i, x: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T, excl_idx: T, k_excl, nx, t):
+        acc = ti.Vector.zero(ti.i64, dim)
+        cnt = 0
+        wi = ti.select(pinned[b, i] == 0, inv_mass[i], 0)
+        scale = ti.cast(FIXED_POINT, ti.f64) / ti.cast(t, ti.f64)
+        if wi > 0:
+            m = ti.min(count[b, i], nbr.shape[2])
+            for q in range(m):
+                j = nbr[b, i, q]
+                d = x[b, i] - x[b, j]
+                dist2 = d.dot(d)
+                if dist2 < t * t and dist2 > 0 and not excluded(i, j, excl_off, excl_idx, k_excl, nx):
+                    wj = ti.select(pinned[b, j] == 0, inv_mass[j], 0)
+                    dist = ti.sqrt(dist2)
+                    c = ((wi / (wi + wj)) * (t - dist) / dist) * d
+                    for a in ti.static(range(dim)):
+                        acc[a] += ti.cast(ti.round(ti.cast(c[a], ti.f64) * scale), ti.i64)
+                    cnt += 1
+        corr = ti.Vector.zero(real, dim)
+        for a in ti.static(range(dim)):
+            corr[a] = ti.cast(ti.cast(acc[a], ti.f64) / scale, real)
+        return corr, cnt
+
+    return gather
