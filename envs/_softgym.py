@@ -56,9 +56,12 @@ CLOTH_FRICTION = 0.75
 CLOTH_DAMPING = 1.0             # 1/s (FleX params.damping), as medium damping rho = 1/s x particle mass
 GRAVITY = 9.8
 CLOTH_SUBSTEPS, CLOTH_ITERATIONS = 4, 2   # XPBD per frame (FleX: 4 substeps, 30 iterations)
-#: Self-collision and a bending model are being added to tianim.physics (branch ``deform``); when they
-#: land, they are switched on for the SoftGym cloth here, in one line, e.g. ``{"self_collision": 0.00625}``.
+#: Model options of the SoftGym cloth beyond the springs (none: FleX's bending is the two-apart springs).
 CLOTH_EXTRA: dict = {}
+#: Solver options of the SoftGym cloth (ClothFold-v1). FleX's cloth self-collides (eNvFlexPhaseSelfCollide) keeping its solid rest distance, which defaults to
+#: its particle radius, 1.8 x 0.00625 m: tianim.physics.SelfCollision with that thickness (grid neighbours
+#: within 2 steps excluded, as FleX's SelfCollideFilter leaves out particles that start closer than it).
+CLOTH_SOLVER: dict = {"self_collision": tp.SelfCollision(thickness=1.8 * 0.00625)}
 CLOTH_PICKER = dict(count=2, radius=0.05, threshold=0.005, particle_radius=CLOTH_SPACING,
                     low=(-0.4, 0.0, -0.4), high=(1.0, 0.5, 0.4))  # SoftGym's ClothEnv picker
 
@@ -221,7 +224,8 @@ class PickerSim:
     """B copies of a SoftGym picker task; subclasses set the class attributes and the hooks.
 
     Class attributes: ``MODEL`` (a function returning the shared model), ``SUBSTEPS`` and
-    ``ITERATIONS`` (XPBD per frame), ``PICKER`` (keyword arguments of :class:`Pickers`),
+    ``ITERATIONS`` (XPBD per frame), ``SOLVER_OPTIONS`` (further :class:`tianim.physics.XPBD`
+    options: self-collision, strain limit), ``PICKER`` (keyword arguments of :class:`Pickers`),
     ``KEYPOINTS`` (particle indices observed), ``REWARD_KEY`` (the metric that is the reward).
     Hooks: ``_start(k, rng)`` writes copy k's start (cloth, pickers, reset metrics);
     ``_metrics() -> dict of (B,) float64`` (must contain ``performance`` and
@@ -231,6 +235,7 @@ class PickerSim:
     MODEL = None
     SUBSTEPS = 4
     ITERATIONS = 1
+    SOLVER_OPTIONS: dict = {}
     PICKER: dict = {}
     KEYPOINTS = np.zeros(0, np.int64)
     REWARD_KEY = "performance"
@@ -242,7 +247,8 @@ class PickerSim:
         # XPBD is stable at any step, so the watchdog only checks for non-finite values (growth=None:
         # no energy sums, which would cost more than the physics of a frame); a copy that fails is
         # rolled back to the start of the env step and its episode ends.
-        self.solver = tp.XPBD(iterations=self.ITERATIONS, watchdog=tp.Watchdog(growth=None, on_divergence="rollback"))
+        self.solver = tp.XPBD(iterations=self.ITERATIONS, watchdog=tp.Watchdog(growth=None, on_divergence="rollback"),
+                              **self.SOLVER_OPTIONS)
         self.diverged = np.zeros(batch, bool)
         self.metrics: dict = {}
 

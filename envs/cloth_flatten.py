@@ -56,15 +56,19 @@ steps (SoftGym's horizon).
 
 ## Physics (fixed for version 0)
 
-As ClothFold-v1 (XPBD, 4 substeps x 2 sweeps per 0.01 s frame, float32). The start
+As ClothFold-v1 (XPBD, 4 substeps x 2 sweeps per 0.01 s frame, float32) but without
+self-collision (``SOLVER_OPTIONS = sg.CLOTH_SOLVER`` in ``ClothFlattenSim`` switches it on,
+one line): the coverage is a projection on the table, and the crumpled starts would cost
+about twice as long to generate. The start
 generation lifts the particle in 25 frames, holds it 35 frames and lets the cloth fall and
 settle for 60 frames (SoftGym: an instant lift, then until the cloth is still, at most 300
 frames each).
 
 ## Differences from SoftGym (what remains)
 
-* As ClothFold-v1: no self-collision (the crumpled layers interpenetrate: the coverage is a
-  projection and does not see it), one cloth size, XPBD iterations, pickers without collision.
+* No self-collision (FleX's cloth self-collides): the crumpled layers interpenetrate; the
+  coverage is a projection and does not see it, the way the cloth unfolds does. As ClothFold-v1:
+  one cloth size, XPBD iterations, pickers without collision.
 * 8 start variations turned at random instead of 1000 cached ones; fixed frame counts instead
   of SoftGym's velocity thresholds while generating them; no extra frame before A0 is read.
 """

@@ -68,18 +68,20 @@ XPBD (:class:`tianim.physics.XPBD`, 2 symmetric Gauss-Seidel sweeps, 4 substeps 
 frame, float32) on the cloth of :func:`envs._softgym.cloth_model`: structural and shear
 constraints of 2000 N/m and bend springs (particles two apart, as FleX's ``CreateSpringGrid``)
 of 20 N/m, viscous damping 1/s, gravity 9.8 m/s^2, table contact with friction 0.75 at FleX's
-5 mm collision distance. Single env and batch run the same code (``ClothFoldV1Sim``).
+5 mm collision distance, and self-collision (:class:`tianim.physics.SelfCollision`) with
+FleX's solid rest distance, 1.8 x 6.25 mm = 11.25 mm, between particles more than 2 grid steps
+apart: the folded half rests on the other. Single env and batch run the same code
+(``ClothFoldV1Sim``).
 
 ## Differences from SoftGym (what remains)
 
-* No self-collision: the folded half passes through the half below it instead of resting on it
-  (SoftGym's FleX cloth self-collides); the metrics read positions, which this changes by at most
-  the layer gap. tianim.physics is gaining self-collision and a bending model (branch ``deform``);
-  ``envs._softgym.CLOTH_EXTRA`` switches them on in one line (then as ClothFold-v2).
+* Self-collision is a position projection after each substep (FleX: contacts inside its
+  constraint iterations, with particle friction 1); it costs about 1.8x the physics without it.
 * One cloth size, 64 x 64 (SoftGym draws 60..119 per side per variation from 1000 cached
   variations): the CPU steps 64 x 64 at a few env steps per second per core.
 * XPBD with 4 x 2 sweeps per frame instead of FleX's 4 substeps x 30 iterations: a corner pulled
-  at full speed stretches the springs next to it more than FleX's cloth (no strain limiting yet).
+  at full speed stretches the springs next to it more than FleX's cloth (tianim's strain_limit
+  solver option is not used in version 1).
 * The pickers are not collision spheres (in FleX they also push the cloth); the start is not
   settled by simulation (the flat cloth is already at rest); observations have finite bounds.
 """
@@ -106,6 +108,7 @@ class ClothFoldV1Sim(sg.PickerSim):
 
     MODEL = staticmethod(sg.cloth_model)
     SUBSTEPS, ITERATIONS = sg.CLOTH_SUBSTEPS, sg.CLOTH_ITERATIONS
+    SOLVER_OPTIONS = sg.CLOTH_SOLVER
     PICKER = sg.CLOTH_PICKER
     KEYPOINTS = KEYPOINTS
 

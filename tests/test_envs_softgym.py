@@ -182,12 +182,13 @@ def test_picker_moves_one_cm_per_axis_per_repeat_and_carries_its_particle():
     env.step(np.array([0.3, 1, -0.2, 1, 0, 0, 0, -1], np.float32))
     assert np.allclose(sim.pickers.pos[0, 0] - before_p, 0.08 * np.array([0.3, 1, -0.2]), atol=1e-6)
     assert np.allclose(sim.state.x[0, held] - before_x, sim.pickers.pos[0, 0] - before_p, atol=1e-6)
-    # release: the particle is free again and falls back to the table
+    # release: the particle is free again and falls back (onto the table or the cloth under it)
+    lifted = sim.state.x[0, held, 1]
     env.step(np.zeros(8, np.float32))
     assert sim.pickers.held[0, 0] == -1 and not sim.state.pinned[0, held]
     for _ in range(3):
         env.step(np.zeros(8, np.float32))
-    assert sim.state.x[0, held, 1] < 0.02
+    assert lifted > 0.07 and sim.state.x[0, held, 1] < 0.04
 
 
 @pytest.mark.parametrize("env_id", ["tianim/ClothFold-v1", "tianim/RopeFlatten-v0"])
