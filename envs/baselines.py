@@ -162,6 +162,160 @@ class CrowdNavVO:
         return _like(obs, cands[np.arange(B), score.argmax(1)].astype(np.float32))
 
 
+class _PickerScript:
+    """Shared moves of the SoftGym picker scripts: the action that brings picker p towards ``goal`` in
+    one env step (8 repeats of at most 1 cm per axis), and whether it holds a particle ``point``
+    (the point is lifted and the picker right above it: SoftGym's observation has no holding flag)."""
+
+    STEP = 0.08  # m per axis per env step at full action (8 repeats x 1 cm)
+
+    def __init__(self, keys: int, gain: float = 1.0):
+        self.keys, self.gain = keys, gain
+
+    def split(self, obs):
+        obs = np.atleast_2d(np.asarray(obs, dtype=np.float64))
+        k = 3 * self.keys
+        return obs[:, :k].reshape(len(obs), self.keys, 3), obs[:, k:k + 6].reshape(len(obs), 2, 3)
+
+    def move(self, pick, goal):
+        return np.clip(self.gain * (goal - pick) / self.STEP, -1.0, 1.0)
+
+    @staticmethod
+    def flat(d):
+        return np.linalg.norm(d[..., [0, 2]], axis=-1)
+
+
+class ClothFoldCorners(_PickerScript):
+    """ClothFold-v1: picker 0 takes corner 0 (row 0, column 0), picker 1 corner 64 x 63 (row 63,
+    column 0); both carry them, lifted, onto the opposite corners (column 63) and release them there.
+    Stateless, from the observation: not at its corner -> fly to it at the lowest height; at it -> pick;
+    holding (the corner right under the picker and off the table) -> wait for the other picker, then
+    carry along a path lifted by ``lift`` times the remaining distance (at most ``max_lift``);
+    corner within ``done_at`` of its destination -> release and rise; a released corner is taken
+    again only if it lies more than ``regrab_at`` from its destination (SoftGym's picker box can
+    keep a picker from reaching a far corner of the turned cloth)."""
+
+    PAIRS = ((0, 2), (1, 3))  # (corner carried, destination) keypoints per picker
+
+    def __init__(self, low=0.05, grab_at=0.01, lift=0.5, max_lift=0.12, done_at=0.04, regrab_at=0.08, gain=1.0):
+        super().__init__(4, gain)
+        self.low, self.grab_at, self.lift, self.max_lift, self.done_at = low, grab_at, lift, max_lift, done_at
+        self.regrab_at = regrab_at
+
+    def __call__(self, obs):
+        """Actions (B, 8) for observations (B, 18); (8,) for one observation."""
+        keys, pick = self.split(obs)
+        act = np.zeros((len(keys), 8))
+        holding = [(self.flat(pick[:, p] - keys[:, c]) < 1.5 * self.grab_at)
+                   & ((keys[:, c, 1] > 0.012) | (pick[:, p, 1] < self.low + 0.01)) for p, (c, _) in enumerate(self.PAIRS)]
+        remaining = [self.flat(keys[:, c] - keys[:, dst]) for c, dst in self.PAIRS]
+        finished = [(r < self.done_at) | (~h & (r < self.regrab_at)) for r, h in zip(remaining, holding)]
+        both = (holding[0] | finished[0]) & (holding[1] | finished[1])
+        for p, (c, dst) in enumerate(self.PAIRS):
+            corner, dest, pk = keys[:, c], keys[:, dst], pick[:, p]
+            done = finished[p]
+            goal = corner.copy()
+            goal[:, 1] = self.low
+            at = (self.flat(pk - corner) < self.grab_at) & (pk[:, 1] < self.low + 0.01)
+            grab = np.where(at, 1.0, -1.0)
+            carry = dest + (pk - corner) * np.array([1.0, 0.0, 1.0])  # the corner, not the picker, onto dest
+            carry[:, 1] = self.low + np.minimum(self.lift * remaining[p], self.max_lift)
+            wait = pk.copy()
+            wait[:, 1] = self.low + 0.02
+            goal = np.where(holding[p][:, None], np.where(both[:, None], carry, wait), goal)
+            grab = np.where(holding[p], 1.0, grab)
+            goal = np.where(done[:, None], pk + np.array([0.0, 0.08, 0.0]), goal)
+            grab = np.where(done, -1.0, grab)
+            act[:, 4 * p:4 * p + 3] = self.move(pk, goal)
+            act[:, 4 * p + 3] = grab
+        return _like(obs, act.astype(np.float32))
+
+
+class ClothFlattenCorners(_PickerScript):
+    """ClothFlatten-v0: pull two opposite corners apart. Picker 0 takes corner 0, picker 1 corner
+    64 x 64 - 1 (the far diagonal); holding both, they carry them, lifted by ``lift``, to
+    ``reach`` apart along their own direction about their midpoint and release them; then the other
+    diagonal (corners 64 x 63 and 63) is pulled the same way, until the first is ``regrab_at`` short again."""
+
+    def __init__(self, low=0.05, grab_at=0.01, lift=0.1, reach=0.56, done_at=0.03, regrab_at=0.1, gain=1.0):
+        super().__init__(4, gain)
+        self.low, self.grab_at, self.lift, self.reach, self.done_at = low, grab_at, lift, reach, done_at
+        self.regrab_at = regrab_at  # the first diagonal is pulled again only when this much shorter than reach
+
+    def __call__(self, obs):
+        """Actions (B, 8) for observations (B, 18); (8,) for one observation."""
+        keys, pick = self.split(obs)
+        b = len(keys)
+        act = np.zeros((b, 8))
+        first_short = self.flat(keys[:, 0] - keys[:, 3]) < self.reach - self.regrab_at
+        pair = np.where(first_short[:, None], np.array([[0, 3]]), np.array([[1, 2]]))  # (B, 2) corner per picker
+        corners = keys[np.arange(b)[:, None], pair]  # (B, 2, 3)
+        holding = (self.flat(pick - corners) < 1.5 * self.grab_at) & ((corners[..., 1] > 0.012) | (pick[..., 1] < self.low + 0.01))
+        both = holding.all(axis=1)
+        mid = corners.mean(axis=1)
+        u = corners[:, 0] - corners[:, 1]
+        u[:, 1] = 0.0
+        u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-9)
+        spread = self.flat(corners[:, 0] - corners[:, 1])
+        done = spread > self.reach - self.done_at
+        for p in range(2):
+            corner, pk = corners[:, p], pick[:, p]
+            goal = corner.copy()
+            goal[:, 1] = self.low
+            at = (self.flat(pk - corner) < self.grab_at) & (pk[:, 1] < self.low + 0.01)
+            grab = np.where(at, 1.0, -1.0)
+            sign = 1.0 if p == 0 else -1.0
+            carry = mid + sign * 0.5 * self.reach * u + (pk - corner) * np.array([1.0, 0.0, 1.0])
+            carry[:, 1] = self.low + self.lift
+            wait = pk.copy()
+            wait[:, 1] = self.low + 0.02
+            goal = np.where(holding[:, p, None], np.where(both[:, None], carry, wait), goal)
+            grab = np.where(holding[:, p], 1.0, grab)
+            grab = np.where(done & holding[:, p], -1.0, grab)
+            act[:, 4 * p:4 * p + 3] = self.move(pk, goal)
+            act[:, 4 * p + 3] = grab
+        return _like(obs, act.astype(np.float32))
+
+
+class RopeFlattenEnds(_PickerScript):
+    """RopeFlatten-v0: picker 0 takes end particle 0, picker 1 end particle 40; holding both, they
+    carry them ``length`` apart along their own direction about their midpoint, then release."""
+
+    def __init__(self, low=0.02, grab_at=0.01, length=0.5, done_at=0.01, gain=1.0):
+        super().__init__(10, gain)
+        self.low, self.grab_at, self.length, self.done_at = low, grab_at, length, done_at
+
+    def __call__(self, obs):
+        """Actions (B, 8) for observations (B, 36); (8,) for one observation."""
+        keys, pick = self.split(obs)
+        ends = keys[:, [0, 9]]
+        act = np.zeros((len(keys), 8))
+        holding = (self.flat(pick - ends) < 1.5 * self.grab_at) & ((ends[..., 1] > 0.004) | (pick[..., 1] < self.low + 0.01))
+        both = holding.all(axis=1)
+        mid = ends.mean(axis=1)
+        u = ends[:, 0] - ends[:, 1]
+        u[:, 1] = 0.0
+        u /= np.maximum(np.linalg.norm(u, axis=1, keepdims=True), 1e-9)
+        done = np.abs(np.linalg.norm(ends[:, 0] - ends[:, 1], axis=1) - self.length) < self.done_at
+        for p in range(2):
+            end, pk = ends[:, p], pick[:, p]
+            goal = end.copy()
+            goal[:, 1] = self.low
+            at = (self.flat(pk - end) < self.grab_at) & (pk[:, 1] < self.low + 0.01)
+            grab = np.where(at & ~done, 1.0, -1.0)
+            sign = 1.0 if p == 0 else -1.0
+            carry = mid + sign * 0.5 * self.length * u + (pk - end) * np.array([1.0, 0.0, 1.0])
+            carry[:, 1] = self.low + 0.02
+            wait = pk.copy()
+            wait[:, 1] = self.low + 0.02
+            goal = np.where(holding[:, p, None], np.where(both[:, None], carry, wait), goal)
+            grab = np.where(holding[:, p], np.where(done, -1.0, 1.0), grab)
+            goal = np.where(done[:, None], pk + np.array([0.0, 0.02, 0.0]), goal)
+            act[:, 4 * p:4 * p + 3] = self.move(pk, goal)
+            act[:, 4 * p + 3] = grab
+        return _like(obs, act.astype(np.float32))
+
+
 def _like(obs, action: np.ndarray) -> np.ndarray:
     """``action`` (B, A) for a batch of observations, (A,) for a single observation (the env's action shape)."""
     return action[0] if np.ndim(obs) == 1 else action
@@ -180,7 +334,14 @@ def make_baseline(env_id: str, env):
         return ClothFoldPickPlace()
     if env_id.endswith("CrowdNav-v0"):
         return CrowdNavVO()
-    raise ValueError(f"env_id={env_id!r} has no scripted baseline; known: tianim/ArmReach-v0, ArmReach-v1, RopeSwing-v0, ClothFold-v0, CrowdNav-v0")
+    if env_id.endswith("ClothFold-v1"):
+        return ClothFoldCorners()
+    if env_id.endswith("ClothFlatten-v0"):
+        return ClothFlattenCorners()
+    if env_id.endswith("RopeFlatten-v0"):
+        return RopeFlattenEnds()
+    raise ValueError(f"env_id={env_id!r} has no scripted baseline; known: tianim/ArmReach-v0, ArmReach-v1, RopeSwing-v0, "
+                     "ClothFold-v0, CrowdNav-v0, ClothFold-v1, ClothFlatten-v0, RopeFlatten-v0")
 
 
 def evaluate(env, policy, episodes: int, seed: int = 0) -> np.ndarray:
@@ -201,4 +362,5 @@ def evaluate(env, policy, episodes: int, seed: int = 0) -> np.ndarray:
     return np.array(returns)
 
 
-__all__ = ["ArmReachIKPD", "RopeSwingDamped", "ClothFoldPickPlace", "CrowdNavVO", "make_baseline", "evaluate"]
+__all__ = ["ArmReachIKPD", "RopeSwingDamped", "ClothFoldPickPlace", "CrowdNavVO", "ClothFoldCorners",
+           "ClothFlattenCorners", "RopeFlattenEnds", "make_baseline", "evaluate"]

@@ -7,7 +7,12 @@ Measures, with pre-generated actions and medians over ``--repeats``:
 * ``armreach_vec_steps_per_s``: ``gym.make_vec`` with N = 4096 copies (env-steps/s);
 * ``ropeswing_vec_steps_per_s`` (N = 256) and ``clothfold_steps_per_s`` (single env);
 * ``mujoco_reacher_steps_per_s`` (``gym.make("Reacher-v5")`` measured the same way
-  in the same run, when mujoco is installed) and ``ratio_vs_mujoco``.
+  in the same run, when mujoco is installed) and ``ratio_vs_mujoco``;
+* per SoftGym task (:data:`SOFTGYM_IDS`) ``<id>_steps_per_s`` (one ``gym.make`` env),
+  ``<id>_vec_steps_per_s`` (``gym.make_vec`` with ``--softgym-envs`` copies, env-steps/s) and
+  ``<id>_vec_speedup`` (their ratio), with ``<id>`` the id in lower case without the namespace,
+  ``-`` as ``_`` (``clothfold_v1``). Copy 0 of the batch is checked equal to the single env
+  (same seed, same actions) before timing.
 
 It lives with the environments (it was ``tianim bench envs``): it drives them through
 Gymnasium, and the ``tianim`` library never imports gymnasium or ``envs``
@@ -53,15 +58,57 @@ def _vector_rate(venv, steps: int, repeats: int, seed: int = 0) -> float:
     return steps * venv.num_envs / median_time(run, repeats=repeats, warmup=1)
 
 
+SOFTGYM_IDS = ("tianim/ClothFold-v1", "tianim/ClothFlatten-v0", "tianim/RopeFlatten-v0")
+
+
+def key(env_id: str) -> str:
+    """Summary key prefix of an env id: ``tianim/ClothFold-v1`` -> ``clothfold_v1``."""
+    return env_id.split("/")[-1].lower().replace("-", "_")
+
+
+def _softgym_rates(env_id: str, num_envs: int, steps: int, repeats: int) -> dict:
+    single, venv = gym.make(env_id), gym.make_vec(env_id, num_envs=num_envs)
+    acts = np.random.default_rng(0).uniform(-1, 1, (steps, num_envs, 8)).astype(np.float32)
+    single.reset(seed=0)
+    venv.reset(seed=0)
+    for a in acts[:2]:  # agreement before timing: copy 0 of the batch is the single env
+        obs, *_ = single.step(a[0])
+        vobs, *_ = venv.step(a)
+        if not np.array_equal(obs, vobs[0]):
+            raise RuntimeError(f"{env_id}: copy 0 of make_vec differs from the single env")
+    k = key(env_id)
+    out = {f"{k}_steps_per_s": steps / median_time(lambda: [single.step(a[0]) for a in acts], repeats=repeats, warmup=0),
+           f"{k}_vec_steps_per_s": steps * num_envs / median_time(lambda: [venv.step(a) for a in acts], repeats=repeats,
+                                                                  warmup=0)}
+    out[f"{k}_vec_speedup"] = out[f"{k}_vec_steps_per_s"] / out[f"{k}_steps_per_s"]
+    single.close()
+    venv.close()
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     p = parser("envs", __doc__.splitlines()[0])
     p.prog = "python -m envs.bench"
     p.add_argument("--num-envs", type=int, default=4096, help="copies for the batched ArmReach (default 4096)")
+    p.add_argument("--softgym-envs", type=int, default=16, help="copies for the batched SoftGym tasks (default 16)")
+    p.add_argument("--only-softgym", action="store_true", help="measure only the SoftGym tasks")
     args = p.parse_args(argv)
     quick = args.quick
     repeats = 2 if quick else args.repeats
     single_steps = 2000 if quick else 20000
     rows, summary = [], {}
+
+    for env_id in SOFTGYM_IDS:
+        nv = 2 if quick else args.softgym_envs
+        rates = _softgym_rates(env_id, nv, 2 if quick else 10, repeats)
+        summary.update(rates)
+        k = key(env_id)
+        rows.append({"benchmark": f"{env_id.split('/')[-1]} single", "steps_per_s": rates[f"{k}_steps_per_s"]})
+        rows.append({"benchmark": f"{env_id.split('/')[-1]} make_vec N={nv}", "steps_per_s": rates[f"{k}_vec_steps_per_s"]})
+    if args.only_softgym:
+        print_table(rows)
+        write_json(args.json, summary, rows=rows)
+        return 0
 
     env = gym.make("tianim/ArmReach-v0")
     summary["armreach_steps_per_s"] = _single_rate(env, single_steps, repeats)
