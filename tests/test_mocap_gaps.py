@@ -15,7 +15,8 @@ from scipy.interpolate import CubicSpline
 from scipy.spatial.transform import Rotation
 
 from tianim.mocap import Markers
-from tianim.mocap.gaps import UnfillableGap, fill_error, fill_gaps, find_gaps, kabsch, natural_spline
+from tianim.mocap.gaps import UnfillableGap, fill_error, fill_gaps, find_gaps, natural_spline
+from tianim.mocap.rigid import kabsch
 
 FS = 120.0
 NOISE = 0.001  # m per coordinate

@@ -5,7 +5,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from tianim.mocap import humanoid, marker_set, virtual_markers, walk
-from tianim.mocap.solve import euler_from_matrix, kabsch, solve_markers
+from tianim.mocap.rigid import kabsch
+from tianim.mocap.solve import euler_from_matrix, solve_markers
 
 
 @pytest.fixture(scope="module")

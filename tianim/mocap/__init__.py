@@ -28,7 +28,8 @@ from tianim.mocap.markers import Markers
 from tianim.mocap.resample import NTSC, resample
 from tianim.mocap.retarget import RetargetResult, detect_contacts, retarget
 from tianim.mocap.skeleton import CHANNELS, Skeleton
-from tianim.mocap.solve import SolveResult, euler_from_matrix, kabsch, solve_markers
+from tianim.mocap.rigid import kabsch
+from tianim.mocap.solve import SolveResult, euler_from_matrix, solve_markers
 from tianim.mocap.virtual import (
     attach_markers,
     gait_angles,

@@ -44,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tianim._checks import check_choice, check_finite_scalar, check_int, fmt
+from tianim.mocap.rigid import kabsch
 
 METHODS = ("auto", "linear", "cubic", "quintic", "rigid", "pca")
 _SPLINE_M = {"linear": 1, "cubic": 2, "quintic": 3}
@@ -171,23 +172,6 @@ def natural_spline(t_known: np.ndarray, y_known: np.ndarray, t_eval: np.ndarray,
     coef_p = np.linalg.lstsq(P, y_known - K @ w - lam * w, rcond=None)[0]
     Ke = sign * np.abs(v[:, None] - u[None, :]) ** p
     return Ke @ w + np.vander(v, m, increasing=True) @ coef_p
-
-
-def kabsch(source: np.ndarray, target: np.ndarray):
-    """Least-squares rotation R (B,3,3) and translation t (B,3) with ``R @ source_i + t ~ target_i``.
-
-    ``source``, ``target`` (B, D, 3), D >= 3 (Kabsch 1976; the determinant sign excludes reflections).
-    """
-    cs, ct = source.mean(axis=1), target.mean(axis=1)
-    H = np.einsum("bdi,bdj->bij", source - cs[:, None], target - ct[:, None])
-    U, _, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(np.einsum("bji,bkj->bik", Vt, U)))
-    d[d == 0] = 1.0
-    D = np.zeros_like(H)
-    D[:, 0, 0] = D[:, 1, 1] = 1.0
-    D[:, 2, 2] = d
-    R = np.einsum("bji,bjk,blk->bil", Vt, D, U)  # V D U^T
-    return R, ct - np.einsum("bij,bj->bi", R, cs)
 
 
 class _Filler:

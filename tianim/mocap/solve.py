@@ -22,6 +22,7 @@ import numpy as np
 
 from tianim._checks import as_index_array, check_choice, check_finite_scalar, check_positive_int, float_array, numeric_array
 from tianim.mocap.skeleton import ROTATION_CHANNELS, Skeleton
+from tianim.mocap.rigid import kabsch
 
 
 class SolveResult(NamedTuple):
@@ -31,22 +32,6 @@ class SolveResult(NamedTuple):
     motion: np.ndarray
     rms: np.ndarray
     iterations: np.ndarray
-
-
-def kabsch(local: np.ndarray, world: np.ndarray, weights: np.ndarray | None = None):
-    """Best rigid fit ``world ~ R local + t`` (Kabsch 1976), batched: local (M, 3), world (..., M, 3),
-    weights (..., M) (0 drops a point). Returns R (..., 3, 3) (a proper rotation) and t (..., 3)."""
-    w = np.ones(world.shape[:-1]) if weights is None else weights
-    wsum = np.maximum(w.sum(-1, keepdims=True), 1e-300)
-    ca = (w[..., None] * local).sum(-2) / wsum
-    cb = (w[..., None] * world).sum(-2) / wsum
-    H = np.einsum("...m,...mi,...mj->...ij", w, local - ca[..., None, :], world - cb[..., None, :])
-    U, _, Vt = np.linalg.svd(H)
-    d = np.sign(np.linalg.det(np.swapaxes(Vt, -1, -2) @ np.swapaxes(U, -1, -2)))
-    D = np.broadcast_to(np.eye(3), H.shape).copy()
-    D[..., 2, 2] = np.where(d == 0, 1.0, d)
-    R = np.swapaxes(Vt, -1, -2) @ D @ np.swapaxes(U, -1, -2)
-    return R, cb - np.einsum("...ij,...j->...i", R, ca)
 
 
 def euler_from_matrix(R, order: str) -> np.ndarray:
