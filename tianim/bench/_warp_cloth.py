@@ -1,6 +1,6 @@
 """The benchmark cloth in NVIDIA Warp (CPU), written as strongly as Warp allows: a per-particle gather.
 
-Warp's own cloth examples accumulate spring forces with ``wp.atomic_add`` over springs; on the CPU
+Warp's own cloth examples accumulate spring forces with atomic adds over springs; on the CPU
 (one thread) a gather over each particle's 12 grid-stencil neighbours is faster and needs no
 atomics, so that is the reference here (each substep one fused launch: forces from ``x``, the
 symplectic Euler update into a second position buffer, buffers swapped). Same model and equations
