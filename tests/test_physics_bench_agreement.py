@@ -1,5 +1,7 @@
 """The benchmark scenes: tianim and the NumPy reference agree in float32 before anything is timed."""
 
+import numpy as np
+
 import tianim.physics as tp
 from tianim.bench.cloth import cloth_model
 from tianim.bench._physics import check_agreement
