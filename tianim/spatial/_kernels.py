@@ -20,14 +20,25 @@ BOX_PAD = 1e-6
 
 
 @cached_variants
-def grid_kernels(real_name: str, dim: int):
-    """Kernels ``cell_ids``, ``counting_sort`` and ``query`` for ``real_name`` positions in ``dim`` D."""
+def grid_funcs(real_name: str, dim: int):
+    """The grid's building blocks as Taichi functions, for kernels that scan cells themselves
+    (the queries below, and fused solver kernels such as the boids step that add up neighbour
+    terms while they scan, with no neighbour list in between). A namespace of:
+
+    * ``coord(xa, a, geom, dims)``: clamped cell coordinate of coordinate ``xa`` along axis ``a``;
+    * ``cell_of(p, geom, dims)``: flat cell id of position ``p``;
+    * ``sort_copy(b, x, cell, start, order, xs)``: the counting sort of copy b (serial in the copy);
+    * ``box(p, pad, geom, dims)``: the (lo, hi) cell coordinates of the box ``[p - pad, p + pad]``;
+    * ``n_rows(lo, hi)``: number of rows of cells along x in that box;
+    * ``row_base(row, lo, hi, dims)``: flat id of cell (0, y, z) of row ``row`` (rows in (z, y) order).
+
+    The cells of row ``row`` from ``lo[0]`` to ``hi[0]`` are the one contiguous span
+    ``start[b, base + lo[0]] .. start[b, base + hi[0] + 1]`` of the sorted arrays.
+    """
+    from types import SimpleNamespace
+
     t = kernel_types(real_name, dim)
-    ti, real = t.ti, t.real
-    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
-    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
-    f64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
-    i32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+    ti = t.ti
 
     @ti.func
     def coord(xa, a: ti.template(), geom: ti.template(), dims: ti.template()):
@@ -35,6 +46,84 @@ def grid_kernels(real_name: str, dim: int):
         u = ti.floor((ti.cast(xa, ti.f64) - geom[a]) / geom[dim])
         u = ti.min(ti.max(u, 0.0), ti.cast(dims[a] - 1, ti.f64))
         return ti.cast(u, ti.i32)
+
+    @ti.func
+    def cell_of(p, geom: ti.template(), dims: ti.template()):
+        c = 0
+        for k in ti.static(range(dim)):
+            a = ti.static(dim - 1 - k)
+            c = c * dims[a] + coord(p[a], a, geom, dims)
+        return c
+
+    @ti.func
+    def sort_copy(b, x: ti.template(), cell: ti.template(), start: ti.template(), order: ti.template(),
+                  xs: ti.template()):
+        """Counting sort of copy b by cell, stable in point index (see ``counting_sort``)."""
+        n_cells = start.shape[1] - 1
+        for c in range(n_cells + 1):
+            start[b, c] = 0
+        for i in range(x.shape[1]):  # counts
+            start[b, cell[b, i]] += 1
+        run = 0
+        for c in range(n_cells):  # exclusive scan: start[c] = first slot of cell c
+            cnt = start[b, c]
+            start[b, c] = run
+            run += cnt
+        for i in range(x.shape[1]):  # scatter in point-index order (stable)
+            c = cell[b, i]
+            k = start[b, c]
+            order[b, k] = i
+            xs[b, k] = x[b, i]
+            start[b, c] = k + 1
+        for k in range(n_cells):  # start[c] now holds the end of cell c: shift right by one
+            c = n_cells - k
+            start[b, c] = start[b, c - 1]
+        start[b, 0] = 0
+
+    @ti.func
+    def box(p, pad, geom: ti.template(), dims: ti.template()):
+        lo = ti.Vector.zero(ti.i32, dim)
+        hi = ti.Vector.zero(ti.i32, dim)
+        for a in ti.static(range(dim)):
+            lo[a] = coord(ti.cast(p[a], ti.f64) - pad, a, geom, dims)
+            hi[a] = coord(ti.cast(p[a], ti.f64) + pad, a, geom, dims)
+        return lo, hi
+
+    @ti.func
+    def n_rows(lo, hi):
+        rows = 1
+        for a in ti.static(range(1, dim)):
+            rows *= hi[a] - lo[a] + 1
+        return rows
+
+    @ti.func
+    def row_base(row, lo, hi, dims: ti.template()):
+        base = 0  # flat id of cell (0, y, z) of this row
+        rest = row
+        for k in ti.static(range(1, dim)):
+            a = ti.static(dim - k)  # z before y: row-major over (z, y)
+            ext = 1
+            for m in ti.static(range(1, a)):
+                ext *= hi[m] - lo[m] + 1
+            ua = lo[a] + rest // ext
+            rest = rest % ext
+            base = base * dims[a] + ua
+        return base * dims[0]
+
+    return SimpleNamespace(coord=coord, cell_of=cell_of, sort_copy=sort_copy, box=box, n_rows=n_rows,
+                           row_base=row_base)
+
+
+@cached_variants
+def grid_kernels(real_name: str, dim: int):
+    """Kernels ``cell_ids``, ``counting_sort`` and ``query`` for ``real_name`` positions in ``dim`` D."""
+    t = kernel_types(real_name, dim)
+    ti, real = t.ti, t.real
+    g = grid_funcs(real_name, dim)
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    f64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
+    i32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
 
     @ti.kernel
     def cell_ids(x: t.vec_arr, active: t.mask_arr, geom: f64_1, dims: i32_1, cell: i32_2):
@@ -46,10 +135,7 @@ def grid_kernels(real_name: str, dim: int):
         for a in ti.static(range(dim)):
             n_cells *= dims[a]
         for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-            c = 0
-            for k in ti.static(range(dim)):
-                a = ti.static(dim - 1 - k)
-                c = c * dims[a] + coord(x[b, i][a], a, geom, dims)
+            c = g.cell_of(x[b, i], geom, dims)
             if active[b, i] == 0:
                 c = n_cells
             cell[b, i] = c
@@ -62,26 +148,7 @@ def grid_kernels(real_name: str, dim: int):
         xs[b] (their positions, sorted). O(N + M) serial work per copy.
         """
         for b in range(x.shape[0]):
-            n_cells = start.shape[1] - 1
-            for c in range(n_cells + 1):
-                start[b, c] = 0
-            for i in range(x.shape[1]):  # counts
-                start[b, cell[b, i]] += 1
-            run = 0
-            for c in range(n_cells):  # exclusive scan: start[c] = first slot of cell c
-                cnt = start[b, c]
-                start[b, c] = run
-                run += cnt
-            for i in range(x.shape[1]):  # scatter in particle-index order (stable)
-                c = cell[b, i]
-                k = start[b, c]
-                order[b, k] = i
-                xs[b, k] = x[b, i]
-                start[b, c] = k + 1
-            for k in range(n_cells):  # start[c] now holds the end of cell c: shift right by one
-                c = n_cells - k
-                start[b, c] = start[b, c - 1]
-            start[b, 0] = 0
+            g.sort_copy(b, x, cell, start, order, xs)
 
     @ti.kernel
     def query(q: t.vec_arr, xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1,
@@ -109,35 +176,19 @@ def grid_kernels(real_name: str, dim: int):
                 skip = ti.cast(s >= start[b, last], ti.i32)  # an inactive point: no neighbours  # the built points, visited in sorted order (cache-friendly)
                 i = order[b, s]
                 p = xs[b, s]
-            lo = ti.Vector.zero(ti.i32, dim)
-            hi = ti.Vector.zero(ti.i32, dim)
-            for a in ti.static(range(dim)):
-                lo[a] = coord(ti.cast(p[a], ti.f64) - pad, a, geom, dims)
-                hi[a] = coord(ti.cast(p[a], ti.f64) + pad, a, geom, dims)
+            lo, hi = g.box(p, pad, geom, dims)
             own_base = 0  # flat id of the first cell of the point's own row (half shell)
             for k in ti.static(range(1, dim)):
                 a = ti.static(dim - k)
-                own_base = own_base * dims[a] + coord(p[a], a, geom, dims)
+                own_base = own_base * dims[a] + g.coord(p[a], a, geom, dims)
             own_base = own_base * dims[0]
             n = 0
             cap = nbr.shape[2]
-            rows = 1
-            for a in ti.static(range(1, dim)):
-                rows *= hi[a] - lo[a] + 1
+            rows = g.n_rows(lo, hi)
             if skip != 0:
                 rows = 0
             for row in range(rows):
-                base = 0  # flat id of cell (lo_x, y, z) of this row
-                rest = row
-                for k in ti.static(range(1, dim)):
-                    a = ti.static(dim - k)  # z before y: row-major over (z, y)
-                    ext = 1
-                    for m in ti.static(range(1, a)):
-                        ext *= hi[m] - lo[m] + 1
-                    ua = lo[a] + rest // ext
-                    rest = rest % ext
-                    base = base * dims[a] + ua
-                base = base * dims[0]
+                base = g.row_base(row, lo, hi, dims)
                 s0 = start[b, base + lo[0]]
                 s1 = start[b, base + hi[0] + 1]
                 if half != 0:
