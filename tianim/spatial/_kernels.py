@@ -30,7 +30,8 @@ def grid_funcs(real_name: str, dim: int):
     * ``sort_copy(b, x, cell, start, order, xs)``: the counting sort of copy b (serial in the copy);
     * ``box(p, pad, geom, dims)``: the (lo, hi) cell coordinates of the box ``[p - pad, p + pad]``;
     * ``n_rows(lo, hi)``: number of rows of cells along x in that box;
-    * ``row_base(row, lo, hi, dims)``: flat id of cell (0, y, z) of row ``row`` (rows in (z, y) order).
+    * ``row_base(row, lo, hi, dims)``: flat id of cell (0, y, z) of row ``row`` (rows in (z, y) order);
+    * ``row_within(row, lo, hi, p, r, geom, dims)``: that row narrowed to the cells that can hold points within r.
 
     The cells of row ``row`` from ``lo[0]`` to ``hi[0]`` are the one contiguous span
     ``start[b, base + lo[0]] .. start[b, base + hi[0] + 1]`` of the sorted arrays.
@@ -110,8 +111,41 @@ def grid_funcs(real_name: str, dim: int):
             base = base * dims[a] + ua
         return base * dims[0]
 
+    @ti.func
+    def row_within(row, lo, hi, p, r, geom: ti.template(), dims: ti.template()):
+        """``(base, x0, x1)``: row ``row`` of the box (as ``row_base``) narrowed to the cells along x
+        that can hold points within ``r`` [m] (float64; pad it as ``box`` is padded) of ``p``: the row's
+        distance g from p across y (and z) leaves a half-width sqrt(r^2 - g^2) along x; x0 > x1 when
+        the whole row is farther than r. Border cells reach to infinity (points outside are clamped)."""
+        base = 0
+        rest = row
+        g2 = ti.cast(0.0, ti.f64)
+        for k in ti.static(range(1, dim)):
+            a = ti.static(dim - k)
+            ext = 1
+            for m in ti.static(range(1, a)):
+                ext *= hi[m] - lo[m] + 1
+            ua = lo[a] + rest // ext
+            rest = rest % ext
+            base = base * dims[a] + ua
+            pa = ti.cast(p[a], ti.f64)
+            c0 = geom[a] + ua * geom[dim]
+            gap = ti.cast(0.0, ti.f64)
+            if ua > 0 and pa < c0:
+                gap = c0 - pa
+            if ua < dims[a] - 1 and pa > c0 + geom[dim]:
+                gap = pa - (c0 + geom[dim])
+            g2 += gap * gap
+        x0, x1 = 1, 0
+        if g2 <= r * r:
+            w = ti.sqrt(r * r - g2)
+            px = ti.cast(p[0], ti.f64)
+            x0 = ti.max(coord(px - w, 0, geom, dims), lo[0])
+            x1 = ti.min(coord(px + w, 0, geom, dims), hi[0])
+        return base * dims[0], x0, x1
+
     return SimpleNamespace(coord=coord, cell_of=cell_of, sort_copy=sort_copy, box=box, n_rows=n_rows,
-                           row_base=row_base)
+                           row_base=row_base, row_within=row_within)
 
 
 @cached_variants
