@@ -31,7 +31,9 @@ def grid_funcs(real_name: str, dim: int):
     * ``box(p, pad, geom, dims)``: the (lo, hi) cell coordinates of the box ``[p - pad, p + pad]``;
     * ``n_rows(lo, hi)``: number of rows of cells along x in that box;
     * ``row_base(row, lo, hi, dims)``: flat id of cell (0, y, z) of row ``row`` (rows in (z, y) order);
-    * ``row_within(row, lo, hi, p, r, geom, dims)``: that row narrowed to the cells that can hold points within r.
+    * ``row_within(row, lo, hi, p, r, geom, dims)``: that row narrowed to the cells that can hold points within r;
+    * ``nearest(b, p, self_i, r, strict, xs, order, start, geom, dims, dist, idx, row_b, row_i)``: the K
+      nearest points within r, nearest first, ties by index (``NeighbourGrid.query_nearest``).
 
     The cells of row ``row`` from ``lo[0]`` to ``hi[0]`` are the one contiguous span
     ``start[b, base + lo[0]] .. start[b, base + hi[0] + 1]`` of the sorted arrays.
@@ -39,7 +41,7 @@ def grid_funcs(real_name: str, dim: int):
     from types import SimpleNamespace
 
     t = kernel_types(real_name, dim)
-    ti = t.ti
+    ti, real = t.ti, t.real
 
     @ti.func
     def coord(xa, a: ti.template(), geom: ti.template(), dims: ti.template()):
@@ -144,8 +146,91 @@ def grid_funcs(real_name: str, dim: int):
             x1 = ti.min(coord(px + w, 0, geom, dims), hi[0])
         return base * dims[0], x0, x1
 
+    @ti.func
+    def before(d2a, ja, d2b, jb):
+        """(d2a, ja) < (d2b, jb) lexicographically: nearer first, ties by the lower index."""
+        return d2a < d2b or (d2a == d2b and ja < jb)
+
+    @ti.func
+    def nearest(b, p, self_i, r, strict: ti.template(), xs: ti.template(), order: ti.template(),
+                start: ti.template(), geom: ti.template(), dims: ti.template(), dist: ti.template(),
+                idx: ti.template(), row_b, row_i):
+        """The K = dist.shape[2] nearest built points j != self_i of copy b to ``p`` with |x_j - p|^2
+        <= r^2 (< r^2 if ``strict``), written nearest first, ties by the lower index, to
+        dist[row_b, row_i, :] (squared distances, in ``real``) and idx[row_b, row_i, :]; returns how many
+        (<= K). The order (d^2, j) is a total order, so the result does not depend on the order in which
+        cells are visited: rows of cells are visited outward from p's own row and narrowed to the current
+        K-th distance (as RVO2's kd-tree shrinks its range once K are found), which prunes most cells."""
+        K = dist.shape[2]
+        rr = ti.cast(r, real) * ti.cast(r, real)
+        lim = rr  # the squared range: r^2 until K are found, then the K-th distance
+        m = 0
+        lo, hi = box(p, r * (1 + BOX_PAD), geom, dims)
+        own = ti.Vector.zero(ti.i32, dim)
+        span = ti.Vector.zero(ti.i32, dim)
+        rows = 1
+        for a in ti.static(range(1, dim)):
+            own[a] = coord(p[a], a, geom, dims)
+            span[a] = 2 * ti.max(own[a] - lo[a], hi[a] - own[a]) + 1
+            rows *= span[a]
+        for t in range(rows):
+            rest = t
+            base = 0
+            g2 = ti.cast(0.0, ti.f64)
+            inside = 1
+            for k in ti.static(range(1, dim)):
+                a = ti.static(dim - k)
+                ext = 1
+                for q in ti.static(range(1, a)):
+                    ext *= span[q]
+                u = rest // ext  # 0, 1, 2, ... -> offsets 0, +1, -1, +2, -2, ... from the own row
+                rest = rest % ext
+                ua = own[a] + (u + 1) // 2 * (2 * (u % 2) - 1)
+                if ua < lo[a] or ua > hi[a]:
+                    inside = 0
+                base = base * dims[a] + ua
+                pa = ti.cast(p[a], ti.f64)
+                c0 = geom[a] + ua * geom[dim]
+                gap = ti.cast(0.0, ti.f64)
+                if ua > 0 and pa < c0:
+                    gap = c0 - pa
+                if ua < dims[a] - 1 and pa > c0 + geom[dim]:
+                    gap = pa - (c0 + geom[dim])
+                g2 += gap * gap
+            reach2 = ti.cast(lim, ti.f64) * (1 + BOX_PAD) ** 2
+            if inside == 1 and g2 <= reach2:
+                w = ti.sqrt(reach2 - g2)
+                px = ti.cast(p[0], ti.f64)
+                x0 = ti.max(coord(px - w, 0, geom, dims), lo[0])
+                x1 = ti.min(coord(px + w, 0, geom, dims), hi[0])
+                base = base * dims[0]
+                for k in range(start[b, base + x0], start[b, base + x1 + 1]):
+                    j = order[b, k]
+                    if j != self_i:
+                        d = xs[b, k] - p
+                        d2 = d.dot(d)
+                        ok = d2 <= rr
+                        if ti.static(strict):
+                            ok = d2 < rr
+                        if ok and (m < K or before(d2, j, dist[row_b, row_i, K - 1], idx[row_b, row_i, K - 1])):
+                            if m < K:
+                                m += 1
+                            s = m - 1  # insertion (RVO2's insertAgentNeighbor), in (d^2, j) order
+                            while s != 0:
+                                if before(d2, j, dist[row_b, row_i, s - 1], idx[row_b, row_i, s - 1]):
+                                    dist[row_b, row_i, s] = dist[row_b, row_i, s - 1]
+                                    idx[row_b, row_i, s] = idx[row_b, row_i, s - 1]
+                                    s -= 1
+                                else:
+                                    break
+                            dist[row_b, row_i, s] = d2
+                            idx[row_b, row_i, s] = j
+                            if m == K:
+                                lim = dist[row_b, row_i, K - 1]
+        return m
+
     return SimpleNamespace(coord=coord, cell_of=cell_of, sort_copy=sort_copy, box=box, n_rows=n_rows,
-                           row_base=row_base, row_within=row_within)
+                           row_base=row_base, row_within=row_within, nearest=nearest)
 
 
 @cached_variants
@@ -241,6 +326,43 @@ def grid_kernels(real_name: str, dim: int):
             count[b, i] = n
 
     return cell_ids, counting_sort, query
+
+
+@cached_variants
+def nearest_kernels(real_name: str, dim: int):
+    """``query_nearest``: the K nearest built points within r of each query point (grid_funcs.nearest)."""
+    t = kernel_types(real_name, dim)
+    ti, real = t.ti, t.real
+    g = grid_funcs(real_name, dim)
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    real3 = ti.types.ndarray(dtype=real, ndim=3)
+    f64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
+    i32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+
+    @ti.kernel
+    def query_nearest(q: t.vec_arr, xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1,
+                      r: ti.f64, exclude_self: ti.i32, dist: real3, nbr: i32_3, count: i32_2):
+        """Row (b, i): the K = nbr.shape[2] nearest points j with |x_j - q_i|^2 <= r^2, nearest first, ties
+        by index, their squared distances in dist; count[b, i] how many (<= K). With ``exclude_self`` the
+        queries are the built points (``q`` ignored) and i is not its own neighbour."""
+        last = start.shape[1] - 2  # the extra cell of inactive points
+        for b, s in ti.ndrange(q.shape[0], q.shape[1]):
+            i = s
+            p = q[b, s]
+            self_i = -1
+            skip = 0
+            if exclude_self != 0:
+                skip = ti.cast(s >= start[b, last], ti.i32)
+                i = order[b, s]
+                self_i = i
+                p = xs[b, s]
+            n = 0
+            if skip == 0:
+                n = g.nearest(b, p, self_i, r, False, xs, order, start, geom, dims, dist, nbr, b, i)
+            count[b, i] = n
+
+    return query_nearest
 
 
 @cached_variants

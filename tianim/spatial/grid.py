@@ -268,6 +268,36 @@ class NeighbourGrid:
         query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
 
+    def query_nearest(self, k, radius, points: np.ndarray | None = None):
+        """The ``k`` nearest built points within ``radius`` [m] of each built point (default, itself
+        excluded) or of ``points`` (B, Q, D), as RVO2's kd-tree query (``maxNeighbors`` within
+        ``neighborDist``) and ``cKDTree.query(k=k, distance_upper_bound=radius)``.
+
+        Returns ``(indices (B, Q, k) int32, dist2 (B, Q, k), counts (B, Q) int32)``: row (b, i) holds its
+        ``counts[b, i] <= k`` neighbours nearest first (ties by the lower index: the result does not
+        depend on the cells or the thread count), ``dist2`` their squared distances in the positions'
+        dtype; entries past the count are unspecified. Each row visits the cells outward and narrows them
+        to its current k-th distance, so dense scenes cost about k, not everything within ``radius``.
+        New arrays each call.
+        """
+        k = check_int("k", k, lo=1, hi=4096)
+        r = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
+        if self._built is None:
+            raise RuntimeError("query_nearest before build: call grid.build(x) first")
+        if points is None:
+            q, exclude = self._built, 1
+        else:
+            q, exclude = self._points("points", points, None), 0
+        B, Q = q.shape[0], q.shape[1]
+        idx = np.full((B, Q, k), -1, np.int32)
+        dist2 = np.full((B, Q, k), np.inf, self.dtype)
+        counts = np.zeros((B, Q), np.int32)
+        from tianim.spatial._kernels import nearest_kernels
+
+        nearest_kernels(np.dtype(self.dtype).name, self.dim)(q, self.sorted_x, self.order, self.start, self._geom,
+                                                             self.dims, r, exclude, dist2, idx, counts)
+        return idx, dist2, counts
+
     def _checked(self, out, on_overflow):
         if on_overflow != "report" and out.overflow:
             if on_overflow == "raise":
