@@ -21,19 +21,12 @@ RVO_EPSILON = 1e-5
 
 
 @cached_variants
-def orca_kernels(real_name: str, steps: int = 1):
-    """``orca_steps``, advancing ``steps`` steps per launch (unrolled), for ``real_name`` positions (2D)."""
+def _agent_step(real_name: str):
+    """The Taichi function of one agent's ORCA step (neighbours, half-planes, linear programs)."""
     t = kernel_types(real_name, 2)
     ti, real = t.ti, t.real
     vec2 = ti.types.vector(2, real)
     grid = grid_funcs(real_name, 2)
-    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
-    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
-    real2d = ti.types.ndarray(dtype=real, ndim=2)
-    real3d = ti.types.ndarray(dtype=real, ndim=3)
-    real4d = ti.types.ndarray(dtype=real, ndim=4)
-    f64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
-    f64_2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
 
     @ti.func
     def det(a, b):
@@ -217,6 +210,25 @@ def orca_kernels(real_name: str, steps: int = 1):
             if g.dot(g) <= prm[5] * prm[5]:
                 arrival[b, i] = t_end
 
+    return agent_step
+
+
+@cached_variants
+def orca_kernels(real_name: str, steps: int = 1):
+    """``orca_steps``, advancing ``steps`` steps per launch (unrolled), for ``real_name`` positions (2D)."""
+    agent_step = _agent_step(real_name)
+    t = kernel_types(real_name, 2)
+    ti, real = t.ti, t.real
+    vec2 = ti.types.vector(2, real)
+    grid = grid_funcs(real_name, 2)
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    real2d = ti.types.ndarray(dtype=real, ndim=2)
+    real3d = ti.types.ndarray(dtype=real, ndim=3)
+    real4d = ti.types.ndarray(dtype=real, ndim=4)
+    f64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
+    f64_2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
+
     @ti.kernel
     def orca_steps(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, target: real3d, prm: t.real_arr, work: real4d,
                    nd: real3d, ni: i32_3, out: real3d, arrival: f64_2, t0: f64_1, tick0: t.int_arr, closest: real2d,
@@ -256,3 +268,45 @@ def orca_kernels(real_name: str, steps: int = 1):
                 v[b, i] = ti.Vector([out[b, i, 2], out[b, i, 3]])
 
     return orca_steps
+
+
+@cached_variants
+def orca_copy_kernels(real_name: str):
+    """``orca_copy_steps``: the same steps as :func:`orca_kernels`, but parallel over copies only (each
+    copy's agents in a serial loop inside one thread) and the steps a runtime loop, so one launch runs
+    any number of steps and the kernel compiles one step's code: for small crowds, where launches and
+    thread synchronisation cost more than the agents. Bit-identical to :func:`orca_kernels` (each
+    agent's arithmetic is the same; the update is Jacobi either way)."""
+    t = kernel_types(real_name, 2)
+    ti, real = t.ti, t.real
+    grid = grid_funcs(real_name, 2)
+    agent_step = _agent_step(real_name)
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    real2d = ti.types.ndarray(dtype=real, ndim=2)
+    real3d = ti.types.ndarray(dtype=real, ndim=3)
+    real4d = ti.types.ndarray(dtype=real, ndim=4)
+    f64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
+    f64_2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
+
+    @ti.kernel
+    def orca_copy_steps(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, target: real3d, prm: t.real_arr, work: real4d,
+                        nd: real3d, ni: i32_3, out: real3d, arrival: f64_2, t0: f64_1, tick0: t.int_arr,
+                        closest: real2d, geom: f64_1, dims: t.int_arr, cell: i32_2, start: i32_2, order: i32_2,
+                        xs: t.vec_arr, reach: ti.f64, steps: ti.i32):
+        """``steps`` steps as ``orca_steps`` (same arguments), one thread per copy."""
+        for b in range(x.shape[0]):
+            t_end = t0[b]
+            for s in range(steps):
+                t_end += ti.cast(prm[2], ti.f64)
+                for i in range(x.shape[1]):
+                    cell[b, i] = grid.cell_of(x[b, i], geom, dims)
+                grid.sort_copy(b, x, cell, start, order, xs)
+                for i in range(x.shape[1]):
+                    agent_step(x, v, hd, target, prm, work, nd, ni, out, arrival, closest, geom, dims, start, order,
+                               xs, reach, t_end, tick0[b] + s, b, i)
+                for i in range(x.shape[1]):
+                    x[b, i] = ti.Vector([out[b, i, 0], out[b, i, 1]])
+                    v[b, i] = ti.Vector([out[b, i, 2], out[b, i, 3]])
+
+    return orca_copy_steps

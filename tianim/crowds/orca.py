@@ -14,8 +14,10 @@ the preferred one inside all ORCA half-planes (time horizon ``time_horizon``) an
 max_speed``, by RVO2's linear programs (:mod:`tianim.crowds._orca_kernels`); then all agents move,
 ``x += dt v``.
 
-Neighbours: each launch runs up to :data:`MAX_STEPS_PER_LAUNCH` steps; before every step it
-rebuilds a :class:`tianim.spatial.NeighbourGrid` (cells of ``neighbour_dist / 2``) and each agent
+Launches: crowds of at most :data:`COPY_KERNEL_MAX_AGENTS` agents per copy run all the steps of a
+call in one launch, parallel over copies (``orca_copy_kernels``); larger ones run up to
+:data:`MAX_STEPS_PER_LAUNCH` unrolled steps per launch, parallel over agents; both give the same
+bits. Neighbours: before every step the launch rebuilds a :class:`tianim.spatial.NeighbourGrid` (cells of ``neighbour_dist / 2``) and each agent
 takes its ``max_neighbors`` nearest within ``neighbour_dist`` straight from the cells
 (``NeighbourGrid.query_nearest``'s scan: nearest first, exact ties by the lower index, rows of cells
 pruned at the current K-th distance, as RVO2's kd-tree prunes), so dense crowds cost about K per
@@ -35,8 +37,14 @@ from tianim.crowds.agents import Agents
 from tianim.crowds.pedestrians import PedestrianModel
 
 
-#: Steps run in one kernel launch (the grid is rebuilt in the launch before each step; each variant compiles once).
+#: Steps run in one launch of the agent-parallel kernel (unrolled; the grid is rebuilt in the launch before
+#: each step; each variant compiles once).
 MAX_STEPS_PER_LAUNCH = 4
+
+#: Crowds of at most this many agents per copy step in the copy-parallel kernel instead: all steps of a
+#: call in one launch, each copy's agents serial in one thread (launch and thread synchronisation cost
+#: more than such agents do). Both kernels give bit-identical results.
+COPY_KERNEL_MAX_AGENTS = 1024
 
 
 class ORCA(PedestrianModel):
@@ -121,20 +129,24 @@ class ORCA(PedestrianModel):
         w = self._work
         prm = w["prm"]
         prm[2] = dt
-        from tianim.crowds._orca_kernels import orca_kernels
-
         geom, dims, cell, start, order, xs = self.grid.kernel_buffers
         name = np.dtype(f).name
-        left = steps
-        while left > 0:
-            chunk = MAX_STEPS_PER_LAUNCH if left >= MAX_STEPS_PER_LAUNCH else 1  # two compiled variants at most
-            orca_kernels(name, chunk)(agents.x, agents.v, agents.heading, self.target, prm, w["work"], w["nd"],
-                                      w["ni"], w["out"], self.arrival_time, agents.t, self.ticks, self.closest,
-                                      geom, dims, cell, start, order, xs, self.neighbour_dist)
+        args = (agents.x, agents.v, agents.heading, self.target, prm, w["work"], w["nd"], w["ni"], w["out"],
+                self.arrival_time, agents.t, self.ticks, self.closest, geom, dims, cell, start, order, xs,
+                self.neighbour_dist)
+        from tianim.crowds._orca_kernels import orca_copy_kernels, orca_kernels
+
+        copy = agents.x.shape[1] <= COPY_KERNEL_MAX_AGENTS  # all steps in one launch, parallel over copies
+        chunks = [steps] if copy else (
+            [MAX_STEPS_PER_LAUNCH] * (steps // MAX_STEPS_PER_LAUNCH) + [1] * (steps % MAX_STEPS_PER_LAUNCH))
+        for chunk in chunks:
+            if copy:
+                orca_copy_kernels(name)(*args, chunk)
+            else:
+                orca_kernels(name, chunk)(*args)  # two compiled variants at most
             self.ticks += chunk
             for _ in range(chunk):  # step by step: the same times for any chunking
                 agents.t += dt
-            left -= chunk
 
 
 def circle_scenario(n, circle_radius, batch=1, dtype=np.float64):
