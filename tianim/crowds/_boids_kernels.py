@@ -115,8 +115,8 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1):
         if r >= 0:
             rows = grid.n_rows(lo, hi_c)
         for row in range(rows):
-            base, x0, x1 = grid.row_within(row, lo, hi_c, xi, r * (1 + BOX_PAD), geom, dims)
-            for k in range(start[b, base + x0], start[b, base + x1 + 1]):  # empty when x0 > x1
+            base = grid.row_base(row, lo, hi_c, dims)  # (narrowing rows to the disc cost more than it saved)
+            for k in range(start[b, base + lo[0]], start[b, base + hi_c[0] + 1]):
                 if k != s:
                     d = xs[b, k] - xi
                     d2 = d.dot(d)

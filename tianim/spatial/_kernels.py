@@ -31,7 +31,6 @@ def grid_funcs(real_name: str, dim: int):
     * ``box(p, pad, geom, dims)``: the (lo, hi) cell coordinates of the box ``[p - pad, p + pad]``;
     * ``n_rows(lo, hi)``: number of rows of cells along x in that box;
     * ``row_base(row, lo, hi, dims)``: flat id of cell (0, y, z) of row ``row`` (rows in (z, y) order);
-    * ``row_within(row, lo, hi, p, r, geom, dims)``: that row narrowed to the cells that can hold points within r;
     * ``nearest(b, p, self_i, r, strict, xs, order, start, geom, dims, dist, idx, row_b, row_i)``: the K
       nearest points within r, nearest first, ties by index (``NeighbourGrid.query_nearest``).
 
@@ -112,39 +111,6 @@ def grid_funcs(real_name: str, dim: int):
             rest = rest % ext
             base = base * dims[a] + ua
         return base * dims[0]
-
-    @ti.func
-    def row_within(row, lo, hi, p, r, geom: ti.template(), dims: ti.template()):
-        """``(base, x0, x1)``: row ``row`` of the box (as ``row_base``) narrowed to the cells along x
-        that can hold points within ``r`` [m] (float64; pad it as ``box`` is padded) of ``p``: the row's
-        distance g from p across y (and z) leaves a half-width sqrt(r^2 - g^2) along x; x0 > x1 when
-        the whole row is farther than r. Border cells reach to infinity (points outside are clamped)."""
-        base = 0
-        rest = row
-        g2 = ti.cast(0.0, ti.f64)
-        for k in ti.static(range(1, dim)):
-            a = ti.static(dim - k)
-            ext = 1
-            for m in ti.static(range(1, a)):
-                ext *= hi[m] - lo[m] + 1
-            ua = lo[a] + rest // ext
-            rest = rest % ext
-            base = base * dims[a] + ua
-            pa = ti.cast(p[a], ti.f64)
-            c0 = geom[a] + ua * geom[dim]
-            gap = ti.cast(0.0, ti.f64)
-            if ua > 0 and pa < c0:
-                gap = c0 - pa
-            if ua < dims[a] - 1 and pa > c0 + geom[dim]:
-                gap = pa - (c0 + geom[dim])
-            g2 += gap * gap
-        x0, x1 = 1, 0
-        if g2 <= r * r:
-            w = ti.sqrt(r * r - g2)
-            px = ti.cast(p[0], ti.f64)
-            x0 = ti.max(coord(px - w, 0, geom, dims), lo[0])
-            x1 = ti.min(coord(px + w, 0, geom, dims), hi[0])
-        return base * dims[0], x0, x1
 
     @ti.func
     def before(d2a, ja, d2b, jb):
@@ -230,7 +196,7 @@ def grid_funcs(real_name: str, dim: int):
         return m
 
     return SimpleNamespace(coord=coord, cell_of=cell_of, sort_copy=sort_copy, box=box, n_rows=n_rows,
-                           row_base=row_base, row_within=row_within, nearest=nearest)
+                           row_base=row_base, nearest=nearest)
 
 
 @cached_variants
