@@ -50,17 +50,14 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1):
 
     @ti.func
     def visible(hd, d2, cos):
-        """Whether the angle between heading h and offset d is at most fov / 2, i.e.
-        h . d >= cos |d|, tested without a square root: hd = h . d, d2 = |d|^2, cos = cos(fov / 2)."""
-        out = True
-        if cos > -1:
-            lhs = hd * hd
-            rhs = cos * cos * d2
-            if cos >= 0:
-                out = hd >= 0 and lhs >= rhs
-            else:
-                out = hd >= 0 or lhs <= rhs
-        return out
+        """1 if the angle between heading h and offset d is at most fov / 2, i.e. h . d >= cos |d|,
+        else 0, tested without a square root or branches: hd = h . d, d2 = |d|^2, cos = cos(fov / 2)."""
+        lhs = hd * hd
+        rhs = cos * cos * d2
+        ahead = ti.cast(hd >= 0, ti.i32)
+        narrow = ahead & ti.cast(lhs >= rhs, ti.i32)  # fov <= pi
+        wide = ahead | ti.cast(lhs <= rhs, ti.i32)  # fov > pi
+        return ti.select(cos <= -1, 1, ti.select(cos >= 0, narrow, wide))
 
     @ti.func
     def steer_to(direction, vi, max_speed, max_force):
@@ -114,6 +111,7 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1):
         lo, hi_c = grid.box(xi, r * (1 + BOX_PAD), geom, dims)
         if r >= 0:
             rows = grid.n_rows(lo, hi_c)
+        zero = ti.Vector.zero(real, dim)
         for row in range(rows):
             base = grid.row_base(row, lo, hi_c, dims)  # (narrowing rows to the disc cost more than it saved)
             for k in range(start[b, base + lo[0]], start[b, base + hi_c[0] + 1]):
@@ -123,16 +121,18 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1):
                     if d2 <= r2:
                         seen += 1
                         if seen <= cap and d2 > 0:
+                            # masks and selects, not branches: whether a neighbour is in view is unpredictable
                             hd_ = hi.dot(d)
-                            if d2 <= rs2 and visible(hd_, d2, cs):
+                            ms = ti.cast(d2 <= rs2, ti.i32) & visible(hd_, d2, cs)
+                            ma = ti.cast(d2 <= ra2, ti.i32) & visible(hd_, d2, ca)
+                            mc = ti.cast(d2 <= rc2, ti.i32) & visible(hd_, d2, cc)
+                            if ms != 0:  # (rare: the separation radius is the small one)
                                 sep -= d / d2
-                                ns += 1
-                            if d2 <= ra2 and visible(hd_, d2, ca):
-                                ali += vs[b, k]
-                                na += 1
-                            if d2 <= rc2 and visible(hd_, d2, cc):
-                                coh += d
-                                nc += 1
+                            ali += ti.select(ma != 0, vs[b, k], zero)
+                            coh += ti.select(mc != 0, d, zero)
+                            ns += ms
+                            na += ma
+                            nc += mc
         if seen > cap:
             over[b, i] += 1
         acc = ti.Vector.zero(real, dim)
