@@ -174,6 +174,32 @@ def test_orca_copy_kernel_equals_agent_kernel_and_any_chunking_bit_for_bit(monke
         assert all(np.array_equal(p, q, equal_nan=True) for p, q in zip(ref, got)), (copy_kernel, calls)
 
 
+@pytest.mark.parametrize("copy_kernel", [True, False])
+def test_orca_takes_the_max_neighbors_nearest_within_neighbour_dist(monkeypatch, copy_kernel):
+    """RVO2's neighbour rule, checked by brute force: each agent's K nearest others strictly closer than
+    neighbour_dist (nearest first, exact ties by index), in a dense crowd (a lattice part: exact ties)."""
+    import tianim.crowds.orca as orca
+
+    monkeypatch.setattr(orca, "COPY_KERNEL_MAX_AGENTS", 1024 if copy_kernel else 0)
+    rng = np.random.default_rng(4)
+    x = rng.uniform(-6, 6, (2, 300, 2))
+    x[:, :64] = np.stack(np.meshgrid(np.arange(8.0), np.arange(8.0)), -1).reshape(-1, 2) * 0.7
+    agents = Agents(x, dtype=np.float64)
+    K, dist = 7, 1.6
+    model = ORCA(goals=-x, radius=0.1, neighbour_dist=dist, max_neighbors=K)
+    model.step(agents, 0.05)
+    w = model._work
+    for b in range(2):
+        for i in range(300):
+            d = x[b] - x[b, i]
+            d2 = (d * d).sum(-1)
+            want = sorted((d2[j], j) for j in range(300) if j != i and d2[j] < dist * dist)[:K]
+            m = len(want)
+            assert w["ni"][b, i, :m].tolist() == [j for _, j in want]
+            assert np.array_equal(w["nd"][b, i, :m], [q for q, _ in want])
+            assert model.closest[b, i] == (np.sqrt(want[0][0]) if m else np.inf)
+
+
 _THREAD_SCRIPT = textwrap.dedent("""
     import hashlib, numpy as np
     from tianim.crowds import ORCA, SocialForce, Agents, circle_scenario
