@@ -7,6 +7,7 @@ Usage::
     nb = grid.query(0.05)                 # neighbours within 0.05 m of every built point
     offsets, idx = nb.csr()               # CSR rows in (copy, point) order
     pairs = grid.query_half(0.05).pairs() # each pair (i, j), i < j, once (as cKDTree.query_pairs)
+    idx, d2, n = grid.query_nearest(10, 0.05)  # the 10 nearest within 0.05 m, nearest first (RVO2's rule)
 
 Rules
 -----
