@@ -152,18 +152,72 @@ def test_pedestrians_batch_equals_separate_runs_bit_for_bit(model_cls):
         assert np.array_equal(agents.x[b], a1.x[0]) and np.array_equal(agents.v[b], a1.v[0])
 
 
+def test_orca_copy_kernel_equals_agent_kernel_and_any_chunking_bit_for_bit(monkeypatch):
+    """The copy-parallel kernel (small crowds, all steps in one launch) and the agent-parallel one
+    (2 unrolled steps per launch here, then single steps) give the same bits, for 9 steps in one call
+    or one step per call (times and arrival times included)."""
+    import tianim.crowds.orca as orca
+
+    monkeypatch.setattr(orca, "MAX_STEPS_PER_LAUNCH", 2)  # (a cheaper variant to compile than 4)
+
+    def run(copy_kernel, calls):
+        monkeypatch.setattr(orca, "COPY_KERNEL_MAX_AGENTS", 1024 if copy_kernel else 0)
+        a, g = circle_scenario(40, 4.0, batch=2, dtype=np.float32)
+        g[:, ::4] = 0.8 * a.x[:, ::4]  # a quarter have near goals: they arrive within the 9 steps
+        m = ORCA(goals=g, radius=0.2, pref_speed=1.0, arrival_radius=0.3)
+        for steps in calls:
+            m.step(a, 0.25, steps)
+        return a.x, a.v, a.heading, a.t, m.arrival_time, m.closest, m.ticks
+
+    ref = run(True, [9])
+    assert np.isfinite(ref[4]).any()  # some arrived: the arrival times are compared too
+    for copy_kernel, calls in ((False, [9]), (True, [1] * 9), (False, [1] * 9), (False, [5, 4])):
+        got = run(copy_kernel, calls)
+        assert all(np.array_equal(p, q, equal_nan=True) for p, q in zip(ref, got)), (copy_kernel, calls)
+
+
+@pytest.mark.parametrize("copy_kernel", [True, False])
+def test_orca_takes_the_max_neighbors_nearest_within_neighbour_dist(monkeypatch, copy_kernel):
+    """RVO2's neighbour rule, checked by brute force: each agent's K nearest others strictly closer than
+    neighbour_dist (nearest first, exact ties by index), in a dense crowd (a lattice part: exact ties)."""
+    import tianim.crowds.orca as orca
+
+    monkeypatch.setattr(orca, "COPY_KERNEL_MAX_AGENTS", 1024 if copy_kernel else 0)
+    rng = np.random.default_rng(4)
+    x = rng.uniform(-6, 6, (2, 300, 2))
+    x[:, :64] = np.stack(np.meshgrid(np.arange(8.0), np.arange(8.0)), -1).reshape(-1, 2) * 0.7
+    agents = Agents(x, dtype=np.float64)
+    K, dist = 7, 1.6
+    model = ORCA(goals=-x, radius=0.1, neighbour_dist=dist, max_neighbors=K)
+    model.step(agents, 0.05)
+    w = model._work
+    for b in range(2):
+        for i in range(300):
+            d = x[b] - x[b, i]
+            d2 = (d * d).sum(-1)
+            want = sorted((d2[j], j) for j in range(300) if j != i and d2[j] < dist * dist)[:K]
+            m = len(want)
+            assert w["ni"][b, i, :m].tolist() == [j for _, j in want]
+            assert np.array_equal(w["nd"][b, i, :m], [q for q, _ in want])
+            assert model.closest[b, i] == (np.sqrt(want[0][0]) if m else np.inf)
+
+
 _THREAD_SCRIPT = textwrap.dedent("""
     import hashlib, numpy as np
     from tianim.crowds import ORCA, SocialForce, Agents, circle_scenario
     a, g = circle_scenario(400, 20.0, batch=2, dtype=np.float32)
     m = ORCA(goals=g, radius=0.12, pref_speed=1.0)
     m.step(a, 0.1, 60)
+    import tianim.crowds.orca as orca
+    orca.COPY_KERNEL_MAX_AGENTS = 0  # the agent-parallel kernel too
+    a2, g2 = circle_scenario(400, 20.0, batch=2, dtype=np.float32)
+    ORCA(goals=g2, radius=0.12, pref_speed=1.0).step(a2, 0.1, 3)
     rng = np.random.default_rng(0)
     x = rng.uniform(-10, 10, (2, 2000, 2))
     s = Agents(x, dtype=np.float32)
     f = SocialForce(goals=-x)
     f.step(s, 0.05, 30)
-    print(hashlib.sha256(a.x.tobytes() + a.v.tobytes() + s.x.tobytes() + s.v.tobytes()).hexdigest())
+    print(hashlib.sha256(a.x.tobytes() + a.v.tobytes() + a2.x.tobytes() + s.x.tobytes() + s.v.tobytes()).hexdigest())
 """)
 
 

@@ -289,3 +289,90 @@ def test_half_query_on_cell_borders_radius_larger_than_a_cell_and_clamped_points
         n = len(x)
         assert len(got) == len(ref)
         assert np.array_equal(np.sort(got[:, 0] * n + got[:, 1]), np.sort(ref.min(1) * n + ref.max(1)))
+
+
+# --- nearest-K query ------------------------------------------------------------------------
+
+def brute_nearest(x, q, k, r, exclude_self):
+    """The k nearest of x to each q within r (|d|^2 <= r^2 in x's dtype), nearest first, ties by index."""
+    rows = []
+    for i, p in enumerate(q):
+        d = x - p
+        d2 = (d * d).sum(-1)
+        keys = [(d2[j], j) for j in range(len(x)) if d2[j] <= x.dtype.type(r) * x.dtype.type(r)
+                and not (exclude_self and j == i)]
+        rows.append([j for _, j in sorted(keys)[:k]])
+    return rows
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_nearest_query_matches_brute_force_with_ties_by_index(dim, dtype):
+    """Two copies; a lattice part (many exactly equal distances) and random points, some outside the
+    domain (clamped), coincident pairs; the built points and other query points."""
+    rng = np.random.default_rng(3)
+    n = 300
+    x = rng.random((2, n, dim)) * 1.2 - 0.1
+    lattice = np.stack(np.meshgrid(*[np.arange(8) * 0.05] * dim, indexing="ij"), -1).reshape(-1, dim)[:60]
+    x[:, :60] = lattice + 0.3
+    x[:, 70] = x[:, 71]
+    x = x.astype(dtype)
+    grid = NeighbourGrid([0] * dim, [1] * dim, 0.07, n, batch=2, dtype=dtype).build(x)
+    for k, r in ((1, 0.1), (6, 0.12), (40, 0.2)):
+        idx, d2, counts = grid.query_nearest(k, r)
+        for b in range(2):
+            want = brute_nearest(x[b], x[b], k, r, True)
+            assert [idx[b, i, :counts[b, i]].tolist() for i in range(n)] == want
+            got_d2 = [d2[b, i, :counts[b, i]] for i in range(n)]
+            assert all(np.all(np.diff(row) >= 0) for row in got_d2)
+    q = (rng.random((2, 50, dim)) * 1.1 - 0.05).astype(dtype)
+    q[:, 0] = x[:, 5]  # a query point on a built point: it is its own nearest neighbour (distance 0)
+    idx, d2, counts = grid.query_nearest(8, 0.15, points=q)
+    for b in range(2):
+        assert [idx[b, i, :counts[b, i]].tolist() for i in range(50)] == brute_nearest(x[b], q[b], 8, 0.15, False)
+        assert idx[b, 0, 0] == 5 and d2[b, 0, 0] == 0
+
+
+def test_nearest_query_agrees_with_ckdtree_and_cell_size_does_not_matter():
+    rng = np.random.default_rng(5)
+    x = rng.random((1, 500, 2))
+    d, j = cKDTree(x[0]).query(x[0], k=11, distance_upper_bound=0.08)
+    rows = []
+    for h in (0.02, 0.08, 0.3):
+        idx, d2, counts = NeighbourGrid((0, 0), (1, 1), h, 500, dtype=np.float64).build(x).query_nearest(10, 0.08)
+        rows.append([idx[0, i, :counts[0, i]].tolist() for i in range(500)])
+        for i in range(500):
+            m = counts[0, i]
+            assert m == np.count_nonzero(np.isfinite(d[i])) - 1  # cKDTree's row includes the point itself
+            assert np.allclose(np.sqrt(d2[0, i, :m]), d[i, 1:m + 1], rtol=0, atol=1e-12)
+    assert rows[0] == rows[1] == rows[2]
+
+
+def test_nearest_query_bit_identical_with_one_and_two_threads():
+    code = textwrap.dedent("""
+        import numpy as np
+        from tianim.spatial import NeighbourGrid
+        x = np.random.default_rng(2).random((2, 2000, 3)).astype(np.float32)
+        idx, d2, c = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.05, 2000, batch=2).build(x).query_nearest(12, 0.1)
+        out = [idx[b, i, :c[b, i]].tobytes() + d2[b, i, :c[b, i]].tobytes() for b in range(2) for i in range(2000)]
+        print(__import__("hashlib").sha256(b"".join(out) + c.tobytes()).hexdigest())
+    """)
+    one, two = digests_by_thread_count(code)
+    assert one == two
+
+
+def test_nearest_query_bad_input():
+    grid = NeighbourGrid((0, 0), (1, 1), 0.1, 10, dtype=np.float64)
+    with pytest.raises(RuntimeError, match="before build"):
+        grid.query_nearest(3, 0.1)
+    grid.build(np.random.default_rng(0).random((1, 10, 2)))
+    for k in (0, -2, 1.5, 5000):
+        with pytest.raises((ValueError, TypeError), match="k"):
+            grid.query_nearest(k, 0.1)
+    for r in (0.0, -1.0, float("nan")):
+        with pytest.raises(ValueError, match="radius"):
+            grid.query_nearest(3, r)
+    with pytest.raises(ValueError, match="points has shape"):
+        grid.query_nearest(3, 0.1, points=np.zeros((1, 4, 3)))
+    with pytest.raises(TypeError, match="float64"):
+        grid.query_nearest(3, 0.1, points=np.zeros((1, 4, 2), np.float32))

@@ -71,7 +71,7 @@ def check_boids_agreement(n=400, steps=5, tol=1e-9) -> float:
 
 def run_boids(n, repeats):
     agents, model = flock(n)
-    model.step(agents, DT, 2)  # compile, warm
+    model.step(agents, DT, 10)  # compile (every launch variant the timed call uses), warm
     t_ti = median_time(lambda: model.step(agents, DT, 10), repeats=repeats, warmup=0) / 10
     x, v, h = (a[0].astype(np.float64) for a in (agents.x, agents.v, agents.heading))
     rules = _numpy_rules()
@@ -220,7 +220,7 @@ def main(argv=None) -> int:
     print_table(orca_rows)
     mesa_s, why = run_mesa()
     agents, model = flock(200)
-    model.step(agents, DT, 2)  # compile, warm
+    model.step(agents, DT, 100)  # compile (every launch variant the timed call uses), warm
     ti_s = median_time(lambda: model.step(agents, DT, 100), repeats=repeats, warmup=0)
     print(f"tianim boids, the same size (200 agents x 100 steps, its own rules): {ti_s:.3g} s "
           f"({200 * 100 / ti_s:.3g} agent-steps/s)")

@@ -1,9 +1,11 @@
-"""Taichi kernel of the boids step (one thread per agent, Jacobi update into output arrays).
+"""Taichi kernel of the boids steps (grid rebuild and one thread per agent, fused in one launch).
 
-Cached factory, one variant per float type and dimension (docs/architecture.md, "Kernel
-conventions"). Each thread reads the old state of its neighbours and writes only its own agent's
-outputs; sums over neighbours run in the grid's fixed order: results are bit-identical for any
-thread count. :mod:`tianim.bench._numpy_boids` is the NumPy mirror of these rules.
+Cached factory, one variant per float type, dimension and steps per launch (docs/architecture.md,
+"Kernel conventions"). Each step rebuilds the grid (:func:`tianim.spatial._kernels.grid_funcs`) and
+copies the velocities into the grid's sorted order; each agent's thread then reads the old state
+only from those sorted copies (Jacobi update), adds up its neighbour terms while it scans the grid's
+cells (no neighbour list is written) and writes only its own agent in place. Sums over neighbours
+run in the grid's fixed order: results are bit-identical for any thread count. :mod:`tianim.bench._numpy_boids` is the NumPy mirror of these rules.
 
 ``prm`` packing (see :data:`PRM`): max_speed, max_force, min_speed, dt, then for separation,
 alignment and cohesion (weight, radius^2, cos(fov / 2)), then seek (weight, slowing radius),
@@ -13,6 +15,7 @@ avoid (weight, distance), wander (weight, jitter).
 from tianim.crowds._shapes import wall_parts
 from tianim.physics.contact import contact_parts
 from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.spatial._kernels import BOX_PAD, grid_funcs
 
 #: Names of the entries of the boids parameter vector, in order.
 PRM = ("max_speed", "max_force", "min_speed", "dt",
@@ -25,14 +28,16 @@ LATERAL_MIN = 1e-3
 
 
 @cached_variants
-def boids_kernels(real_name: str, dim: int):
-    """``boids_step`` for ``real_name`` positions in ``dim`` D."""
+def boids_kernels(real_name: str, dim: int, steps: int = 1):
+    """``boids_steps`` (``steps`` steps per launch, unrolled) for ``real_name`` positions in ``dim`` D."""
     t = kernel_types(real_name, dim)
     ti, real = t.ti, t.real
     surface, _ = contact_parts(real_name, dim)
     wall_surface = wall_parts(real_name, dim)
     i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
-    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    f64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
+    i32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+    grid = grid_funcs(real_name, dim)
     real2d = ti.types.ndarray(dtype=real, ndim=2)
 
     @ti.func
@@ -45,17 +50,14 @@ def boids_kernels(real_name: str, dim: int):
 
     @ti.func
     def visible(hd, d2, cos):
-        """Whether the angle between heading h and offset d is at most fov / 2, i.e.
-        h . d >= cos |d|, tested without a square root: hd = h . d, d2 = |d|^2, cos = cos(fov / 2)."""
-        out = True
-        if cos > -1:
-            lhs = hd * hd
-            rhs = cos * cos * d2
-            if cos >= 0:
-                out = hd >= 0 and lhs >= rhs
-            else:
-                out = hd >= 0 or lhs <= rhs
-        return out
+        """1 if the angle between heading h and offset d is at most fov / 2, i.e. h . d >= cos |d|,
+        else 0, tested without a square root or branches: hd = h . d, d2 = |d|^2, cos = cos(fov / 2)."""
+        lhs = hd * hd
+        rhs = cos * cos * d2
+        ahead = ti.cast(hd >= 0, ti.i32)
+        narrow = ahead & ti.cast(lhs >= rhs, ti.i32)  # fov <= pi
+        wide = ahead | ti.cast(lhs <= rhs, ti.i32)  # fov > pi
+        return ti.select(cos <= -1, 1, ti.select(cos >= 0, narrow, wide))
 
     @ti.func
     def steer_to(direction, vi, max_speed, max_force):
@@ -88,92 +90,134 @@ def boids_kernels(real_name: str, dim: int):
             out = n + lat
         return out
 
-    @ti.kernel
-    def boids_step(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, nbr: i32_3, count: i32_2, goal: t.vec_arr,
-                   coll: real2d, walls: real2d, ws: t.vec_arr, noise: t.vec_arr, prm: t.real_arr,
-                   xo: t.vec_arr, vo: t.vec_arr, ho: t.vec_arr):
-        """One step of dt for every agent: steering a = sum_k w_k s_k (each s_k capped at max_force),
-        v += dt a, |v| clamped to [min_speed, max_speed], x += dt v, then agents inside an obstacle
-        are put back on its surface with their inward normal velocity removed."""
+    @ti.func
+    def agent(b, s, x: ti.template(), v: ti.template(), hd: ti.template(), goal: ti.template(), coll: ti.template(),
+              walls: ti.template(), ws: ti.template(), noise: ti.template(), step, prm: ti.template(),
+              geom: ti.template(), dims: ti.template(), start: ti.template(), order: ti.template(),
+              xs: ti.template(), vs: ti.template(), over: ti.template(), r, r2, cap):
+        """One step of the agent at sorted position s of copy b, its neighbour sums added up while
+        scanning the grid's cells (no neighbour list): the first ``cap`` points j != i with
+        |x_j - x_i|^2 <= r2 in the grid's order count, as the rows of ``NeighbourGrid.query`` would."""
         max_speed, max_force, min_speed, dt = prm[0], prm[1], prm[2], prm[3]
         rs2, cs, ra2, ca, rc2, cc = prm[5], prm[6], prm[8], prm[9], prm[11], prm[12]
-        for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-            xi, vi, hi = x[b, i], v[b, i], hd[b, i]
-            sep = ti.Vector.zero(real, dim)
-            ali = ti.Vector.zero(real, dim)
-            coh = ti.Vector.zero(real, dim)
-            ns, na, nc = 0, 0, 0
-            for k in range(ti.min(count[b, i], nbr.shape[2])):
-                j = nbr[b, i, k]
-                d = x[b, j] - xi
-                d2 = d.dot(d)
-                if d2 > 0:
-                    hd_ = hi.dot(d)
-                    if d2 <= rs2 and visible(hd_, d2, cs):
-                        sep -= d / d2
-                        ns += 1
-                    if d2 <= ra2 and visible(hd_, d2, ca):
-                        ali += v[b, j]
-                        na += 1
-                    if d2 <= rc2 and visible(hd_, d2, cc):
-                        coh += d
-                        nc += 1
-            acc = ti.Vector.zero(real, dim)
-            if ns > 0:
-                acc += prm[4] * steer_to(sep, vi, max_speed, max_force)
-            if na > 0:
-                acc += prm[7] * steer_to(ali, vi, max_speed, max_force)
-            if nc > 0:
-                acc += prm[10] * steer_to(coh, vi, max_speed, max_force)
-            if prm[13] > 0:  # seek with arrival (Reynolds 1999): desired speed ramps down inside the slowing radius
-                off = goal[b, i] - xi
-                dist = off.norm()
-                if dist > 0:
-                    desired = off * (max_speed * ti.min(dist / prm[14], 1.0) / dist)
-                    acc += prm[13] * limit(desired - vi, max_force)
-            if prm[15] > 0:  # avoidance: flee along the normals of obstacles closer than the distance
-                push = ti.Vector.zero(real, dim)
-                for c in range(coll.shape[0]):
-                    phi, n = surface(xi, coll, c)
-                    if phi < prm[16]:
-                        push += (1 - phi / prm[16]) * flee(n, hi)
-                if ti.static(dim == 2):
-                    for w in range(walls.shape[0]):
-                        phi, n = wall_surface(xi, walls, w)
-                        if phi < prm[16]:
-                            push += (1 - phi / prm[16]) * flee(n, hi)
-                acc += prm[15] * steer_to(push, vi, max_speed, max_force)
-            if prm[17] > 0:  # wander: a unit direction doing a random walk, steered along at max_force
-                wi = ws[b, i] + prm[18] * noise[b, i]
-                wn = wi.norm()
-                if wn > 0:
-                    wi = wi / wn
-                ws[b, i] = wi
-                acc += prm[17] * max_force * wi
-            vi += dt * acc
-            speed = vi.norm()
-            if speed > max_speed:
-                vi *= max_speed / speed
-            elif speed < min_speed:
-                if speed > 0:
-                    vi *= min_speed / speed
-                else:
-                    vi = hi * min_speed
-            xi += dt * vi
+        i = order[b, s]
+        xi, vi, hi = xs[b, s], vs[b, s], hd[b, i]
+        sep = ti.Vector.zero(real, dim)
+        ali = ti.Vector.zero(real, dim)
+        coh = ti.Vector.zero(real, dim)
+        ns, na, nc = 0, 0, 0
+        seen = 0
+        rows = 0
+        lo, hi_c = grid.box(xi, r * (1 + BOX_PAD), geom, dims)
+        if r >= 0:
+            rows = grid.n_rows(lo, hi_c)
+        zero = ti.Vector.zero(real, dim)
+        for row in range(rows):
+            base = grid.row_base(row, lo, hi_c, dims)  # (narrowing rows to the disc cost more than it saved)
+            for k in range(start[b, base + lo[0]], start[b, base + hi_c[0] + 1]):
+                if k != s:
+                    d = xs[b, k] - xi
+                    d2 = d.dot(d)
+                    if d2 <= r2:
+                        seen += 1
+                        if seen <= cap and d2 > 0:
+                            # masks and selects, not branches: whether a neighbour is in view is unpredictable
+                            hd_ = hi.dot(d)
+                            ms = ti.cast(d2 <= rs2, ti.i32) & visible(hd_, d2, cs)
+                            ma = ti.cast(d2 <= ra2, ti.i32) & visible(hd_, d2, ca)
+                            mc = ti.cast(d2 <= rc2, ti.i32) & visible(hd_, d2, cc)
+                            if ms != 0:  # (rare: the separation radius is the small one)
+                                sep -= d / d2
+                            ali += ti.select(ma != 0, vs[b, k], zero)
+                            coh += ti.select(mc != 0, d, zero)
+                            ns += ms
+                            na += ma
+                            nc += mc
+        if seen > cap:
+            over[b, i] += 1
+        acc = ti.Vector.zero(real, dim)
+        if ns > 0:
+            acc += prm[4] * steer_to(sep, vi, max_speed, max_force)
+        if na > 0:
+            acc += prm[7] * steer_to(ali, vi, max_speed, max_force)
+        if nc > 0:
+            acc += prm[10] * steer_to(coh, vi, max_speed, max_force)
+        if prm[13] > 0:  # seek with arrival (Reynolds 1999): desired speed ramps down inside the slowing radius
+            off = goal[b, i] - xi
+            dist = off.norm()
+            if dist > 0:
+                desired = off * (max_speed * ti.min(dist / prm[14], 1.0) / dist)
+                acc += prm[13] * limit(desired - vi, max_force)
+        if prm[15] > 0:  # avoidance: flee along the normals of obstacles closer than the distance
+            push = ti.Vector.zero(real, dim)
             for c in range(coll.shape[0]):
                 phi, n = surface(xi, coll, c)
-                if phi < 0:
-                    xi -= phi * n
-                    vi -= ti.min(vi.dot(n), 0.0) * n
+                if phi < prm[16]:
+                    push += (1 - phi / prm[16]) * flee(n, hi)
             if ti.static(dim == 2):
                 for w in range(walls.shape[0]):
                     phi, n = wall_surface(xi, walls, w)
-                    if phi < 0:
-                        xi -= phi * n
-                        vi -= ti.min(vi.dot(n), 0.0) * n
-            speed = vi.norm()
-            if speed > 1e-2:  # agents.HEADING_MIN_SPEED
-                hi = vi / speed
-            xo[b, i], vo[b, i], ho[b, i] = xi, vi, hi
+                    if phi < prm[16]:
+                        push += (1 - phi / prm[16]) * flee(n, hi)
+            acc += prm[15] * steer_to(push, vi, max_speed, max_force)
+        if prm[17] > 0:  # wander: a unit direction doing a random walk, steered along at max_force
+            wi = ws[b, i] + prm[18] * noise[step, b, i]
+            wn = wi.norm()
+            if wn > 0:
+                wi = wi / wn
+            ws[b, i] = wi
+            acc += prm[17] * max_force * wi
+        vi += dt * acc
+        speed = vi.norm()
+        if speed > max_speed:
+            vi *= max_speed / speed
+        elif speed < min_speed:
+            if speed > 0:
+                vi *= min_speed / speed
+            else:
+                vi = hi * min_speed
+        xi += dt * vi
+        for c in range(coll.shape[0]):
+            phi, n = surface(xi, coll, c)
+            if phi < 0:
+                xi -= phi * n
+                vi -= ti.min(vi.dot(n), 0.0) * n
+        if ti.static(dim == 2):
+            for w in range(walls.shape[0]):
+                phi, n = wall_surface(xi, walls, w)
+                if phi < 0:
+                    xi -= phi * n
+                    vi -= ti.min(vi.dot(n), 0.0) * n
+        speed = vi.norm()
+        if speed > 1e-2:  # agents.HEADING_MIN_SPEED
+            hi = vi / speed
+        x[b, i], v[b, i], hd[b, i] = xi, vi, hi
 
-    return boids_step
+    @ti.kernel
+    def boids_steps(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, goal: t.vec_arr, coll: real2d, walls: real2d,
+                    ws: t.vec_arr, noise: t.work_arr, prm: t.real_arr, geom: f64_1, dims: i32_1, cell: i32_2,
+                    start: i32_2, order: i32_2, xs: t.vec_arr, vs: t.vec_arr, over: i32_2, r: ti.f64, cap: ti.i32):
+        """``steps`` steps of dt for every agent, in place: per step the grid is rebuilt (cell ids,
+        the counting sort per copy, velocities gathered into sorted order), then each agent (one
+        thread, reading only the sorted copies xs, vs of the old state and its own heading) sums its
+        neighbour terms while scanning the cells within ``r`` [m] (r < 0: no neighbours), steers
+        a = sum_k w_k s_k (each s_k capped at max_force), v += dt a, |v| clamped to [min_speed,
+        max_speed], x += dt v, and agents inside an obstacle are put back on its surface with their
+        inward normal velocity removed. over[b, i] += 1 for each step in which agent i had more than
+        ``cap`` neighbours within r (only the first cap in grid order were used). noise (S, B, N) the
+        wander noise of each step."""
+        r2 = ti.cast(-1.0, real)
+        if r >= 0:
+            r2 = ti.cast(r, real) * ti.cast(r, real)
+        for st in ti.static(range(steps)):
+            for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                cell[b, i] = grid.cell_of(x[b, i], geom, dims)
+            for b in range(x.shape[0]):
+                grid.sort_copy(b, x, cell, start, order, xs)
+            for b, k in ti.ndrange(x.shape[0], x.shape[1]):
+                vs[b, k] = v[b, order[b, k]]
+            for b, s in ti.ndrange(x.shape[0], x.shape[1]):
+                agent(b, s, x, v, hd, goal, coll, walls, ws, noise, st, prm, geom, dims, start, order, xs, vs,
+                      over, r, r2, cap)
+
+    return boids_steps

@@ -1,34 +1,32 @@
 """Taichi kernel of ORCA (van den Berg, Guy, Lin, Manocha 2011), ported from RVO2 (Agent.cpp).
 
-One thread per agent: it selects its ``max_neighbors`` nearest neighbours from the grid's list
-(insertion by distance, ties in grid order, exactly RVO2's ``insertAgentNeighbor``), builds one
+Each step rebuilds the neighbour grid in the same launch; then one thread per agent selects its
+``max_neighbors`` nearest neighbours closer than the neighbour distance straight from the grid's
+cells (``tianim.spatial._kernels.grid_funcs().nearest``: RVO2's ``insertAgentNeighbor`` order,
+nearest first, exact ties by the lower index; cells pruned at the current K-th distance as RVO2's
+kd-tree prunes), builds one
 ORCA half-plane per neighbour, and solves for the velocity closest to its preferred one with the
 2D incremental linear program (``linearProgram1/2``) and, if that is infeasible, the 3D fallback
 that minimises the largest violation (``linearProgram3``). Lines and the fallback's projected
-lines live in per-agent rows of work arrays (B, N, K, 4) = (point, direction); each thread writes
+lines live in per-agent rows of work arrays (B, N, K, 8) = (point, direction) x 2; each thread writes
 only its own rows and its own new velocity: bit-identical for any thread count. Static obstacles
 (RVO2's polygon obstacles) are not modelled.
 """
 
 from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.spatial._kernels import grid_funcs
 
 #: RVO2's RVO_EPSILON: below it two ORCA lines count as parallel.
 RVO_EPSILON = 1e-5
 
 
 @cached_variants
-def orca_kernels(real_name: str, steps: int = 1):
-    """``orca_steps``, advancing ``steps`` steps per launch (unrolled), for ``real_name`` positions (2D)."""
+def _agent_step(real_name: str):
+    """The Taichi function of one agent's ORCA step (neighbours, half-planes, linear programs)."""
     t = kernel_types(real_name, 2)
     ti, real = t.ti, t.real
     vec2 = ti.types.vector(2, real)
-    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
-    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
-    real2d = ti.types.ndarray(dtype=real, ndim=2)
-    real3d = ti.types.ndarray(dtype=real, ndim=3)
-    real4d = ti.types.ndarray(dtype=real, ndim=4)
-    f64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
-    f64_2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
+    grid = grid_funcs(real_name, 2)
 
     @ti.func
     def det(a, b):
@@ -137,11 +135,11 @@ def orca_kernels(real_name: str, steps: int = 1):
         return result
 
     @ti.func
-    def agent_step(x: ti.template(), v: ti.template(), hd: ti.template(), target: ti.template(), nbr: ti.template(),
-                   count: ti.template(), prm: ti.template(), work: ti.template(), out: ti.template(),
-                   arrival: ti.template(), closest: ti.template(), t_end, tick, b, i):
-        r, tau, dt, vmax, range2 = prm[0], prm[1], prm[2], prm[3], prm[4]
-        K = work.shape[2]
+    def agent_step(x: ti.template(), v: ti.template(), hd: ti.template(), target: ti.template(), prm: ti.template(),
+                   work: ti.template(), nd: ti.template(), ni: ti.template(), out: ti.template(),
+                   arrival: ti.template(), closest: ti.template(), geom: ti.template(), dims: ti.template(),
+                   start: ti.template(), order: ti.template(), xs: ti.template(), reach, t_end, tick, b, i):
+        r, tau, dt, vmax = prm[0], prm[1], prm[2], prm[3]
         xi, vi = x[b, i], v[b, i]
         gi = vec2(target[b, i, 0], target[b, i, 1])
         off = gi - xi
@@ -155,30 +153,14 @@ def orca_kernels(real_name: str, steps: int = 1):
             h = h ^ (h >> 13)
             ang = ti.cast(h & ti.u32(0xFFFFFF), real) * (6.283185307179586 / 16777216.0)
             pref += (prm[6] * pref.norm()) * vec2(ti.cos(ang), ti.sin(ang))
-        m = 0
-        lim = range2
-        for k in range(ti.min(count[b, i], nbr.shape[2])):  # RVO2 insertAgentNeighbor
-            j = nbr[b, i, k]
-            d = x[b, j] - xi
-            d2 = d.dot(d)
-            if d2 < lim:
-                if m < K:
-                    m += 1
-                s = m - 1
-                while s != 0 and d2 < work[b, i, s - 1, 8]:
-                    work[b, i, s, 8] = work[b, i, s - 1, 8]
-                    work[b, i, s, 9] = work[b, i, s - 1, 9]
-                    s -= 1
-                work[b, i, s, 8] = d2
-                work[b, i, s, 9] = ti.cast(j, real)
-                if m == K:
-                    lim = work[b, i, K - 1, 8]
+        # RVO2 insertAgentNeighbor: the max_neighbors nearest within neighbour_dist (strictly), from the grid
+        m = grid.nearest(b, xi, i, reach, True, xs, order, start, geom, dims, nd, ni, b, i)
         if m > 0:
-            closest[b, i] = ti.min(closest[b, i], ti.sqrt(work[b, i, 0, 8]))
+            closest[b, i] = ti.min(closest[b, i], ti.sqrt(nd[b, i, 0]))
         inv_tau = 1 / tau
         combined = 2 * r
         for k in range(m):
-            j = ti.cast(work[b, i, k, 9], ti.i32)
+            j = ni[b, i, k]
             rel_p = x[b, j] - xi
             rel_v = vi - v[b, j]
             dist_sq = rel_p.dot(rel_p)
@@ -228,31 +210,103 @@ def orca_kernels(real_name: str, steps: int = 1):
             if g.dot(g) <= prm[5] * prm[5]:
                 arrival[b, i] = t_end
 
+    return agent_step
+
+
+@cached_variants
+def orca_kernels(real_name: str, steps: int = 1):
+    """``orca_steps``, advancing ``steps`` steps per launch (unrolled), for ``real_name`` positions (2D)."""
+    agent_step = _agent_step(real_name)
+    t = kernel_types(real_name, 2)
+    ti, real = t.ti, t.real
+    vec2 = ti.types.vector(2, real)
+    grid = grid_funcs(real_name, 2)
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    real2d = ti.types.ndarray(dtype=real, ndim=2)
+    real3d = ti.types.ndarray(dtype=real, ndim=3)
+    real4d = ti.types.ndarray(dtype=real, ndim=4)
+    f64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
+    f64_2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
+
     @ti.kernel
-    def orca_steps(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, target: real3d, nbr: i32_3, count: i32_2,
-                   prm: t.real_arr, work: real4d, out: real3d, arrival: f64_2, t0: f64_1, tick0: t.int_arr,
-                   closest: real2d):
+    def orca_steps(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, target: real3d, prm: t.real_arr, work: real4d,
+                   nd: real3d, ni: i32_3, out: real3d, arrival: f64_2, t0: f64_1, tick0: t.int_arr, closest: real2d,
+                   geom: f64_1, dims: t.int_arr, cell: i32_2, start: i32_2, order: i32_2, xs: t.vec_arr,
+                   reach: ti.f64):
         """``steps`` ORCA steps of all agents: velocities, positions, headings, arrival times.
 
+        Each step rebuilds the grid (cell ids, the counting sort per copy: geom, dims, cell, start, order,
+        xs as :attr:`tianim.spatial.NeighbourGrid.kernel_buffers`), then every agent takes its
+        K = nd.shape[2] nearest neighbours closer than ``reach`` (the neighbour distance [m]) by
+        ``grid_funcs.nearest`` (squared distances nd, indices ni (B, N, K); nearest first, ties by index).
         target (B, N, 4) = [goal_x, goal_y, preferred speed, active]; out (B, N, 6) = [x_new, v_new,
-        v_pref] with x_new = x + dt v_new; work (B, N, K, 10) = [ORCA line (point, direction),
-        projected line, distance^2 and index of the k-th nearest chosen neighbour]; arrival[b, i] =
-        t0[b] + (s + 1) dt where |goal - x_new| <= arrival radius for the first time, after step s of the launch;
-        closest[b, i] = min(closest, distance to the nearest neighbour at the start of each step). prm = [radius (half the
-        combined radius, incl. safety), time horizon, dt, max_speed, neighbour distance^2, arrival radius,
-        perturbation]. As RVO2's examples do against the deadlocks of perfectly symmetric scenes, the
-        preferred velocity gets a perturbation of that fraction of its magnitude, in a direction hashed from
-        (agent, tick), tick0[b] + s the copy's step count since its reset: the same in every copy, batched
-        or not, and for any thread count.
+        v_pref] with x_new = x + dt v_new; work (B, N, K, 8) = [ORCA line (point, direction), projected
+        line]; arrival[b, i] = t0[b] + dt + ... + dt (s + 1 times) where |goal - x_new| <= arrival radius for the first
+        time, after step s of the launch; closest[b, i] = min(closest, distance to the nearest neighbour
+        at the start of each step). prm = [radius (half the combined radius, incl. safety), time horizon,
+        dt, max_speed, (unused), arrival radius, perturbation]. As RVO2's examples do against the
+        deadlocks of perfectly symmetric scenes, the preferred velocity gets a perturbation of that
+        fraction of its magnitude, in a direction hashed from (agent, tick), tick0[b] + s the copy's step
+        count since its reset: the same in every copy, batched or not, and for any thread count.
         The preferred velocity points at the goal at the preferred speed, capped at |goal - x| / dt so
         that an agent lands on its goal; inactive agents (active = 0) prefer rest.
         """
-        for s in ti.static(range(steps)):  # unrolled: each step's two loops are parallel top-level loops
+        for s in ti.static(range(steps)):  # unrolled: each step's loops are parallel top-level loops
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                agent_step(x, v, hd, target, nbr, count, prm, work, out, arrival, closest,
-                           t0[b] + (s + 1) * ti.cast(prm[2], ti.f64), tick0[b] + s, b, i)
+                cell[b, i] = grid.cell_of(x[b, i], geom, dims)
+            for b in range(x.shape[0]):
+                grid.sort_copy(b, x, cell, start, order, xs)
+            for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                t_end = t0[b]
+                for _ in ti.static(range(s + 1)):  # t0 + dt + dt ..., as step-by-step calls add it up
+                    t_end += ti.cast(prm[2], ti.f64)
+                agent_step(x, v, hd, target, prm, work, nd, ni, out, arrival, closest, geom, dims, start, order,
+                           xs, reach, t_end, tick0[b] + s, b, i)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 x[b, i] = ti.Vector([out[b, i, 0], out[b, i, 1]])
                 v[b, i] = ti.Vector([out[b, i, 2], out[b, i, 3]])
 
     return orca_steps
+
+
+@cached_variants
+def orca_copy_kernels(real_name: str):
+    """``orca_copy_steps``: the same steps as :func:`orca_kernels`, but parallel over copies only (each
+    copy's agents in a serial loop inside one thread) and the steps a runtime loop, so one launch runs
+    any number of steps and the kernel compiles one step's code: for small crowds, where launches and
+    thread synchronisation cost more than the agents. Bit-identical to :func:`orca_kernels` (each
+    agent's arithmetic is the same; the update is Jacobi either way)."""
+    t = kernel_types(real_name, 2)
+    ti, real = t.ti, t.real
+    grid = grid_funcs(real_name, 2)
+    agent_step = _agent_step(real_name)
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    real2d = ti.types.ndarray(dtype=real, ndim=2)
+    real3d = ti.types.ndarray(dtype=real, ndim=3)
+    real4d = ti.types.ndarray(dtype=real, ndim=4)
+    f64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
+    f64_2 = ti.types.ndarray(dtype=ti.f64, ndim=2)
+
+    @ti.kernel
+    def orca_copy_steps(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, target: real3d, prm: t.real_arr, work: real4d,
+                        nd: real3d, ni: i32_3, out: real3d, arrival: f64_2, t0: f64_1, tick0: t.int_arr,
+                        closest: real2d, geom: f64_1, dims: t.int_arr, cell: i32_2, start: i32_2, order: i32_2,
+                        xs: t.vec_arr, reach: ti.f64, steps: ti.i32):
+        """``steps`` steps as ``orca_steps`` (same arguments), one thread per copy."""
+        for b in range(x.shape[0]):
+            t_end = t0[b]
+            for s in range(steps):
+                t_end += ti.cast(prm[2], ti.f64)
+                for i in range(x.shape[1]):
+                    cell[b, i] = grid.cell_of(x[b, i], geom, dims)
+                grid.sort_copy(b, x, cell, start, order, xs)
+                for i in range(x.shape[1]):
+                    agent_step(x, v, hd, target, prm, work, nd, ni, out, arrival, closest, geom, dims, start, order,
+                               xs, reach, t_end, tick0[b] + s, b, i)
+                for i in range(x.shape[1]):
+                    x[b, i] = ti.Vector([out[b, i, 0], out[b, i, 1]])
+                    v[b, i] = ti.Vector([out[b, i, 2], out[b, i, 3]])
+
+    return orca_copy_steps

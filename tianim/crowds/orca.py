@@ -14,21 +14,21 @@ the preferred one inside all ORCA half-planes (time horizon ``time_horizon``) an
 max_speed``, by RVO2's linear programs (:mod:`tianim.crowds._orca_kernels`); then all agents move,
 ``x += dt v``.
 
-Neighbour lists are Verlet lists (Verlet 1967): the grid is queried at ``neighbour_dist + skin``
-and rebuilt whenever the steps since the last build could have moved an agent by more than
-``skin / 2`` (no agent moves more than ``max_speed dt`` per step) or the positions were changed
-outside :meth:`step`; in between every pair within ``neighbour_dist`` is still on the list, and the kernel's own distance test keeps the result exact
-(the same as rebuilding every step, up to the order of exactly equidistant neighbours). Half of each avoidance is taken by each agent (reciprocity). ``safety`` (default 0.25) inflates
+Launches: crowds of at most :data:`COPY_KERNEL_MAX_AGENTS` agents per copy run all the steps of a
+call in one launch, parallel over copies (``orca_copy_kernels``); larger ones run up to
+:data:`MAX_STEPS_PER_LAUNCH` unrolled steps per launch, parallel over agents; both give the same
+bits. Neighbours: before every step the launch rebuilds a :class:`tianim.spatial.NeighbourGrid` (cells of ``neighbour_dist / 2``) and each agent
+takes its ``max_neighbors`` nearest within ``neighbour_dist`` straight from the cells
+(``NeighbourGrid.query_nearest``'s scan: nearest first, exact ties by the lower index, rows of cells
+pruned at the current K-th distance, as RVO2's kd-tree prunes), so dense crowds cost about K per
+agent, not everyone within ``neighbour_dist``. Half of each avoidance is taken by each agent (reciprocity). ``safety`` (default 0.25) inflates
 the radius used in the velocity obstacles by that fraction, a margin against the overlap that
 RVO2's discrete steps leave (its 250-agent circle scenario comes to 0.8 of 2r; ``safety=0`` is
-RVO2 exactly); the reported radius is ``radius``. Neighbours come from one :class:`tianim.spatial.NeighbourGrid` query per step; all
-copies step in one kernel launch; each thread writes only its own agent: bit-identical for any
+RVO2 exactly); the reported radius is ``radius``. All copies step in one kernel launch; each thread writes only its own agent: bit-identical for any
 thread count.
 """
 
 from __future__ import annotations
-
-import warnings
 
 import numpy as np
 
@@ -37,8 +37,14 @@ from tianim.crowds.agents import Agents
 from tianim.crowds.pedestrians import PedestrianModel
 
 
-#: Steps run in one kernel launch while the Verlet lists stay valid (each variant is compiled once).
+#: Steps run in one launch of the agent-parallel kernel (unrolled; the grid is rebuilt in the launch before
+#: each step; each variant compiles once).
 MAX_STEPS_PER_LAUNCH = 4
+
+#: Crowds of at most this many agents per copy step in the copy-parallel kernel instead: all steps of a
+#: call in one launch, each copy's agents serial in one thread (launch and thread synchronisation cost
+#: more than such agents do). Both kernels give bit-identical results.
+COPY_KERNEL_MAX_AGENTS = 1024
 
 
 class ORCA(PedestrianModel):
@@ -49,8 +55,8 @@ class ORCA(PedestrianModel):
     farthest an agent can matter within tau); ``max_neighbors`` per agent (RVO2's default 10);
     ``arrival_radius`` [m]; ``domain`` the (lower, upper) box of the grid (default: the agents'
     and goals' bounding box at the first step; outside agents are clamped, exact but slower);
-    ``grid_neighbours`` the grid's row capacity (overflow warns: far neighbours may be missed);
-    ``skin`` [m] the Verlet-list margin (default 0.2 ``neighbour_dist``; 0 rebuilds every step);
+    ``grid_neighbours`` and ``skin`` are checked but no longer used (the grid is rebuilt in the kernel
+    before every step and never stores neighbour lists: nothing can overflow; ``neighbour_overflow`` stays 0);
     After the first step, ``closest`` (B, N) holds each agent's smallest distance [m] to its nearest
     neighbour at the start of any step so far (inf if none came within ``neighbour_dist``; write inf
     to reset): the no-overlap metric without an extra query; ``ticks`` (B,) int32 the steps of each
@@ -60,6 +66,10 @@ class ORCA(PedestrianModel):
     circles of 20-64 agents with a 2 s horizon jam for good in a ring at 0.01 and all cross at 0.1;
     agents at rest on their goals are not disturbed).
     """
+
+    #: Cells of neighbour_dist / 2 (up to 16 per agent): the nearest-K scan prunes at cell granularity.
+    CELL_DIVISOR = 2.0
+    CELLS_PER_AGENT = 16
 
     def __init__(self, goals, pref_speed=1.0, radius=0.5, time_horizon=2.0, neighbour_dist=None,
                  max_neighbors=10, max_speed=2.0, safety=0.25, arrival_radius=1e-3, domain=None,
@@ -84,7 +94,7 @@ class ORCA(PedestrianModel):
                 f"neighbour_dist={self.neighbour_dist:g}, max_neighbors={self.max_neighbors})")
 
     def _search(self) -> float:
-        return self.neighbour_dist + self.skin
+        return self.neighbour_dist
 
     def reset_copy(self, b: int, agents: Agents):
         """Forget copy b's arrivals, closest approach and step count (after editing it)."""
@@ -102,7 +112,10 @@ class ORCA(PedestrianModel):
         K = self.max_neighbors
         if self._work is None or self._work["key"] != (B, N, f):
             out = np.zeros((B, N, 6), f)  # [x_new, v_new, v_pref]
-            self._work = dict(key=(B, N, f), work=np.zeros((B, N, K, 10), f), out=out)
+            prm = np.array([self.radius * (1 + self.safety), self.time_horizon, 0.0, self.max_speed,
+                            self.neighbour_dist ** 2, self.arrival_radius, self.perturbation], f)  # prm[2] = dt
+            self._work = dict(key=(B, N, f), work=np.zeros((B, N, K, 8), f), out=out, prm=prm,
+                              nd=np.zeros((B, N, K), f), ni=np.zeros((B, N, K), np.int32))
             self.v_pref = out[..., 4:6]
             self.closest = np.full((B, N), np.inf, f)
             self.ticks = np.zeros(B, np.int32)  # steps per copy since its reset (the perturbation's hash)
@@ -112,41 +125,28 @@ class ORCA(PedestrianModel):
         dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
         steps = check_int("steps", steps, lo=1)
         self.prepare(agents)
-        B, N, _ = agents.x.shape
         f = agents.x.dtype
         w = self._work
-        prm = np.array([self.radius * (1 + self.safety), self.time_horizon, dt, self.max_speed,
-                        self.neighbour_dist ** 2, self.arrival_radius, self.perturbation], f)
-        from tianim.crowds._orca_kernels import orca_kernels
-
-        out = w["out"]
-        # the lists reach a little beyond neighbour_dist + skin: a margin for float rounding of |v| <= max_speed
-        search = self.neighbour_dist + self.skin * (1 + 1e-4)
-        hop = self.max_speed * dt  # the farthest an agent moves in one step [m]
-        last = w.get("last_x")
-        if last is None or not np.array_equal(last, agents.x):
-            w["moved"] = np.inf  # positions edited since our last step: the lists are stale
+        prm = w["prm"]
+        prm[2] = dt
+        geom, dims, cell, start, order, xs = self.grid.kernel_buffers
         name = np.dtype(f).name
-        left = steps
-        while left > 0:
-            if w["moved"] + hop > self.skin / 2:
-                nb = self.grid.build(agents.x, check=False).query(search, on_overflow="report")
-                w["nb"], w["moved"] = nb, 0.0
-                if nb.overflow:
-                    self.neighbour_overflow += nb.overflow
-                    warnings.warn(f"{nb.overflow} agents had more than grid_neighbours={self.grid_neighbours} agents "
-                                  f"within {search:g} m; nearer ones may be missed: raise grid_neighbours",
-                                  RuntimeWarning, stacklevel=2)
-            nb = w["nb"]
-            valid = max(1, int((self.skin / 2 - w["moved"]) / hop))  # steps the lists stay valid
-            chunk = min(left, valid, MAX_STEPS_PER_LAUNCH)
-            orca_kernels(name, chunk)(agents.x, agents.v, agents.heading, self.target, nb.indices, nb.counts, prm,
-                                      w["work"], out, self.arrival_time, agents.t, self.ticks, self.closest)
+        args = (agents.x, agents.v, agents.heading, self.target, prm, w["work"], w["nd"], w["ni"], w["out"],
+                self.arrival_time, agents.t, self.ticks, self.closest, geom, dims, cell, start, order, xs,
+                self.neighbour_dist)
+        from tianim.crowds._orca_kernels import orca_copy_kernels, orca_kernels
+
+        copy = agents.x.shape[1] <= COPY_KERNEL_MAX_AGENTS  # all steps in one launch, parallel over copies
+        chunks = [steps] if copy else (
+            [MAX_STEPS_PER_LAUNCH] * (steps // MAX_STEPS_PER_LAUNCH) + [1] * (steps % MAX_STEPS_PER_LAUNCH))
+        for chunk in chunks:
+            if copy:
+                orca_copy_kernels(name)(*args, chunk)
+            else:
+                orca_kernels(name, chunk)(*args)  # two compiled variants at most
             self.ticks += chunk
-            w["moved"] += chunk * hop
-            agents.t += chunk * dt
-            left -= chunk
-        w["last_x"] = agents.x.copy()
+            for _ in range(chunk):  # step by step: the same times for any chunking
+                agents.t += dt
 
 
 def circle_scenario(n, circle_radius, batch=1, dtype=np.float64):

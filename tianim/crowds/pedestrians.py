@@ -20,6 +20,11 @@ from tianim.crowds.agents import Agents, check_agents
 class PedestrianModel:
     """Base of :class:`tianim.crowds.ORCA` and :class:`tianim.crowds.SocialForce` (goals and arrivals)."""
 
+    #: The grid's cell size is the search radius / CELL_DIVISOR, or larger where the box would have
+    #: more than CELLS_PER_AGENT cells per agent.
+    CELL_DIVISOR = 1.0
+    CELLS_PER_AGENT = 4
+
     def __init__(self, goals, pref_speed, arrival_radius, domain, grid_neighbours):
         if goals is None:
             raise ValueError("goals=None; give the goal positions [m]: (2,), (N, 2) or (B, N, 2)")
@@ -67,7 +72,8 @@ class PedestrianModel:
             np.minimum(agents.x.min(axis=(0, 1)), goals.min(axis=(0, 1))) - search,
             np.maximum(agents.x.max(axis=(0, 1)), goals.max(axis=(0, 1))) + search)
         cells = float(np.prod(np.asarray(hi) - np.asarray(lo)))
-        h = max(search, (cells / (4 * N)) ** 0.5)  # at most ~4 cells per agent: the serial build is O(N + cells)
+        # cells of search / CELL_DIVISOR, but at most CELLS_PER_AGENT per agent: the serial build is O(N + cells)
+        h = max(search / self.CELL_DIVISOR, (cells / (self.CELLS_PER_AGENT * N)) ** 0.5)
         self.grid = NeighbourGrid(lo, hi, h, N, batch=B, max_neighbours=self.grid_neighbours, dtype=f)
         self.goals, self.pref_speed = goals, speed
         self.arrival_time = np.full((B, N), np.nan)

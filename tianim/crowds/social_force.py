@@ -39,7 +39,8 @@ class SocialForce(PedestrianModel):
     ``goals`` (2,), (N, 2) or (B, N, 2) [m]; ``pref_speed`` v0 [m/s]; ``tau`` [s]; ``V0`` [m^2/s^2];
     ``sigma`` [m]; ``step_time`` dt_s [s]; ``U0`` [m^2/s^2]; ``R`` [m]; ``fov`` 2 phi [rad];
     ``c`` the weight outside the view; ``max_ratio`` v_max / v0; ``cutoff`` [m]; ``obstacles``;
-    ``arrival_radius`` [m]; ``domain``, ``grid_neighbours`` as for :class:`tianim.crowds.ORCA`.
+    ``arrival_radius`` [m]; ``domain`` as for :class:`tianim.crowds.ORCA`; ``grid_neighbours`` the
+    grid's row capacity (overflow warns: far neighbours may be missed).
     """
 
     def __init__(self, goals, pref_speed=1.34, tau=0.5, V0=2.1, sigma=0.3, step_time=2.0, U0=10.0, R=0.2,

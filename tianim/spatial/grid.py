@@ -7,6 +7,7 @@ Usage::
     nb = grid.query(0.05)                 # neighbours within 0.05 m of every built point
     offsets, idx = nb.csr()               # CSR rows in (copy, point) order
     pairs = grid.query_half(0.05).pairs() # each pair (i, j), i < j, once (as cKDTree.query_pairs)
+    idx, d2, n = grid.query_nearest(10, 0.05)  # the 10 nearest within 0.05 m, nearest first (RVO2's rule)
 
 Rules
 -----
@@ -180,6 +181,14 @@ class NeighbourGrid:
         arrays = [self.cell, self.start, self.order, self.sorted_x] + [a for pair in self._out.values() for a in pair]
         return int(sum(a.nbytes for a in arrays))
 
+    @property
+    def kernel_buffers(self) -> tuple:
+        """``(geom, dims, cell, start, order, sorted_x)``: the arrays that fused kernels built on
+        :func:`tianim.spatial._kernels.grid_funcs` take (geom (D + 1,) float64 = [lower, cell_size],
+        dims (D,) int32 cells per axis, cell (B, N), start (B, M + 2), order (B, N) int32, sorted_x
+        (B, N, D)); such a kernel sorts the points into them itself (``grid_funcs().sort_copy``)."""
+        return self._geom, self.dims, self.cell, self.start, self.order, self.sorted_x
+
     def _kernels(self):
         from tianim.spatial._kernels import grid_kernels
 
@@ -259,6 +268,36 @@ class NeighbourGrid:
         _, _, query = self._kernels()
         query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
+
+    def query_nearest(self, k, radius, points: np.ndarray | None = None):
+        """The ``k`` nearest built points within ``radius`` [m] of each built point (default, itself
+        excluded) or of ``points`` (B, Q, D), as RVO2's kd-tree query (``maxNeighbors`` within
+        ``neighborDist``) and ``cKDTree.query(k=k, distance_upper_bound=radius)``.
+
+        Returns ``(indices (B, Q, k) int32, dist2 (B, Q, k), counts (B, Q) int32)``: row (b, i) holds its
+        ``counts[b, i] <= k`` neighbours nearest first (ties by the lower index: the result does not
+        depend on the cells or the thread count), ``dist2`` their squared distances in the positions'
+        dtype; entries past the count are unspecified. Each row visits the cells outward and narrows them
+        to its current k-th distance, so dense scenes cost about k, not everything within ``radius``.
+        New arrays each call.
+        """
+        k = check_int("k", k, lo=1, hi=4096)
+        r = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
+        if self._built is None:
+            raise RuntimeError("query_nearest before build: call grid.build(x) first")
+        if points is None:
+            q, exclude = self._built, 1
+        else:
+            q, exclude = self._points("points", points, None), 0
+        B, Q = q.shape[0], q.shape[1]
+        idx = np.full((B, Q, k), -1, np.int32)
+        dist2 = np.full((B, Q, k), np.inf, self.dtype)
+        counts = np.zeros((B, Q), np.int32)
+        from tianim.spatial._kernels import nearest_kernels
+
+        nearest_kernels(np.dtype(self.dtype).name, self.dim)(q, self.sorted_x, self.order, self.start, self._geom,
+                                                             self.dims, r, exclude, dist2, idx, counts)
+        return idx, dist2, counts
 
     def _checked(self, out, on_overflow):
         if on_overflow != "report" and out.overflow:
