@@ -9,7 +9,7 @@ its call one substep at a time, and around each substep:
 3. the ``post`` kernel, one launch, each loop parallel over (copy, particle) and ending in a
    barrier: XPBD bending (6 colours), ``strain.iterations`` Jacobi sweeps of the strain limit,
    ``self_collision.iterations`` Jacobi sweeps of the contact projection (on candidate lists the
-   neighbour grid rebuilds when needed), then the colliders again (so that nothing the passes moved
+   neighbour grid rebuilds when needed, for the stale copies only), then the colliders again (so that nothing the passes moved
    ends inside a collider).
 
 Without these features none of this runs: the solvers launch exactly the kernels they launched
@@ -227,8 +227,8 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
         post(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], nbr, count, excl_off,
              excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl, xb, spread, run, margin, vcap)
         if contacts is not None and not run.all():
-            # some copy moved too far for its lists: rebuild, then its contacts (and colliders) only
-            contacts.rebuild(state.x)
+            # some copies moved too far for their lists: rebuild theirs, then their contacts (and colliders) only
+            contacts.rebuild(state.x, np.flatnonzero(run == 0))
             np.subtract(1, run, out=run)
             fix(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], contacts.nbr,
                 contacts.count, excl_off, excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl,
