@@ -268,7 +268,7 @@ class _Explicit(Solver):
             check_sc_model(self.self_collision, model)
         run_with_passes(model, state, dt, substeps,
                         lambda: launch(model, state, dt, 1, self.name, self.layout, self._buffer),
-                        True, self.self_collision, self.strain_limit, self._buffer)
+                        True, self.self_collision, self.strain_limit, self._buffer, method=self.name)
 
 
 def _with_passes(opts: dict, solver) -> dict:
