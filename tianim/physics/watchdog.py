@@ -178,10 +178,17 @@ def _small_energy(model, state, springs: bool = True) -> np.ndarray:
     return out
 
 
+_SCALES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
 def energy_scale(model) -> float:
-    """W = total mass * |g| * diagonal of the initial bounding box [J] (at least total mass * 1 m^2/s^2)."""
-    extent = float(np.linalg.norm(np.ptp(model.positions, axis=0)))
-    return float(np.sum(model.mass)) * max(float(np.linalg.norm(model.gravity)) * extent, 1.0)
+    """W = total mass * |g| * diagonal of the initial bounding box [J] (at least total mass * 1 m^2/s^2);
+    cached per model (models are read-only)."""
+    w = _SCALES.get(model)
+    if w is None:
+        extent = float(np.linalg.norm(np.ptp(model.positions, axis=0)))
+        w = _SCALES[model] = float(np.sum(model.mass)) * max(float(np.linalg.norm(model.gravity)) * extent, 1.0)
+    return w
 
 
 class _Memory:
@@ -255,7 +262,8 @@ class Watchdog:
                 mem.cusum = np.maximum(mem.cusum + np.minimum(edit, 0.0), 0.0)  # or took away
             else:  # another solver (another criterion) on the same state
                 mem.terms, mem.cusum = tuple(terms), np.zeros(state.batch)
-            mem.reference = np.where(fresh, parts[:, 0] + parts[:, 1] + energy_scale(model), mem.reference)
+            if fresh.any():
+                mem.reference = np.where(fresh, parts[:, 0] + parts[:, 1] + energy_scale(model), mem.reference)
             mem.energy = e
             return snap, e, pins0
         parts = fast_energy(model, state)
@@ -333,9 +341,14 @@ def _pin_springs(model, touched: np.ndarray):
 def _pin_forces(model, state):
     """Spring forces along the springs that touch a moving pin: ``(moving (B, N), springs (S',),
     force on the first end (B, S', D))`` float64, or None when no pin moves (then pins do no work)."""
-    moving = state.pinned & (state.v != 0).any(axis=2)
-    if model.n_springs == 0 or not moving.any():
+    if model.n_springs == 0:
         return None
+    b, i = np.nonzero(state.pinned)  # few pins: test only their velocities
+    hit = (state.v[b, i] != 0).any(axis=1)
+    if not hit.any():
+        return None
+    moving = np.zeros(state.pinned.shape, dtype=bool)
+    moving[b[hit], i[hit]] = True
     sel, i, j, k, rest, c = _pin_springs(model, moving.any(axis=0))
     x, v = state.x, state.v
     d = (x[:, i] - x[:, j]).astype(np.float64)
