@@ -270,13 +270,19 @@ def test_bench_scene_agrees_at_a_tiny_size():
     assert row["selfcollision_cost_ratio"] > 0 and row["rebuilds_per_call"] >= 0
 
 
-@pytest.mark.parametrize("iterations,cap", [(1, None), (2, 0.5), (3, None)])
-def test_fused_symplectic_contact_launch_equals_the_two_launches(monkeypatch, iterations, cap):
-    """Symplectic Euler with self-collision runs its substep inside the contact launch: bit for bit the
-    solver's own substep launch followed by the passes (FUSE_SYMPLECTIC=False), through contacts, ground
-    contact, stale lists rebuilt per copy, and the separation-speed cap."""
+@pytest.mark.parametrize("iterations,cap,per_launch", [(1, None, 1), (2, 0.5, 4), (3, None, 1)])
+def test_fused_symplectic_contact_launch_equals_the_two_launches(monkeypatch, iterations, cap, per_launch):
+    """Symplectic Euler with self-collision runs its substeps inside the contact launch (``per_launch`` of
+    them, parallel loops; 1: the small-scene serial launch): bit for bit the solver's own substep launch
+    followed by the passes (FUSE_SYMPLECTIC=False), through contacts, ground contact, stale lists rebuilt
+    per copy (a copy stops inside a launch and goes on after its rebuild), a substep count that is not a
+    multiple of ``per_launch``, and the separation-speed cap."""
     from tianim.physics import passes
     from tianim.physics.selfcollision import contacts_for
+
+    if per_launch > 1:
+        monkeypatch.setattr(passes, "SERIAL_MAX", 0)
+        monkeypatch.setattr(passes, "SC_SUBSTEPS_PER_LAUNCH", per_launch)
 
     model, _ = drop_scene()
     start = model.state(batch=2)
@@ -288,10 +294,10 @@ def test_fused_symplectic_contact_launch_equals_the_two_launches(monkeypatch, it
         monkeypatch.setattr(passes, "FUSE_SYMPLECTIC", fuse)
         solver = tp.SymplecticEuler(self_collision=sc)
         s = start.copy()
-        solver.step(model, s, 0.5 * solver.stable_dt(model), 1500)
+        solver.step(model, s, 0.5 * solver.stable_dt(model), 1502)
         out[fuse] = (s.x.copy(), s.v.copy(), contacts_for(sc, model, s).rebuilt.tolist())
     plain = start.copy()
-    tp.SymplecticEuler().step(model, plain, 0.5 * tp.stable_dt(model, "symplectic_euler"), 1500)
+    tp.SymplecticEuler().step(model, plain, 0.5 * tp.stable_dt(model, "symplectic_euler"), 1502)
     assert not np.array_equal(plain.x, out[True][0])  # contacts acted
     assert min(out[True][2]) > 1 and out[True][2] == out[False][2]
     assert np.array_equal(out[True][0], out[False][0]) and np.array_equal(out[True][1], out[False][1])

@@ -43,31 +43,40 @@ def _validity_check(real_name, dim, serial):
     T = ti.template()
 
     @ti.func
-    def check(x: T, xb: T, spread: T, run: T, margin):
+    def check(x: T, xb: T, spread: T, run: T, margin, lim: T, sub: ti.template(), chunks: ti.template()):
         # Are the neighbour lists still valid? The spread of the displacements since the build, per
-        # chunk of CHUNK particles (parallel), then per copy (selfcollision.Contacts docstring).
+        # chunk of CHUNK particles (parallel; chunks=False: the caller's loop wrote them), then per copy
+        # (selfcollision.Contacts docstring). sub >= 0 (a multi-substep launch): only copies with
+        # sub < lim[b] are checked, and a stale one stops after this substep (lim[b] = sub + 1).
         nch = spread.shape[1] // (2 * dim)
-        ti.loop_config(serialize=serial)
-        for b, c in ti.ndrange(x.shape[0], nch):
-            hi = ti.Vector([-1e30] * dim, dt=real)
-            lo = ti.Vector([1e30] * dim, dt=real)
-            for k in range(c * CHUNK, ti.min((c + 1) * CHUNK, x.shape[1])):
-                d = x[b, k] - xb[b, k]
-                hi = ti.max(hi, d)
-                lo = ti.min(lo, d)
-            for a in ti.static(range(dim)):
-                spread[b, 2 * dim * c + a] = hi[a]
-                spread[b, 2 * dim * c + dim + a] = lo[a]
+        if ti.static(chunks):
+            ti.loop_config(serialize=serial)
+            for b, c in ti.ndrange(x.shape[0], nch):
+                if ti.static(sub < 0) or sub < lim[b]:
+                    hi = ti.Vector([-1e30] * dim, dt=real)
+                    lo = ti.Vector([1e30] * dim, dt=real)
+                    for k in range(c * CHUNK, ti.min((c + 1) * CHUNK, x.shape[1])):
+                        d = x[b, k] - xb[b, k]
+                        hi = ti.max(hi, d)
+                        lo = ti.min(lo, d)
+                    for a in ti.static(range(dim)):
+                        spread[b, 2 * dim * c + a] = hi[a]
+                        spread[b, 2 * dim * c + dim + a] = lo[a]
         ti.loop_config(serialize=serial)
         for b in range(x.shape[0]):
-            hi = ti.Vector([-1e30] * dim, dt=real)
-            lo = ti.Vector([1e30] * dim, dt=real)
-            for c in range(nch):
-                for a in ti.static(range(dim)):
-                    hi[a] = ti.max(hi[a], spread[b, 2 * dim * c + a])
-                    lo[a] = ti.min(lo[a], spread[b, 2 * dim * c + dim + a])
-            w = hi - lo
-            run[b] = ti.cast(w.dot(w) <= margin * margin, ti.i32)
+            if ti.static(sub < 0) or sub < lim[b]:
+                hi = ti.Vector([-1e30] * dim, dt=real)
+                lo = ti.Vector([1e30] * dim, dt=real)
+                for c in range(nch):
+                    for a in ti.static(range(dim)):
+                        hi[a] = ti.max(hi[a], spread[b, 2 * dim * c + a])
+                        lo[a] = ti.min(lo[a], spread[b, 2 * dim * c + dim + a])
+                w = hi - lo
+                ok = ti.cast(w.dot(w) <= margin * margin, ti.i32)
+                run[b] = ok
+                if ti.static(sub >= 0):
+                    if ok == 0:
+                        lim[b] = sub + 1
 
     return check
 
@@ -149,7 +158,7 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
                 x[b, i] = W[b, i]
         if ti.static(sc_iters and check):
             # Are the neighbour lists still valid? (selfcollision.Contacts docstring)
-            validity(x, xb, spread, run, margin)
+            validity(x, xb, spread, run, margin, run, -1, True)
         for it in ti.static(range(sc_iters)):
             ti.loop_config(serialize=serial)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
@@ -175,7 +184,8 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
 
 
 @cached_variants
-def _symplectic_contact_kernel(real_name, dim, grid, colliders, spring_damping, medium_damping, sc_iters, serial):
+def _symplectic_contact_kernel(real_name, dim, grid, colliders, spring_damping, medium_damping, sc_iters, serial,
+                               n_sub):
     """One launch per substep for symplectic Euler with self-collision alone: the solver's fused substep
     (:func:`tianim.physics.kernels.substep_funcs`) from ``(x, v)`` into ``(xs, vs)``, the lists' validity
     check, then the contact sweeps, the last writing ``(x, v)`` and applying the colliders. The same
@@ -219,34 +229,51 @@ def _symplectic_contact_kernel(real_name, dim, grid, colliders, spring_damping, 
         vout[b, i] = vn
 
     @ti.kernel
-    def substep(x: vec_arr, v: vec_arr, xs: vec_arr, vs: vec_arr, Wp: vec_arr, dummy: work_arr, pinned: mask_arr,
-                P: real_arr, Tp: int_arr, coll: real2_arr, inv_mass: real_arr, nbr: i32_3, count: i32_2,
-                excl_off: int_arr, excl_idx: int_arr, h: real, thick: real, g_norm: real, nx: ti.i32,
-                k_excl: ti.i32, xb: vec_arr, spread: real2_arr, run: i32_1, margin: real, vcap: real):
+    def substeps(x: vec_arr, v: vec_arr, xs: vec_arr, vs: vec_arr, Wp: vec_arr, dummy: work_arr, pinned: mask_arr,
+                 P: real_arr, Tp: int_arr, coll: real2_arr, inv_mass: real_arr, nbr: i32_3, count: i32_2,
+                 excl_off: int_arr, excl_idx: int_arr, h: real, thick: real, g_norm: real, nx: ti.i32,
+                 k_excl: ti.i32, xb: vec_arr, spread: real2_arr, run: i32_1, margin: real, vcap: real, lim: i32_1):
         inv_h = 1 / h
-        ti.loop_config(serialize=serial)
-        for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-            xs[b, i], vs[b, i] = fused_symplectic(b, i, "x", "v", x, v, dummy, pinned, P, Tp, coll, h, nx)
-        check(xs, xb, spread, run, margin)
-        # sweep k reads src and writes dst; the sources alternate xs, Wp, xs, ...; the last writes (x, v)
-        for it in ti.static(range(sc_iters)):
+        # substep k acts on the copies with k < lim[b]; a copy whose lists go stale stops after its substep
+        for k in ti.static(range(n_sub)):
+            # the substep of each chunk of CHUNK particles, which also gathers the chunk's displacement
+            # spread for the validity check (max/min: exact in any order)
             ti.loop_config(serialize=serial)
-            for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                if ti.static(it == sc_iters - 1):
-                    if ti.static(it % 2 == 0):
-                        sweep(b, i, xs, x, vs, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
-                              thick, inv_h, run, vcap, coll, g_norm, h, True)
-                    else:
-                        sweep(b, i, Wp, x, vs, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
-                              thick, inv_h, run, vcap, coll, g_norm, h, True)
-                elif ti.static(it % 2 == 0):
-                    sweep(b, i, xs, Wp, vs, vs, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
-                          thick, inv_h, run, vcap, coll, g_norm, h, False)
-                else:
-                    sweep(b, i, Wp, xs, vs, vs, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
-                          thick, inv_h, run, vcap, coll, g_norm, h, False)
+            for b, c in ti.ndrange(x.shape[0], spread.shape[1] // (2 * dim)):
+                if k < lim[b]:
+                    hi = ti.Vector([-1e30] * dim, dt=real)
+                    lo = ti.Vector([1e30] * dim, dt=real)
+                    for i in range(c * CHUNK, ti.min((c + 1) * CHUNK, x.shape[1])):
+                        xi, vi = fused_symplectic(b, i, "x", "v", x, v, dummy, pinned, P, Tp, coll, h, nx)
+                        xs[b, i] = xi
+                        vs[b, i] = vi
+                        d = xi - xb[b, i]
+                        hi = ti.max(hi, d)
+                        lo = ti.min(lo, d)
+                    for a in ti.static(range(dim)):
+                        spread[b, 2 * dim * c + a] = hi[a]
+                        spread[b, 2 * dim * c + dim + a] = lo[a]
+            check(xs, xb, spread, run, margin, lim, k, False)
+            # sweep j reads src and writes dst; the sources alternate xs, Wp, xs, ...; the last writes (x, v)
+            for it in ti.static(range(sc_iters)):
+                ti.loop_config(serialize=serial)
+                for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                    if k < lim[b]:
+                        if ti.static(it == sc_iters - 1):
+                            if ti.static(it % 2 == 0):
+                                sweep(b, i, xs, x, vs, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl,
+                                      nx, thick, inv_h, run, vcap, coll, g_norm, h, True)
+                            else:
+                                sweep(b, i, Wp, x, vs, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl,
+                                      nx, thick, inv_h, run, vcap, coll, g_norm, h, True)
+                        elif ti.static(it % 2 == 0):
+                            sweep(b, i, xs, Wp, vs, vs, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
+                                  thick, inv_h, run, vcap, coll, g_norm, h, False)
+                        else:
+                            sweep(b, i, Wp, xs, vs, vs, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
+                                  thick, inv_h, run, vcap, coll, g_norm, h, False)
 
-    return substep
+    return substeps
 
 
 def has_passes(model, self_collision, strain_limit) -> bool:
@@ -267,6 +294,9 @@ def _empty(shape):
 #: Run symplectic Euler with self-collision alone in one launch per substep (:func:`_symplectic_contact_kernel`);
 #: False runs the solver's substep launch and ``post`` (the same results bit for bit: the tests compare them).
 FUSE_SYMPLECTIC = True
+#: Substeps per launch of that kernel on scenes above SERIAL_MAX particles x copies (the loops are unrolled:
+#: compile time grows with it; small scenes run one substep per launch).
+SC_SUBSTEPS_PER_LAUNCH = 8
 
 
 def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_collision, strain_limit, buffer,
@@ -318,20 +348,26 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
     fuse = (FUSE_SYMPLECTIC and method == "symplectic_euler" and contacts is not None and bend_kind is None
             and not strain_iters)
     if fuse:
-        substep = _symplectic_contact_kernel(dtype.name, model.dim, grid, len(model.colliders) > 0,
-                                             model.has_spring_damping, model.medium_damping > 0, sc_iters, serial)
+        n_sub = 1 if serial else SC_SUBSTEPS_PER_LAUNCH
+        kernel = _symplectic_contact_kernel(dtype.name, model.dim, grid, len(model.colliders) > 0,
+                                            model.has_spring_damping, model.medium_damping > 0, sc_iters, serial, n_sub)
         xs, vs = buffer("passes_xs", state.x.shape, dtype), buffer("passes_vs", state.x.shape, dtype)
         dummy = buffer("passes_dummy", (1, 1, 1, model.dim), dtype)
-        for _ in range(int(substeps)):
-            substep(state.x, state.v, xs, vs, W, dummy, pinned, data["params"], data["topo"], data["coll"],
-                    data["inv_mass"], contacts.nbr, contacts.count, excl_off, excl_idx, h, thick, g_norm, nx, k_excl,
-                    contacts.x_build, spread, run, margin, vcap)
-            if not run.all():
+        lim = buffer("passes_lim", (state.batch,), np.int32)
+        left = np.full(state.batch, int(substeps), np.int64)
+        while left.any():  # each copy advances its own substeps; one whose lists go stale stops to rebuild them
+            np.minimum(left, n_sub, out=lim, casting="unsafe")
+            run[...] = 1
+            kernel(state.x, state.v, xs, vs, W, dummy, pinned, data["params"], data["topo"], data["coll"],
+                   data["inv_mass"], contacts.nbr, contacts.count, excl_off, excl_idx, h, thick, g_norm, nx, k_excl,
+                   contacts.x_build, spread, run, margin, vcap, lim)
+            if not run.all():  # stopped after their integration: rebuild, then their contacts (and colliders)
                 contacts.rebuild(state.x, np.flatnonzero(run == 0))
                 np.subtract(1, run, out=run)
                 fix(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], contacts.nbr,
                     contacts.count, excl_off, excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl,
                     contacts.x_build, spread, run, margin, vcap)
+            left -= lim
         return
     for _ in range(int(substeps)):
         if bend_kind == "kick":
