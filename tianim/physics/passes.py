@@ -9,8 +9,18 @@ its call one substep at a time, and around each substep:
 3. the ``post`` kernel, one launch, each loop parallel over (copy, particle) and ending in a
    barrier: XPBD bending (6 colours), ``strain.iterations`` Jacobi sweeps of the strain limit,
    ``self_collision.iterations`` Jacobi sweeps of the contact projection (on candidate lists the
-   neighbour grid rebuilds when needed, for the stale copies only), then the colliders again (so that nothing the passes moved
-   ends inside a collider).
+   neighbour grid rebuilds when needed, for the stale copies only), then the colliders again (so
+   that nothing the passes moved ends inside a collider).
+
+Symplectic Euler with self-collision and no other pass (the common cloth case) runs all of it in one
+kernel instead (:func:`_symplectic_contact_kernel`): per substep the solver's fused substep over
+chunks of particles (which also gathers each chunk's displacement spread), the per-copy validity
+test, and the sweeps, the last writing ``(x, v)`` and applying the colliders: 4 parallel loops
+instead of 7 in two launches, and :data:`SC_SUBSTEPS_PER_LAUNCH` substeps per launch on large scenes.
+A copy whose lists go stale stops inside the launch after its integration; Python rebuilds its lists,
+runs its contacts (the ``fix`` launch) and it goes on in the next launch, each copy counting its own
+substeps. The arithmetic per particle is the same as the two-launch path (bit-identical; the tests
+compare them with ``FUSE_SYMPLECTIC = False``).
 
 Without these features none of this runs: the solvers launch exactly the kernels they launched
 before, and results are bit-identical to theirs. Every pass gathers per particle in a fixed order
