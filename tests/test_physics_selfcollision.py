@@ -164,6 +164,16 @@ def test_bit_identical_with_one_and_two_threads():
             solver = tp.make_solver(method, self_collision=tp.SelfCollision(0.016), strain_limit=0.1)
             solver.step(m, s, 1e-3 if method == "xpbd" else 2e-4, 100)
             h.update(s.x.tobytes()); h.update(s.v.tobytes())
+        # symplectic Euler's fused contact launch, several substeps per launch, parallel loops
+        from tianim.physics import passes
+        passes.SERIAL_MAX, passes.SC_SUBSTEPS_PER_LAUNCH = 0, 4
+        m = tp.cloth(12, 12, size=(0.3, 0.3), total_mass=0.05, stiffness=(100.0, 30.0, 3.0), pins="none",
+                     plane="xy", origin=(-0.15, 0.32, 0.0), colliders=[tp.Ground(friction=0.5)])
+        s = m.state(batch=2)
+        s.x[..., 2] += np.random.default_rng(0).normal(0, 0.003, s.x.shape[:2]).astype(np.float32)
+        solver = tp.SymplecticEuler(self_collision=tp.SelfCollision(0.016, margin=0.004))
+        solver.step(m, s, 0.5 * solver.stable_dt(m), 1002)
+        h.update(s.x.tobytes()); h.update(s.v.tobytes())
         print(h.hexdigest())
     """)
     one, two = digests_by_thread_count(script)
