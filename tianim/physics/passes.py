@@ -305,8 +305,10 @@ def _empty(shape):
 #: False runs the solver's substep launch and ``post`` (the same results bit for bit: the tests compare them).
 FUSE_SYMPLECTIC = True
 #: Substeps per launch of that kernel on scenes above SERIAL_MAX particles x copies (the loops are unrolled:
-#: compile time grows with it; small scenes run one substep per launch).
-SC_SUBSTEPS_PER_LAUNCH = 8
+#: compile time grows with it; small scenes run one substep per launch). Measured on the 128x128 bench
+#: cloth, 2 noisy cores: cost ratio to the plain substep 2.1 at 4 and 2.2 at 8 (3.3 at 1); first compile
+#: 3.3 s at 4, 8.9 s at 8.
+SC_SUBSTEPS_PER_LAUNCH = 4
 
 
 def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_collision, strain_limit, buffer,
