@@ -248,7 +248,8 @@ class _Explicit(Solver):
 
     A model with bending (``tp.cloth(..., bending=B)``) gets the bending force as a kick before
     each substep (:mod:`tianim.physics.bending`). With any of the three the call runs one substep
-    per launch (:mod:`tianim.physics.passes`); without them nothing changes.
+    per launch (:mod:`tianim.physics.passes`; symplectic Euler with self-collision alone runs its
+    substeps inside the contact kernel, several per launch); without them nothing changes.
     """
 
     def __init__(self, layout: str = "auto", watchdog=True, self_collision=None, strain_limit=None):
