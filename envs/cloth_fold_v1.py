@@ -59,8 +59,8 @@ the vertical by an angle uniform in [-pi/4, pi/4]; pickers at the middle of corn
 
 ## Episode end
 
-Terminates only if a copy's simulation fails (non-finite values: ``info["diverged"]``, the
-copy is put back to the start of the step); truncated after 100 steps (SoftGym's horizon).
+Terminates only if a copy's simulation fails (non-finite values or energy the solver created,
+:class:`tianim.physics.Watchdog`: ``info["diverged"]``, the copy is put back to the start of the step); truncated after 100 steps (SoftGym's horizon).
 
 ## Physics (fixed for version 1)
 

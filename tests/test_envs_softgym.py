@@ -367,3 +367,42 @@ def test_a_diverged_copy_goes_back_to_the_start_of_its_step_and_ends_alone():
     assert np.array_equal(obs_d[1], start[1])  # back to the start of the step, pickers included
     assert np.isfinite(sim.state.x).all() and (sim.pickers.held[1] == -1).all()
     assert np.array_equal(obs_d[[0, 2]], obs_c[[0, 2]]) and np.array_equal(r_d[[0, 2]], r_c[[0, 2]])
+
+
+@pytest.mark.parametrize("env_id", ["tianim/ClothFold-v1", "tianim/RopeFlatten-v0"])
+def test_energy_the_solver_creates_in_one_copy_ends_that_copy_alone(env_id):
+    """A faulty solver in copy 1: every call it adds 3 m/s upward to copy 1's free particles (energy
+    created within the call, finite values throughout, so only the energy watchdog can see it). The
+    watchdog's CUSUM catches it, copy 1 goes back to the start of its step and terminates, and the
+    other copies are bit for bit those of a run without the fault."""
+    n = 3
+    disturbed = gym.make_vec(env_id, num_envs=n)
+    calm = gym.make_vec(env_id, num_envs=n)
+    sim = disturbed.unwrapped._sim
+    assert sim.solver.watchdog.growth is not None  # the energy check is on in the env
+    advance, reasons = sim.solver._advance, []
+    step = sim.solver._step
+
+    def wrapped(model, state, dt, substeps):
+        out = advance(model, state, dt, substeps)
+        state.v[1, :, 1] += np.float32(3.0) * ~state.pinned[1]
+        return out
+
+    def recorded(*args):
+        stats = step(*args)
+        reasons.append(stats.reason)
+        return stats
+
+    sim.solver._advance, sim.solver._step = wrapped, recorded
+    start, _ = disturbed.reset(seed=3)
+    calm.reset(seed=3)
+    a = np.random.default_rng(2).uniform(-1, 1, (n, 8)).astype(np.float32)
+    obs_d, r_d, term_d, _, info_d = disturbed.step(a)
+    obs_c, r_c, term_c, _, info_c = calm.step(a)
+    assert term_d.tolist() == [False, True, False] and info_d["diverged"].tolist() == [False, True, False]
+    assert not term_c.any() and not info_c["diverged"].any()
+    assert any(r is not None and "energy grew" in r and "non-finite" not in r for r in reasons)
+    assert np.array_equal(obs_d[1], start[1])  # back to the start of the step, pickers included
+    assert np.array_equal(obs_d[[0, 2]], obs_c[[0, 2]]) and np.array_equal(r_d[[0, 2]], r_c[[0, 2]])
+    s_d, s_c = sim.state, calm.unwrapped._sim.state
+    assert np.array_equal(s_d.x[[0, 2]], s_c.x[[0, 2]]) and np.array_equal(s_d.v[[0, 2]], s_c.v[[0, 2]])

@@ -99,6 +99,37 @@ def test_results_do_not_depend_on_the_neighbour_list_schedule():
     assert np.array_equal(out[0], out[1])
 
 
+def test_a_batch_rebuilds_only_its_stale_copies():
+    """Copy 0 lies still on the ground, copy 1 is dropped with its own noise: the dropped copy's lists go stale
+    and are rebuilt, the resting copy's never are (its list from the first build stays valid), and each copy's
+    rebuilds and results are those of the copy run alone, bit for bit."""
+    from tianim.physics.selfcollision import contacts_for
+
+    model, drop = drop_scene()
+    rest = tp.cloth(N, N, size=(0.3, 0.3), total_mass=0.05, stiffness=(100.0, 30.0, 3.0), pins="none", plane="xz",
+                    origin=(-0.15, 0.0, -0.15), colliders=[tp.Ground(friction=0.5)], medium_damping=2e-3)
+    sc = tp.SelfCollision(THICKNESS)
+    batch = model.state(batch=2)
+    batch.x[0] = rest.positions  # same topology and masses, flat on the ground: nothing moves relative
+    batch.x[1] = drop.x[0]
+    singles = []
+    for k in range(2):
+        s = model.state()
+        s.x[0] = batch.x[k]
+        singles.append(s)
+    solver = tp.XPBD(self_collision=sc)
+    for _ in range(4):
+        solver.step(model, batch, 1e-3, 100)
+        for s in singles:
+            solver.step(model, s, 1e-3, 100)
+    alone = [int(contacts_for(sc, model, s).rebuilt[0]) for s in singles]
+    together = contacts_for(sc, model, batch).rebuilt.tolist()
+    assert alone[0] == 1 and alone[1] > 3  # the resting copy: its first build only
+    assert together == alone
+    for k, s in enumerate(singles):
+        assert np.array_equal(s.x[0], batch.x[k]) and np.array_equal(s.v[0], batch.v[k]), k
+
+
 def test_batch_equals_separate_runs_with_every_feature_on():
     model, _ = drop_scene()
     model = tp.cloth(N, N, size=(0.3, 0.3), total_mass=0.05, stiffness=(100.0, 30.0, 3.0), pins="none", plane="xy",
@@ -133,6 +164,16 @@ def test_bit_identical_with_one_and_two_threads():
             solver = tp.make_solver(method, self_collision=tp.SelfCollision(0.016), strain_limit=0.1)
             solver.step(m, s, 1e-3 if method == "xpbd" else 2e-4, 100)
             h.update(s.x.tobytes()); h.update(s.v.tobytes())
+        # symplectic Euler's fused contact launch, several substeps per launch, parallel loops
+        from tianim.physics import passes
+        passes.SERIAL_MAX, passes.SC_SUBSTEPS_PER_LAUNCH = 0, 4
+        m = tp.cloth(12, 12, size=(0.3, 0.3), total_mass=0.05, stiffness=(100.0, 30.0, 3.0), pins="none",
+                     plane="xy", origin=(-0.15, 0.32, 0.0), colliders=[tp.Ground(friction=0.5)])
+        s = m.state(batch=2)
+        s.x[..., 2] += np.random.default_rng(0).normal(0, 0.003, s.x.shape[:2]).astype(np.float32)
+        solver = tp.SymplecticEuler(self_collision=tp.SelfCollision(0.016, margin=0.004))
+        solver.step(m, s, 0.5 * solver.stable_dt(m), 1002)
+        h.update(s.x.tobytes()); h.update(s.v.tobytes())
         print(h.hexdigest())
     """)
     one, two = digests_by_thread_count(script)
@@ -237,3 +278,36 @@ def test_bench_scene_agrees_at_a_tiny_size():
     assert selfcollision_agreement(n=16) == 0.0
     row = selfcollision_row(n=12, repeats=1, substeps=8)
     assert row["selfcollision_cost_ratio"] > 0 and row["rebuilds_per_call"] >= 0
+
+
+@pytest.mark.parametrize("iterations,cap,per_launch", [(1, None, 1), (2, 0.5, 4), (3, None, 1)])
+def test_fused_symplectic_contact_launch_equals_the_two_launches(monkeypatch, iterations, cap, per_launch):
+    """Symplectic Euler with self-collision runs its substeps inside the contact launch (``per_launch`` of
+    them, parallel loops; 1: the small-scene serial launch): bit for bit the solver's own substep launch
+    followed by the passes (FUSE_SYMPLECTIC=False), through contacts, ground contact, stale lists rebuilt
+    per copy (a copy stops inside a launch and goes on after its rebuild), a substep count that is not a
+    multiple of ``per_launch``, and the separation-speed cap."""
+    from tianim.physics import passes
+    from tianim.physics.selfcollision import contacts_for
+
+    if per_launch > 1:
+        monkeypatch.setattr(passes, "SERIAL_MAX", 0)
+        monkeypatch.setattr(passes, "SC_SUBSTEPS_PER_LAUNCH", per_launch)
+
+    model, _ = drop_scene()
+    start = model.state(batch=2)
+    start.x[:, :, 2] += np.random.default_rng(3).normal(0, 0.003, start.x.shape[:2]).astype(np.float32)
+    start.x[1, :, 1] -= 0.3  # copy 1 starts near the ground: it folds onto itself sooner
+    sc = tp.SelfCollision(THICKNESS, iterations=iterations, margin=0.004, max_separation_speed=cap)
+    out = {}
+    for fuse in (True, False):
+        monkeypatch.setattr(passes, "FUSE_SYMPLECTIC", fuse)
+        solver = tp.SymplecticEuler(self_collision=sc)
+        s = start.copy()
+        solver.step(model, s, 0.5 * solver.stable_dt(model), 1502)
+        out[fuse] = (s.x.copy(), s.v.copy(), contacts_for(sc, model, s).rebuilt.tolist())
+    plain = start.copy()
+    tp.SymplecticEuler().step(model, plain, 0.5 * tp.stable_dt(model, "symplectic_euler"), 1502)
+    assert not np.array_equal(plain.x, out[True][0])  # contacts acted
+    assert min(out[True][2]) > 1 and out[True][2] == out[False][2]
+    assert np.array_equal(out[True][0], out[False][0]) and np.array_equal(out[True][1], out[False][1])

@@ -68,3 +68,48 @@ def test_small_scene_energy_matches_diagnostics():
     state.x += 0.01 * np.random.default_rng(1).normal(size=state.x.shape)
     e = tp.energy(model, state)
     np.testing.assert_allclose(fast_energy(model, state), np.stack([e["kinetic"], e["spring"], e["gravity"]], 1), rtol=1e-12)
+
+
+@pytest.mark.parametrize("batch", [1, 3])  # a 64x64 cloth: NumPy (one copy) and kernel (batch) paths
+def test_energy_without_the_spring_column_matches_diagnostics(batch):
+    """XPBD's criterion (kinetic + gravity) skips the spring sum: the other two columns are unchanged
+    and the spring column is 0; the threshold between the two paths depends on the work asked."""
+    from tianim.physics import watchdog as wd
+
+    model = tp.cloth(64, 64)
+    state = model.state(batch=batch, dtype=np.float32)
+    state.v[...] = np.random.default_rng(2).normal(0, 0.1, state.v.shape)
+    state.pinned[:, :5] = True
+    e = tp.energy(model, state)
+    got = fast_energy(model, state, springs=False)
+    np.testing.assert_allclose(got[:, [0, 2]], np.stack([e["kinetic"], e["gravity"]], 1), rtol=1e-5)
+    assert np.all(got[:, 1] == 0.0)
+    assert wd._use_numpy(model, state, springs=False) == (batch == 1)
+    assert not wd._use_numpy(model, state, springs=True)
+
+
+def test_xpbd_watchdog_sees_energy_created_within_calls_on_a_64x64_cloth():
+    """The spring-free criterion still catches energy the solver creates (a kick inside every call)
+    and rolls back exactly that copy; an edit between calls (the same kick) is not counted."""
+    model = tp.cloth(64, 64)
+    solver = tp.XPBD(watchdog=tp.Watchdog(on_divergence="rollback"))
+    state = model.state(batch=2, dtype=np.float32)
+    for _ in range(3):  # kicks between calls: user edits, raise the reference, never flagged
+        state.v[1, :, 1] += np.float32(5.0) * ~state.pinned[1]
+        assert not solver.step(model, state, 1e-3, 2).diverged.any()
+    advance = solver._advance
+
+    def faulty(model, state, dt, substeps):
+        advance(model, state, dt, substeps)
+        state.v[0, :, 2] += np.float32(5.0) * ~state.pinned[0]
+
+    solver._advance = faulty
+    for calls in range(1, 21):
+        before = state.snapshot()
+        stats = solver.step(model, state, 1e-3, 2)
+        if stats.diverged.any():
+            break
+    assert calls > 1  # one kick is below the bound: the CUSUM summed the kicks across calls
+    assert stats.diverged.tolist() == [True, False] and "energy grew" in stats.reason
+    assert np.array_equal(state.x[0], before["x"][0]) and np.array_equal(state.v[0], before["v"][0])
+    assert not np.array_equal(state.x[1], before["x"][1])  # the sound copy kept its step

@@ -75,11 +75,12 @@ def frame_kernel(real_np, dim: int, method: str, layout: str, grid: bool, collid
 
 
 @cached_variants
-def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medium_damping):
+def substep_funcs(real_name, dim, grid, colliders, spring_damping, medium_damping):
+    """The per-particle ``ti.func``s the integrators are made of: ``(load, accel, collide, fused_symplectic,
+    gravity_norm)``; :func:`fused_symplectic` is one whole symplectic Euler substep of one particle, which
+    :mod:`tianim.physics.passes` also runs inside its own launch (self-collision)."""
     t = kernel_types(real_name, dim)
-    ti, real, vec_arr, work_arr = t.ti, t.real, t.vec_arr, t.work_arr
-    real_arr, int_arr, coll_arr, mask_arr = t.real_arr, t.int_arr, t.real2_arr, t.mask_arr
-    pre_phases, step_phases = PHASES[method]
+    ti, real = t.ti, t.real
     n_stencil = len(GRID_STENCIL)
 
     @ti.func
@@ -180,6 +181,18 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
             if pinned[b, i] == 0:
                 xi, vi = respond(xi, vi, coll, gravity_norm(P), dt)
         return xi, vi
+
+    return load, accel, collide, fused_symplectic, gravity_norm
+
+
+@cached_variants
+def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medium_damping):
+    t = kernel_types(real_name, dim)
+    ti, real, vec_arr, work_arr = t.ti, t.real, t.vec_arr, t.work_arr
+    real_arr, int_arr, coll_arr, mask_arr = t.real_arr, t.int_arr, t.real2_arr, t.mask_arr
+    pre_phases, step_phases = PHASES[method]
+    load, accel, collide, fused_symplectic, gravity_norm = substep_funcs(
+        real_name, dim, grid, colliders, spring_damping, medium_damping)
 
     @ti.func
     def phase(p: ti.template(), b, i, x: ti.template(), v: ti.template(), W: ti.template(), pinned: ti.template(),

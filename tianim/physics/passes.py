@@ -9,8 +9,18 @@ its call one substep at a time, and around each substep:
 3. the ``post`` kernel, one launch, each loop parallel over (copy, particle) and ending in a
    barrier: XPBD bending (6 colours), ``strain.iterations`` Jacobi sweeps of the strain limit,
    ``self_collision.iterations`` Jacobi sweeps of the contact projection (on candidate lists the
-   neighbour grid rebuilds when needed), then the colliders again (so that nothing the passes moved
-   ends inside a collider).
+   neighbour grid rebuilds when needed, for the stale copies only), then the colliders again (so
+   that nothing the passes moved ends inside a collider).
+
+Symplectic Euler with self-collision and no other pass (the common cloth case) runs all of it in one
+kernel instead (:func:`_symplectic_contact_kernel`): per substep the solver's fused substep over
+chunks of particles (which also gathers each chunk's displacement spread), the per-copy validity
+test, and the sweeps, the last writing ``(x, v)`` and applying the colliders: 4 parallel loops
+instead of 7 in two launches, and :data:`SC_SUBSTEPS_PER_LAUNCH` substeps per launch on large scenes.
+A copy whose lists go stale stops inside the launch after its integration; Python rebuilds its lists,
+runs its contacts (the ``fix`` launch) and it goes on in the next launch, each copy counting its own
+substeps. The arithmetic per particle is the same as the two-launch path (bit-identical; the tests
+compare them with ``FUSE_SYMPLECTIC = False``).
 
 Without these features none of this runs: the solvers launch exactly the kernels they launched
 before, and results are bit-identical to theirs. Every pass gathers per particle in a fixed order
@@ -33,6 +43,55 @@ CHUNK = 256
 
 
 @cached_variants
+def _validity_check(real_name, dim, serial):
+    """``ti.func check(x, xb, spread, run, margin)``: ``run[b] = 1`` where copy b's neighbour lists are still
+    valid for positions x: the spread of the displacements since the build ``x - xb``, per chunk of CHUNK
+    particles (parallel), then per copy (:class:`tianim.physics.selfcollision.Contacts`). Two parallel loops;
+    call it at the top level of a kernel."""
+    t = kernel_types(real_name, dim)
+    ti, real = t.ti, t.real
+    T = ti.template()
+
+    @ti.func
+    def check(x: T, xb: T, spread: T, run: T, margin, lim: T, sub: ti.template(), chunks: ti.template()):
+        # Are the neighbour lists still valid? The spread of the displacements since the build, per
+        # chunk of CHUNK particles (parallel; chunks=False: the caller's loop wrote them), then per copy
+        # (selfcollision.Contacts docstring). sub >= 0 (a multi-substep launch): only copies with
+        # sub < lim[b] are checked, and a stale one stops after this substep (lim[b] = sub + 1).
+        nch = spread.shape[1] // (2 * dim)
+        if ti.static(chunks):
+            ti.loop_config(serialize=serial)
+            for b, c in ti.ndrange(x.shape[0], nch):
+                if ti.static(sub < 0) or sub < lim[b]:
+                    hi = ti.Vector([-1e30] * dim, dt=real)
+                    lo = ti.Vector([1e30] * dim, dt=real)
+                    for k in range(c * CHUNK, ti.min((c + 1) * CHUNK, x.shape[1])):
+                        d = x[b, k] - xb[b, k]
+                        hi = ti.max(hi, d)
+                        lo = ti.min(lo, d)
+                    for a in ti.static(range(dim)):
+                        spread[b, 2 * dim * c + a] = hi[a]
+                        spread[b, 2 * dim * c + dim + a] = lo[a]
+        ti.loop_config(serialize=serial)
+        for b in range(x.shape[0]):
+            if ti.static(sub < 0) or sub < lim[b]:
+                hi = ti.Vector([-1e30] * dim, dt=real)
+                lo = ti.Vector([1e30] * dim, dt=real)
+                for c in range(nch):
+                    for a in ti.static(range(dim)):
+                        hi[a] = ti.max(hi[a], spread[b, 2 * dim * c + a])
+                        lo[a] = ti.min(lo[a], spread[b, 2 * dim * c + dim + a])
+                w = hi - lo
+                ok = ti.cast(w.dot(w) <= margin * margin, ti.i32)
+                run[b] = ok
+                if ti.static(sub >= 0):
+                    if ok == 0:
+                        lim[b] = sub + 1
+
+    return check
+
+
+@cached_variants
 def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders, serial, check=True):
     """``(pre, post)`` kernels; ``bend_kind``: None, "kick" (explicit) or "xpbd"; ``check``: the contact
     sweeps first test the neighbour lists (``run[b] = 1`` where still valid) and act only on valid copies;
@@ -47,6 +106,7 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
     strain_gather = strain_funcs(real_name, dim, grid)
     contact_gather = contact_funcs(real_name, dim, grid)
     respond = contact_response(real_name, dim)
+    validity = _validity_check(real_name, dim, serial)
 
     @ti.kernel
     def pre(x: vec_arr, v: vec_arr, pinned: mask_arr, inv_mass: real_arr, bp: real_arr, h: real, nx: ti.i32,
@@ -107,30 +167,8 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 x[b, i] = W[b, i]
         if ti.static(sc_iters and check):
-            # Are the neighbour lists still valid? The spread of the displacements since the build, per
-            # chunk of CHUNK particles (parallel), then per copy (selfcollision.Contacts docstring).
-            nch = spread.shape[1] // (2 * dim)
-            ti.loop_config(serialize=serial)
-            for b, c in ti.ndrange(x.shape[0], nch):
-                hi = ti.Vector([-1e30] * dim, dt=real)
-                lo = ti.Vector([1e30] * dim, dt=real)
-                for k in range(c * CHUNK, ti.min((c + 1) * CHUNK, x.shape[1])):
-                    d = x[b, k] - xb[b, k]
-                    hi = ti.max(hi, d)
-                    lo = ti.min(lo, d)
-                for a in ti.static(range(dim)):
-                    spread[b, 2 * dim * c + a] = hi[a]
-                    spread[b, 2 * dim * c + dim + a] = lo[a]
-            ti.loop_config(serialize=serial)
-            for b in range(x.shape[0]):
-                hi = ti.Vector([-1e30] * dim, dt=real)
-                lo = ti.Vector([1e30] * dim, dt=real)
-                for c in range(nch):
-                    for a in ti.static(range(dim)):
-                        hi[a] = ti.max(hi[a], spread[b, 2 * dim * c + a])
-                        lo[a] = ti.min(lo[a], spread[b, 2 * dim * c + dim + a])
-                w = hi - lo
-                run[b] = ti.cast(w.dot(w) <= margin * margin, ti.i32)
+            # Are the neighbour lists still valid? (selfcollision.Contacts docstring)
+            validity(x, xb, spread, run, margin, run, -1, True)
         for it in ti.static(range(sc_iters)):
             ti.loop_config(serialize=serial)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
@@ -155,6 +193,99 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
     return pre, post
 
 
+@cached_variants
+def _symplectic_contact_kernel(real_name, dim, grid, colliders, spring_damping, medium_damping, sc_iters, serial,
+                               n_sub):
+    """One launch per substep for symplectic Euler with self-collision alone: the solver's fused substep
+    (:func:`tianim.physics.kernels.substep_funcs`) from ``(x, v)`` into ``(xs, vs)``, the lists' validity
+    check, then the contact sweeps, the last writing ``(x, v)`` and applying the colliders. The same
+    arithmetic, in the same order per particle, as the solver's substep launch followed by ``post``
+    (bit-identical), in 3 + ``sc_iters`` parallel loops instead of 7 in two launches."""
+    from tianim.physics.kernels import substep_funcs
+
+    t = kernel_types(real_name, dim)
+    ti, real, vec_arr, work_arr = t.ti, t.real, t.vec_arr, t.work_arr
+    real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    i32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+    T = ti.template()
+    _load, _accel, _collide, fused_symplectic, _gn = substep_funcs(real_name, dim, grid, colliders, spring_damping,
+                                                                  medium_damping)
+    contact_gather = contact_funcs(real_name, dim, grid)
+    respond = contact_response(real_name, dim)
+    check = _validity_check(real_name, dim, serial)
+
+    @ti.func
+    def sweep(b, i, src: T, dst: T, vin: T, vout: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T,
+              excl_idx: T, k_excl, nx, thick, inv_h, run: T, vcap, coll: T, g_norm, h, final: ti.template()):
+        xn = src[b, i]
+        vn = vin[b, i]
+        if run[b] != 0:
+            corr, cnt = contact_gather(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
+                                       thick)
+            corr /= ti.cast(ti.max(cnt, 1), real)
+            xn = src[b, i] + corr
+            dv = inv_h * corr
+            if vcap > 0:
+                speed = dv.norm()
+                if speed > vcap:
+                    dv *= vcap / speed
+            vn = vin[b, i] + dv
+            if ti.static(final and colliders):
+                if pinned[b, i] == 0:
+                    xn, vn = respond(xn, vn, coll, g_norm, h)
+        dst[b, i] = xn
+        vout[b, i] = vn
+
+    @ti.kernel
+    def substeps(x: vec_arr, v: vec_arr, xs: vec_arr, vs: vec_arr, Wp: vec_arr, dummy: work_arr, pinned: mask_arr,
+                 P: real_arr, Tp: int_arr, coll: real2_arr, inv_mass: real_arr, nbr: i32_3, count: i32_2,
+                 excl_off: int_arr, excl_idx: int_arr, h: real, thick: real, g_norm: real, nx: ti.i32,
+                 k_excl: ti.i32, xb: vec_arr, spread: real2_arr, run: i32_1, margin: real, vcap: real, lim: i32_1):
+        inv_h = 1 / h
+        # substep k acts on the copies with k < lim[b]; a copy whose lists go stale stops after its substep
+        for k in ti.static(range(n_sub)):
+            # the substep of each chunk of CHUNK particles, which also gathers the chunk's displacement
+            # spread for the validity check (max/min: exact in any order)
+            ti.loop_config(serialize=serial)
+            for b, c in ti.ndrange(x.shape[0], spread.shape[1] // (2 * dim)):
+                if k < lim[b]:
+                    hi = ti.Vector([-1e30] * dim, dt=real)
+                    lo = ti.Vector([1e30] * dim, dt=real)
+                    for i in range(c * CHUNK, ti.min((c + 1) * CHUNK, x.shape[1])):
+                        xi, vi = fused_symplectic(b, i, "x", "v", x, v, dummy, pinned, P, Tp, coll, h, nx)
+                        xs[b, i] = xi
+                        vs[b, i] = vi
+                        d = xi - xb[b, i]
+                        hi = ti.max(hi, d)
+                        lo = ti.min(lo, d)
+                    for a in ti.static(range(dim)):
+                        spread[b, 2 * dim * c + a] = hi[a]
+                        spread[b, 2 * dim * c + dim + a] = lo[a]
+            check(xs, xb, spread, run, margin, lim, k, False)
+            # sweep j reads src and writes dst; the sources alternate xs, Wp, xs, ...; the last writes (x, v)
+            for it in ti.static(range(sc_iters)):
+                ti.loop_config(serialize=serial)
+                for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                    if k < lim[b]:
+                        if ti.static(it == sc_iters - 1):
+                            if ti.static(it % 2 == 0):
+                                sweep(b, i, xs, x, vs, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl,
+                                      nx, thick, inv_h, run, vcap, coll, g_norm, h, True)
+                            else:
+                                sweep(b, i, Wp, x, vs, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl,
+                                      nx, thick, inv_h, run, vcap, coll, g_norm, h, True)
+                        elif ti.static(it % 2 == 0):
+                            sweep(b, i, xs, Wp, vs, vs, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
+                                  thick, inv_h, run, vcap, coll, g_norm, h, False)
+                        else:
+                            sweep(b, i, Wp, xs, vs, vs, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
+                                  thick, inv_h, run, vcap, coll, g_norm, h, False)
+
+    return substeps
+
+
 def has_passes(model, self_collision, strain_limit) -> bool:
     """Whether a solver step of ``model`` with these options runs any pass."""
     return getattr(model, "bending", None) is not None or self_collision is not None or strain_limit is not None
@@ -170,10 +301,22 @@ def _empty(shape):
     return a
 
 
-def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_collision, strain_limit, buffer):
+#: Run symplectic Euler with self-collision alone in one launch per substep (:func:`_symplectic_contact_kernel`);
+#: False runs the solver's substep launch and ``post`` (the same results bit for bit: the tests compare them).
+FUSE_SYMPLECTIC = True
+#: Substeps per launch of that kernel on scenes above SERIAL_MAX particles x copies (the loops are unrolled:
+#: compile time grows with it; small scenes run one substep per launch). Measured on the 128x128 bench
+#: cloth, 2 noisy cores: cost ratio to the plain substep 2.1 at 4 and 2.2 at 8 (3.3 at 1); first compile
+#: 3.3 s at 4, 8.9 s at 8.
+SC_SUBSTEPS_PER_LAUNCH = 4
+
+
+def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_collision, strain_limit, buffer,
+                    method=None):
     """Advance ``substeps`` substeps of ``dt``: ``advance_one()`` runs one substep of the solver, the
     passes (module docstring) run around it. ``explicit``: bending as a kick before the substep
-    (explicit solvers) or as an XPBD pass after it."""
+    (explicit solvers) or as an XPBD pass after it. ``method``: the solver's name; symplectic Euler with
+    self-collision and no other pass fuses its substep into the contact launch."""
     bend = model.bending
     grid = model.grid is not None
     bend_kind = None if bend is None else ("kick" if explicit else "xpbd")
@@ -214,6 +357,30 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
                               False)
     else:
         spread, run, margin = np.zeros((1, 2), dtype), _empty((1,)), real(0)
+    fuse = (FUSE_SYMPLECTIC and method == "symplectic_euler" and contacts is not None and bend_kind is None
+            and not strain_iters)
+    if fuse:
+        n_sub = 1 if serial else SC_SUBSTEPS_PER_LAUNCH
+        kernel = _symplectic_contact_kernel(dtype.name, model.dim, grid, len(model.colliders) > 0,
+                                            model.has_spring_damping, model.medium_damping > 0, sc_iters, serial, n_sub)
+        xs, vs = buffer("passes_xs", state.x.shape, dtype), buffer("passes_vs", state.x.shape, dtype)
+        dummy = buffer("passes_dummy", (1, 1, 1, model.dim), dtype)
+        lim = buffer("passes_lim", (state.batch,), np.int32)
+        left = np.full(state.batch, int(substeps), np.int64)
+        while left.any():  # each copy advances its own substeps; one whose lists go stale stops to rebuild them
+            np.minimum(left, n_sub, out=lim, casting="unsafe")
+            run[...] = 1
+            kernel(state.x, state.v, xs, vs, W, dummy, pinned, data["params"], data["topo"], data["coll"],
+                   data["inv_mass"], contacts.nbr, contacts.count, excl_off, excl_idx, h, thick, g_norm, nx, k_excl,
+                   contacts.x_build, spread, run, margin, vcap, lim)
+            if not run.all():  # stopped after their integration: rebuild, then their contacts (and colliders)
+                contacts.rebuild(state.x, np.flatnonzero(run == 0))
+                np.subtract(1, run, out=run)
+                fix(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], contacts.nbr,
+                    contacts.count, excl_off, excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl,
+                    contacts.x_build, spread, run, margin, vcap)
+            left -= lim
+        return
     for _ in range(int(substeps)):
         if bend_kind == "kick":
             pre(state.x, state.v, pinned, data["inv_mass"], bp, h, nx, ny)
@@ -227,8 +394,8 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
         post(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], nbr, count, excl_off,
              excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl, xb, spread, run, margin, vcap)
         if contacts is not None and not run.all():
-            # some copy moved too far for its lists: rebuild, then its contacts (and colliders) only
-            contacts.rebuild(state.x)
+            # some copies moved too far for their lists: rebuild theirs, then their contacts (and colliders) only
+            contacts.rebuild(state.x, np.flatnonzero(run == 0))
             np.subtract(1, run, out=run)
             fix(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], contacts.nbr,
                 contacts.count, excl_off, excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl,

@@ -19,11 +19,13 @@ thickness: grids ``max(2, ceil(t / min(dx, dy)))`` (so every spring of the 12-st
 edge models ``max(1, ceil(t / shortest spring))``.
 
 Neighbours come from :class:`tianim.spatial.NeighbourGrid` (the one neighbour grid) queried at
-radius ``t + margin``. The list is reused while the spread of the copy's displacements since the
+radius ``t + margin``, per copy. A copy's list is reused while the spread of the copy's displacements since the
 build, ``sqrt(sum_a (max_k d_ka - min_k d_ka)^2)`` with ``d = x - x_build``, stays below the margin:
 ``|x_i - x_j|`` changes by at most ``|d_i - d_j|``, which that spread bounds, so no pair can have come
 within t without being listed and the candidate set always contains every contact. A cloth that
 moves as a whole (falls, is carried) keeps its list; the check costs three passes over the positions.
+In a batch only the stale copies are rebuilt (:meth:`Contacts.rebuild`), so each copy's rebuilds happen
+when they would if it ran alone.
 
 Determinism. The corrections of a particle are summed in 64-bit fixed point
 (:data:`FIXED_POINT` steps per thickness): integer addition is associative, so the result does not
@@ -174,7 +176,10 @@ class Contacts:
             self.capacity = int(min(4096, max(16, math.ceil(4 * (per_layer + 1)))))
         self.grid = None
         self.x_build = None
-        self.rebuilds = 0
+        self.rebuilds = 0  # rebuild calls
+        self.rebuilt = np.zeros(state.batch, np.int64)  # rebuilds per copy
+        self._active = None  # (B, N) uint8: the copies a partial rebuild sorts and queries
+        self._aliased = False  # nbr/count are the grid's own output buffers
 
     def _new_grid(self, x):
         from tianim.spatial import NeighbourGrid
@@ -213,14 +218,38 @@ class Contacts:
             self.rebuild(x)
         return self.nbr, self.count
 
-    def rebuild(self, x):
-        """Sort ``x`` into the grid (a new grid if x left its box) and query every particle's candidates
-        (growing the rows until none overflows)."""
-        if self.grid is None or not (np.all(x.min(axis=(0, 1)) >= self.grid.lower)
-                                     and np.all(x.max(axis=(0, 1)) <= self.grid.upper)):
+    def rebuild(self, x, copies=None):
+        """Sort ``x`` (B, N, D) into the grid (a new grid if x left its box) and query the candidates of every
+        particle of the copies ``copies`` (indices; None: all), growing the rows until none overflows.
+
+        Only those copies are sorted and queried (the others are inactive in the grid's build, so their
+        part of the sort and the query is empty) and only their rows of ``nbr``/``count`` and ``x_build``
+        change: in a batch each copy's lists are rebuilt exactly when its own are stale, as if it ran
+        alone."""
+        b = x.shape[0]
+        if self.x_build is None or self.x_build.shape != x.shape:
+            copies = None
+        if copies is not None:
+            copies = np.unique(np.asarray(copies, dtype=np.int64))
+            if copies.size == b:
+                copies = None
+        sub = x if copies is None else x[copies]
+        if self.grid is None or not (np.all(sub.min(axis=(0, 1)) >= self.grid.lower)
+                                     and np.all(sub.max(axis=(0, 1)) <= self.grid.upper)):
             self._new_grid(x)
+        if copies is None:
+            active = None
+        else:
+            if self._active is None or self._active.shape != x.shape[:2]:
+                self._active = np.zeros(x.shape[:2], np.uint8)
+            active = self._active
+            active[...] = 0
+            active[copies] = 1
+            if self._aliased:  # the query below writes the grid's buffers: keep the other copies' rows
+                self.nbr, self.count = self.nbr.copy(), self.count.copy()
+                self._aliased = False
         while True:
-            self.grid.build(x, check=False)
+            self.grid.build(x, active, check=False)
             nb = self.grid.query(self.radius, on_overflow="report")
             if not nb.overflow:
                 break
@@ -230,8 +259,21 @@ class Contacts:
             lo, hi, h = self.grid.lower, self.grid.upper, self.grid.cell_size
             self.grid = NeighbourGrid(lo, hi, h, x.shape[1], batch=x.shape[0], max_neighbours=self.capacity,
                                       dtype=x.dtype)
-        self.nbr, self.count = nb.indices, nb.counts
-        self.x_build = x.copy()
+        if copies is None:  # every row is new: use the grid's output buffers as they are
+            self.nbr, self.count = nb.indices, nb.counts
+            self._aliased = True
+            self.x_build = x.copy()
+            self.rebuilt += 1
+        else:
+            k = nb.indices.shape[2]
+            if self.nbr.shape[2] < k:  # the rows grew: the other copies' rows (all within the old K) move over
+                nbr = np.zeros(x.shape[:2] + (k,), np.int32)
+                nbr[..., :self.nbr.shape[2]] = self.nbr
+                self.nbr = nbr
+            self.nbr[copies] = nb.indices[copies]
+            self.count[copies] = nb.counts[copies]
+            self.x_build[copies] = x[copies]
+            self.rebuilt[copies] += 1
         self.rebuilds += 1
 
 

@@ -248,7 +248,8 @@ class _Explicit(Solver):
 
     A model with bending (``tp.cloth(..., bending=B)``) gets the bending force as a kick before
     each substep (:mod:`tianim.physics.bending`). With any of the three the call runs one substep
-    per launch (:mod:`tianim.physics.passes`); without them nothing changes.
+    per launch (:mod:`tianim.physics.passes`; symplectic Euler with self-collision alone runs its
+    substeps inside the contact kernel, several per launch); without them nothing changes.
     """
 
     def __init__(self, layout: str = "auto", watchdog=True, self_collision=None, strain_limit=None):
@@ -268,7 +269,7 @@ class _Explicit(Solver):
             check_sc_model(self.self_collision, model)
         run_with_passes(model, state, dt, substeps,
                         lambda: launch(model, state, dt, 1, self.name, self.layout, self._buffer),
-                        True, self.self_collision, self.strain_limit, self._buffer)
+                        True, self.self_collision, self.strain_limit, self._buffer, method=self.name)
 
 
 def _with_passes(opts: dict, solver) -> dict:

@@ -61,7 +61,7 @@ TERMS = {"kinetic": 0, "spring": 1, "gravity": 2}
 
 _FORWARD = tuple(o for o, (dc, dr, _) in enumerate(GRID_STENCIL) if dc > 0 or (dc == 0 and dr > 0))
 @cached_variants
-def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool):
+def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool, springs: bool = True):
     t = kernel_types(real_name, dim)
     ti, vec, vec_arr, real_arr, int_arr = t.ti, t.vec, t.vec_arr, t.real_arr, t.int_arr
     out_arr = ti.types.ndarray(dtype=ti.f64, ndim=2)
@@ -85,7 +85,7 @@ def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool):
                 if pinned[b, i] == 0:
                     kin += ti.cast(0.5 * mass[i] * v[b, i].dot(v[b, i]), ti.f64)
                     pot -= ti.cast(mass[i] * g.dot(x[b, i]), ti.f64)
-            if ti.static(grid):
+            if ti.static(springs and grid):
                 for i in range(n):
                     row = i // nx
                     col = i - row * nx
@@ -94,7 +94,7 @@ def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool):
                         rr = row + off[2 * o + 1]
                         if 0 <= cc < nx and 0 <= rr < n // nx:
                             spr += ti.cast(spring_energy(x[b, i], x[b, rr * nx + cc], k[o], rest[o]), ti.f64)
-            else:
+            elif ti.static(springs):
                 for s in range(n_springs):
                     spr += ti.cast(spring_energy(x[b, ends[2 * s]], x[b, ends[2 * s + 1]], k[s], rest[s]), ti.f64)
             out[b, 0] = kin
@@ -104,40 +104,64 @@ def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool):
     return energies
 
 
-def fast_energy(model, state) -> np.ndarray:
+def fast_energy(model, state, springs: bool = True) -> np.ndarray:
     """Kinetic, spring and gravitational energy of every copy, shape (B, 3) [J]; a model with bending
     counts its bending energy (:func:`tianim.physics.bending.energy`) in the spring column.
+    ``springs=False`` leaves the spring column 0 (the criteria that do not watch it skip its cost).
     """
-    out = _fast_energy(model, state)
-    if getattr(model, "bending", None) is not None:
+    out = _fast_energy(model, state, springs)
+    if springs and getattr(model, "bending", None) is not None:
         from tianim.physics.bending import energy as bending_energy
 
         out[:, 1] += bending_energy(model, state.x)
     return out
 
 
-def _fast_energy(model, state) -> np.ndarray:
+def _fast_energy(model, state, springs: bool = True) -> np.ndarray:
     """Kinetic, spring and gravitational energy of every copy, shape (B, 3) [J], by one Taichi kernel.
 
     Same definitions as :func:`tianim.physics.energy` (pinned particles' kinetic and
     gravitational energy left out), summed in float64 in a fixed order per copy.
-    Small scenes (B * N <= 4096) use the NumPy diagnostics, whose call costs less than a
-    kernel launch with array arguments.
+    Small scenes use the NumPy diagnostics, whose call costs less than a kernel launch with
+    array arguments (:func:`_use_numpy`).
     """
-    if state.batch * model.n_particles <= 4096:
-        return _small_energy(model, state)
+    if _use_numpy(model, state, springs):
+        return _small_energy(model, state, springs)
     data = model.kernel_data(state.dtype)
-    edges = model.grid is None and model.n_springs > 0
-    ends = model.springs.ravel() if edges else np.zeros(2, np.int32)
+    edges = springs and model.grid is None and model.n_springs > 0
+    ends = _spring_ends(model) if edges else np.zeros(2, np.int32)
     out = np.zeros((state.batch, 3), dtype=np.float64)
-    kernel = _energy_kernel(state.dtype.name, model.dim, model.grid is not None, state.batch == 1)
-    kernel(state.x, state.v, state.pinned.view(np.uint8), data["mass"], data["off"],
-           np.ascontiguousarray(ends, dtype=np.int32), data["k"], data["rest"], model.gravity.astype(state.dtype),
-           model.grid.nx if model.grid is not None else 1, model.n_springs if edges else 0, out)
+    kernel = _energy_kernel(state.dtype.name, model.dim, model.grid is not None, state.batch == 1, springs)
+    kernel(state.x, state.v, state.pinned.view(np.uint8), data["mass"], data["off"], ends, data["k"], data["rest"],
+           model.gravity.astype(state.dtype), model.grid.nx if model.grid is not None else 1,
+           model.n_springs if edges else 0, out)
     return out
 
 
-def _small_energy(model, state) -> np.ndarray:
+#: NumPy computes the energies when batch x (particles + springs summed) <= this; above it one kernel
+#: launch is cheaper. Measured on the 2-core CPU (float32, noisy): a kernel launch costs 110-200 us at
+#: these sizes; NumPy 8-55 us without springs for 41..4096 particles of one copy, with springs 50 us
+#: (16x16 cloth, 1378 springs), 150 us (32x32, 5826: the crossover) and 8 ms (64x64, 23938).
+NUMPY_MAX_WORK = 8192
+
+
+def _use_numpy(model, state, springs: bool) -> bool:
+    work = model.n_particles + (model.n_springs if springs else 0)
+    return state.batch * work <= NUMPY_MAX_WORK
+
+
+_ENDS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+
+def _spring_ends(model) -> np.ndarray:
+    """The springs' end indices (2 S,) int32, contiguous (cached per model)."""
+    ends = _ENDS.get(model)
+    if ends is None:
+        ends = _ENDS[model] = np.ascontiguousarray(model.springs.ravel(), dtype=np.int32)
+    return ends
+
+
+def _small_energy(model, state, springs: bool = True) -> np.ndarray:
     """:func:`fast_energy` in a few NumPy calls (small scenes), shape (B, 3), float64."""
     x = state.x.astype(np.float64)
     v = state.v.astype(np.float64)
@@ -145,7 +169,7 @@ def _small_energy(model, state) -> np.ndarray:
     out = np.empty((state.batch, 3))
     out[:, 0] = 0.5 * np.einsum("bn,bnd,bnd->b", free_mass, v, v)
     out[:, 2] = -np.einsum("bn,bnd,d->b", free_mass, x, model.gravity)
-    if model.n_springs:
+    if springs and model.n_springs:
         d = x[:, model.springs[:, 0]] - x[:, model.springs[:, 1]]
         stretch = np.sqrt(np.einsum("bsd,bsd->bs", d, d)) - model.rest_length
         out[:, 1] = 0.5 * (stretch * stretch) @ model.stiffness
@@ -154,12 +178,17 @@ def _small_energy(model, state) -> np.ndarray:
     return out
 
 
+_SCALES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
 def energy_scale(model) -> float:
-    """W = total mass * |g| * diagonal of the initial bounding box [J] (at least total mass * 1 m^2/s^2)."""
-    extent = float(np.linalg.norm(np.ptp(model.positions, axis=0)))
-    return float(np.sum(model.mass)) * max(float(np.linalg.norm(model.gravity)) * extent, 1.0)
+    """W = total mass * |g| * diagonal of the initial bounding box [J] (at least total mass * 1 m^2/s^2);
+    cached per model (models are read-only)."""
+    w = _SCALES.get(model)
+    if w is None:
+        extent = float(np.linalg.norm(np.ptp(model.positions, axis=0)))
+        w = _SCALES[model] = float(np.sum(model.mass)) * max(float(np.linalg.norm(model.gravity)) * extent, 1.0)
+    return w
 
 
 class _Memory:
@@ -224,7 +253,8 @@ class Watchdog:
             fresh = np.isnan(mem.reference)
             if unchanged and not fresh.any() and mem.terms == tuple(terms):
                 return snap, mem.energy, pins0
-            parts = fast_energy(model, state)
+            # the spring column is needed by criteria that watch it and by the reference of fresh copies
+            parts = fast_energy(model, state, springs="spring" in terms or bool(fresh.any()))
             e = _watched(parts, terms)
             if mem.terms == tuple(terms):
                 edit = e - mem.energy
@@ -232,7 +262,8 @@ class Watchdog:
                 mem.cusum = np.maximum(mem.cusum + np.minimum(edit, 0.0), 0.0)  # or took away
             else:  # another solver (another criterion) on the same state
                 mem.terms, mem.cusum = tuple(terms), np.zeros(state.batch)
-            mem.reference = np.where(fresh, parts[:, 0] + parts[:, 1] + energy_scale(model), mem.reference)
+            if fresh.any():
+                mem.reference = np.where(fresh, parts[:, 0] + parts[:, 1] + energy_scale(model), mem.reference)
             mem.energy = e
             return snap, e, pins0
         parts = fast_energy(model, state)
@@ -257,7 +288,7 @@ class Watchdog:
         mem = self._memory.get(state) if e0 is not None else None
         if mem is not None:
             with np.errstate(invalid="ignore", over="ignore"):
-                e1 = _watched(fast_energy(model, state), terms)
+                e1 = _watched(fast_energy(model, state, springs="spring" in terms), terms)
                 work = _pin_work(model, state, snap, pins0)
                 cusum = np.maximum(mem.cusum + (e1 - e0 - work), 0.0)
                 bound = self.growth * mem.reference
@@ -310,9 +341,14 @@ def _pin_springs(model, touched: np.ndarray):
 def _pin_forces(model, state):
     """Spring forces along the springs that touch a moving pin: ``(moving (B, N), springs (S',),
     force on the first end (B, S', D))`` float64, or None when no pin moves (then pins do no work)."""
-    moving = state.pinned & (state.v != 0).any(axis=2)
-    if model.n_springs == 0 or not moving.any():
+    if model.n_springs == 0:
         return None
+    b, i = np.nonzero(state.pinned)  # few pins: test only their velocities
+    hit = (state.v[b, i] != 0).any(axis=1)
+    if not hit.any():
+        return None
+    moving = np.zeros(state.pinned.shape, dtype=bool)
+    moving[b[hit], i[hit]] = True
     sel, i, j, k, rest, c = _pin_springs(model, moving.any(axis=0))
     x, v = state.x, state.v
     d = (x[:, i] - x[:, j]).astype(np.float64)
