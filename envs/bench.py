@@ -4,7 +4,10 @@ Measures, with pre-generated actions and medians over ``--repeats``:
 
 * ``armreach_steps_per_s``: one ``gym.make("tianim/ArmReach-v0")`` (with its
   gymnasium wrappers), resetting when an episode ends;
-* ``armreach_vec_steps_per_s``: ``gym.make_vec`` with N = 4096 copies (env-steps/s);
+* ``armreach_vec_steps_per_s``: ``gym.make_vec`` with N = 4096 copies (env-steps/s), resets included;
+  ``armreach_kernel_steps_per_s``: the same N arms stepped by the arm kernel alone
+  (``tianim.kinematics.arm.step_batch``, as the env calls it, no env bookkeeping), and
+  ``armreach_vec_kernel_fraction``: their ratio (the share of the kernel's rate the env keeps);
 * ``ropeswing_vec_steps_per_s`` (N = 256) and ``clothfold_steps_per_s`` (single env);
 * ``mujoco_reacher_steps_per_s`` (``gym.make("Reacher-v5")`` measured the same way
   in the same run, when mujoco is installed) and ``ratio_vs_mujoco``;
@@ -118,8 +121,19 @@ def main(argv: list[str] | None = None) -> int:
     n = 256 if quick else args.num_envs
     venv = gym.make_vec("tianim/ArmReach-v0", num_envs=n)
     summary["armreach_vec_steps_per_s"] = _vector_rate(venv, 20 if quick else 200, repeats)
+    base = venv.unwrapped
+    tau, active = np.zeros((n, base.n_links)), np.ones(n, np.int32)
+    k_steps = 20 if quick else 200
+
+    def kernel_only():
+        for _ in range(k_steps):
+            base._launch(tau, active)
+
+    summary["armreach_kernel_steps_per_s"] = k_steps * n / median_time(kernel_only, repeats=repeats, warmup=1)
+    summary["armreach_vec_kernel_fraction"] = summary["armreach_vec_steps_per_s"] / summary["armreach_kernel_steps_per_s"]
     venv.close()
     rows.append({"benchmark": f"ArmReach-v0 make_vec N={n}", "steps_per_s": summary["armreach_vec_steps_per_s"]})
+    rows.append({"benchmark": f"ArmReach-v0 arm kernel alone N={n}", "steps_per_s": summary["armreach_kernel_steps_per_s"]})
 
     if "tianim/RopeSwing-v0" in gym.registry:
         nr = 16 if quick else 256
