@@ -116,8 +116,8 @@ def test_pins_move_along_a_target_and_release():
 
 def test_second_scene_compiles_nothing_new():
     m1 = tp.cloth(12, 12, colliders=[tp.Ground()])
-    s1 = m1.state(batch=2)
-    tp.step(m1, s1, 1e-4, substeps=3)
+    for batch in (2, 12):   # small and large batches: the watchdog's NumPy and kernel energy paths
+        tp.step(m1, m1.state(batch=batch), 1e-4, substeps=3)
     count = compiled_kernel_count()
     m2 = tp.cloth(20, 14, size=(2.0, 1.0), stiffness=(900.0, 300.0, 30.0), colliders=[tp.Ground(height=0.2, friction=0.9)])
     for batch in (2, 7):
