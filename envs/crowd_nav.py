@@ -165,7 +165,10 @@ class CrowdNavSim:
         from tianim.render import Canvas2D
 
         c = Canvas2D(256, 256, extent=(-6, 6, -6, 6))
-        c.discs([GOAL], 0.15, color="red", outline=None)
+        # the goal region (success: the robot's centre within RADIUS of GOAL) and the start
+        c.discs([GOAL], RADIUS, color="red", alpha=0.2, outline="red", outline_width=1.5)
+        c.discs([GOAL], 0.08, color="red", outline=None)
+        c.discs([START], 0.08, color="orange", outline=None, alpha=0.6)
         c.discs(self.humans.x[k], RADIUS, color="blue")
         c.triangles(self.humans.x[k], self.humans.heading[k], size=1.4 * RADIUS, color="white")
         c.discs([self.robot[k]], RADIUS, color="orange")
