@@ -315,6 +315,8 @@ class PickerEnv(SimEnv):
     """A single SoftGym picker task: :class:`SimEnv` plus the task's metrics in ``info``
     (``performance``, ``normalized_performance`` and the task's own keys, floats)."""
 
+    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / (FRAME_DT * ACTION_REPEAT))}
+
     def step(self, action):
         obs, reward, terminated, truncated, info = super().step(action)
         info.update({key: float(value[0]) for key, value in self._sim.metrics.items()})
@@ -325,7 +327,8 @@ class PickerVectorEnv(SimVectorEnv):
     """``num_envs`` copies of a SoftGym picker task in one physics launch per frame; ``info`` holds the
     single env's keys as (N,) arrays with ``_key`` masks (False for copies reset in this step)."""
 
-    metadata = {"render_modes": ["rgb_array"], "autoreset_mode": AutoresetMode.NEXT_STEP}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / (FRAME_DT * ACTION_REPEAT)),
+                "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def _advance(self, actions, reset_mask):
         obs, reward, terminated = super()._advance(actions, reset_mask)

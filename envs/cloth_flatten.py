@@ -78,7 +78,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from gymnasium.vector import AutoresetMode
 
 from . import _softgym as sg
 
@@ -172,14 +171,11 @@ class ClothFlattenSim(sg.PickerSim):
 class ClothFlattenEnv(sg.PickerEnv):
     """Single ClothFlatten-v0 environment (see the module docstring)."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / (sg.FRAME_DT * sg.ACTION_REPEAT))}
     sim_class = ClothFlattenSim
 
 
 class ClothFlattenVectorEnv(sg.PickerVectorEnv):
     """``num_envs`` ClothFlatten-v0 copies, all stepped in one physics launch per frame."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / (sg.FRAME_DT * sg.ACTION_REPEAT)),
-                "autoreset_mode": AutoresetMode.NEXT_STEP}
     sim_class = ClothFlattenSim
     default_max_episode_steps = MAX_EPISODE_STEPS

@@ -89,7 +89,6 @@ apart: the folded half rests on the other. Single env and batch run the same cod
 from __future__ import annotations
 
 import numpy as np
-from gymnasium.vector import AutoresetMode
 
 from . import _softgym as sg
 
@@ -144,14 +143,11 @@ class ClothFoldV1Sim(sg.PickerSim):
 class ClothFoldV1Env(sg.PickerEnv):
     """Single ClothFold-v1 environment (see the module docstring)."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / (sg.FRAME_DT * sg.ACTION_REPEAT))}
     sim_class = ClothFoldV1Sim
 
 
 class ClothFoldV1VectorEnv(sg.PickerVectorEnv):
     """``num_envs`` ClothFold-v1 copies, all stepped in one physics launch per frame."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / (sg.FRAME_DT * sg.ACTION_REPEAT)),
-                "autoreset_mode": AutoresetMode.NEXT_STEP}
     sim_class = ClothFoldV1Sim
     default_max_episode_steps = MAX_EPISODE_STEPS

@@ -85,7 +85,6 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
-from gymnasium.vector import AutoresetMode
 
 import tianim.physics as tp
 
@@ -209,14 +208,11 @@ class RopeFlattenSim(sg.PickerSim):
 class RopeFlattenEnv(sg.PickerEnv):
     """Single RopeFlatten-v0 environment (see the module docstring)."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / (sg.FRAME_DT * sg.ACTION_REPEAT))}
     sim_class = RopeFlattenSim
 
 
 class RopeFlattenVectorEnv(sg.PickerVectorEnv):
     """``num_envs`` RopeFlatten-v0 copies, all stepped in one physics launch per frame."""
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / (sg.FRAME_DT * sg.ACTION_REPEAT)),
-                "autoreset_mode": AutoresetMode.NEXT_STEP}
     sim_class = RopeFlattenSim
     default_max_episode_steps = MAX_EPISODE_STEPS
