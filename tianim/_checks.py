@@ -139,6 +139,17 @@ def as_index_array(name: str, value, n: int, ndim: int = 1, of: str = "particles
     return arr.astype(np.int32)
 
 
+def real_dtype(dtype):
+    """np.float32 or np.float64 from ``dtype``, or a TypeError naming ``dtype`` and the choices."""
+    try:
+        dt = np.dtype(dtype)
+    except TypeError:
+        raise TypeError(f"dtype={fmt(dtype)} is not a dtype; use np.float32 or np.float64") from None
+    if dt not in (np.float32, np.float64):
+        raise TypeError(f"dtype={dt.name} is not supported; use np.float32 or np.float64")
+    return dt.type
+
+
 # --- joint-space checks (kinematics, keyframe) --------------------------------------------
 
 

@@ -16,21 +16,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt
+from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt, real_dtype
 
 #: Below this speed [m/s] a solver keeps an agent's heading instead of turning it to v / |v|.
 HEADING_MIN_SPEED = 1e-2
-
-
-def real_dtype(dtype):
-    """np.float32 or np.float64 from ``dtype``, or a TypeError naming ``dtype``."""
-    try:
-        dt = np.dtype(dtype)
-    except TypeError:
-        raise TypeError(f"dtype={fmt(dtype)} is not a dtype; use np.float32 or np.float64") from None
-    if dt not in (np.float32, np.float64):
-        raise TypeError(f"dtype={dt.name} is not supported; use np.float32 or np.float64")
-    return dt.type
 
 
 def _batched(name, value, dim=None, n=None, batch=None):

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tianim._checks import INT32_MAX, as_float_array, check_choice, check_finite_scalar, check_int, fmt
+from tianim._checks import INT32_MAX, as_float_array, check_choice, check_finite_scalar, check_int, fmt, real_dtype
 
 #: Default cap on the number of cells of one copy's grid (4 bytes each).
 MAX_CELLS = 1 << 26
@@ -147,7 +147,7 @@ class NeighbourGrid:
         self.batch = check_int("batch", batch, lo=1)
         self.max_neighbours = check_int("max_neighbours", max_neighbours, lo=1)
         max_cells = check_int("max_cells", max_cells, lo=1)
-        self.dtype = _real_dtype(dtype)
+        self.dtype = real_dtype(dtype)
         dims = np.maximum(np.ceil((hi - lo) / h), 1).astype(np.int64)
         n_cells = int(np.prod(dims))
         if n_cells > min(max_cells, INT32_MAX - 1):
@@ -310,16 +310,6 @@ class NeighbourGrid:
         if q not in self._out:
             self._out[q] = (np.zeros((self.batch, q, self.max_neighbours), np.int32), np.zeros((self.batch, q), np.int32))
         return self._out[q]
-
-
-def _real_dtype(dtype):
-    try:
-        dt = np.dtype(dtype)
-    except TypeError:
-        raise TypeError(f"dtype={fmt(dtype)} is not a dtype; use np.float32 or np.float64") from None
-    if dt not in (np.float32, np.float64):
-        raise TypeError(f"dtype={dt.name} is not supported; use np.float32 or np.float64")
-    return dt.type
 
 
 def neighbour_lists(points, radius, max_neighbours=None, lower=None, upper=None):
