@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from tianim._checks import check_choice, check_finite_scalar, check_positive_int
-from tianim.physics import theory
+from tianim.physics import lanes, theory
 from tianim.physics.kernels import SUBSTEPS_PER_LAUNCH, WORK, frame_kernel
 from tianim.physics.passes import has_passes, run_with_passes
 from tianim.physics.selfcollision import SelfCollision, as_self_collision
@@ -44,8 +44,8 @@ from tianim.physics.selfcollision import check_model as check_sc_model
 from tianim.physics.strain import StrainLimit, as_strain_limit
 from tianim.physics.watchdog import DivergenceError, Watchdog
 
-#: Loop layouts of the explicit kernels (all give bit-identical results).
-LAYOUTS = ("auto", "serial", "frame", "substep")
+#: Loop layouts of the explicit kernels (all give bit-identical results; "lanes": symplectic Euler on grids only).
+LAYOUTS = ("auto", "serial", "frame", "substep", "lanes")
 #: Loop layouts of XPBD.
 XPBD_LAYOUTS = ("auto", "per_copy", "parallel")
 
@@ -238,8 +238,8 @@ class _Explicit(Solver):
     Parameters
     ----------
     layout : str
-        ``"auto"`` (:func:`choose_layout`), ``"serial"``, ``"frame"`` or ``"substep"``; all give
-        bit-identical results.
+        ``"auto"`` (:func:`choose_layout`), ``"serial"``, ``"frame"``, ``"substep"`` or ``"lanes"``
+        (symplectic Euler on a cloth grid: :mod:`tianim.physics.lanes`); all give bit-identical results.
     self_collision : SelfCollision, optional
         Particle-particle self-collision after every substep (:mod:`tianim.physics.selfcollision`).
     strain_limit : float or StrainLimit, optional
@@ -302,24 +302,37 @@ class RK4(_Explicit):
     name, order, stability_limit, evals_per_substep = "rk4", 4, theory.STABILITY_LIMIT["rk4"], 4.0
 
 
-def choose_layout(model, batch: int) -> str:
-    """Loop layout for a scene of ``model.n_particles`` particles and ``batch`` copies.
+def choose_layout(model, batch: int, method: str = "symplectic_euler", substeps: int = 1, dtype=np.float32) -> str:
+    """Loop layout for ``substeps`` steps of ``method`` on ``batch`` copies of ``model``.
 
     Small scenes run a whole frame per launch (``"serial"`` for one copy,
     ``"frame"``: parallel over copies); large scenes parallelise over particles
-    (``"substep"``). All layouts give bit-identical results.
+    (``"substep"``), and large cloth grids under symplectic Euler pack several particles per
+    SIMD vector (``"lanes"``, when a call runs at least 4 substeps: it packs and unpacks the
+    state around them). All layouts give bit-identical results.
     """
     n = model.n_particles
     if n >= 1024 or (batch >= 1024 and n >= 16):
+        if n >= 1024 and method == "symplectic_euler" and substeps >= 4 and lanes.supports(model, dtype):
+            return "lanes"
         return "substep"
     return "serial" if batch == 1 or n * batch <= 256 else "frame"
 
 
 def launch(model, state, dt, substeps, method, layout, buffer):
-    """Run the kernels of explicit ``method`` on ``state`` (no validation: callers validate)."""
+    """Run the kernels of explicit ``method`` on ``state`` (no validation: callers validate).
+
+    Returns the work array (its first block: the accelerations), or None for the lanes layout."""
     if layout == "auto":
-        layout = choose_layout(model, state.batch)
+        layout = choose_layout(model, state.batch, method, substeps, state.dtype)
     data = model.kernel_data(state.dtype)
+    if layout == "lanes":
+        if method != "symplectic_euler" or not lanes.supports(model, state.dtype):
+            raise ValueError(f"layout='lanes' runs symplectic_euler on a cloth grid of at least "
+                             f"{lanes.lanes_for(state.dtype) + 1} rows; got method={method!r} on model "
+                             f"{model.name!r}; use layout='auto' or 'substep'")
+        lanes.launch_lanes(model, state, dt, substeps, data)
+        return None
     pre, kernel, multi = frame_kernel(
         state.dtype, model.dim, method, layout,
         grid=model.grid is not None,

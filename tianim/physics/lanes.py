@@ -1,0 +1,304 @@
+"""The ``"lanes"`` layout: symplectic Euler on a cloth grid, several particles per SIMD vector.
+
+Why a layout of its own. Taichi's CPU backend compiles the body of a parallel loop into a
+function that walks its chunk of indices one at a time, reloading every external array's pointer
+and shape at each access (a store might alias them); LLVM vectorises neither that loop nor the
+accesses. It does SLP-vectorise the straight-line lanes of a ``ti.Vector`` kept in a ``ti.field``.
+Measured on the optimised LLVM IR (``ti.init(print_kernel_llvm_ir_optimized=True)``) of
+``y[i] = a * x[i] + sqrt(y[i])`` with 8-lane vectors: taichi 1.7.4 emits ``<4 x float>`` loads,
+``sqrt.v4f32`` and ``fdiv <4 x float>`` for ``ti.Vector.field`` storage, and scalar code for the same
+body on ``ti.types.ndarray`` arguments or on scalar fields; quadrants 1.3.3 emits scalar code in all
+three forms. Both target generic x86-64 (SSE2), so a vector holds 4 float32 (2 float64) and an
+8-lane vector is two of them (more independent work per instruction). So this layout keeps the
+state of a call in a pool of L-lane vector fields:
+
+* the ``ny`` rows of each copy are cut into ``L`` bands of ``H = ceil(ny / L)`` rows (the last band
+  padded); lane ``l`` of pack ``(r, c)`` holds particle ``(l H + r, c)``;
+* the stencil neighbour ``(r + dr, c + dc)`` of every lane is lane for lane the pack
+  ``(r + dr, c + dc)`` when ``0 <= r + dr < H``; across a band edge it is the pack
+  ``(r + dr -/+ H, c + dc)`` with its lanes shifted by one (so ``H >= 2`` is needed for the
+  2-row bend springs); a lane whose neighbour row lies outside ``[0, ny)`` adds nothing (a select,
+  no branch); a column outside ``[0, nx)`` is the same for every lane (a branch);
+* every operation is that of :func:`tianim.physics.kernels.substep_funcs` in the same order, so the
+  results are bit-identical to the other layouts (tested), for any thread count and batch.
+
+A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
+the pool (:data:`SUBSTEPS_PER_LAUNCH` per launch, one parallel loop per substep, the spring loop a
+runtime loop so that compiling stays short), and unpacks. The pool grows by doubling (one compile
+of the kernels per growth); the kernels take sizes as arguments, so a second scene or another batch
+size compiles nothing new.
+"""
+
+import numpy as np
+
+from tianim.physics.contact import contact_response
+from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.physics.model import GRID_STENCIL
+
+#: Particles per vector, by float type (two SSE registers each).
+LANES = {"float32": 8, "float64": 4}
+#: Substeps per launch of the main kernel (even: the ping-pong ends in the first buffer).
+SUBSTEPS_PER_LAUNCH = 16
+#: Smallest pool, in packs (grown by doubling).
+MIN_CAPACITY = 1 << 12
+
+_N_OFF = len(GRID_STENCIL)
+
+
+def lanes_for(dtype) -> int:
+    """Particles per vector for the state's float type."""
+    return LANES[np.dtype(dtype).name]
+
+
+def supports(model, dtype) -> bool:
+    """Whether ``model`` can run in this layout: a cloth grid with at least 2 rows per band."""
+    g = model.grid
+    return g is not None and -(-g.ny // lanes_for(dtype)) >= 2
+
+
+class _Pool:
+    """The fields of one (float type, dimension): state (4 D, cap) lanes [x, v, xs, vs components],
+    mass (3, cap) lanes [mass, inverse mass, 1 free / 0 pinned], prm [gravity, rho, k, rest, damp],
+    off [(d_col, d_row) of :data:`GRID_STENCIL`]."""
+
+    def __init__(self, ti, real, dim, lanes, capacity):
+        fb = ti.FieldsBuilder()
+        self.state = ti.Vector.field(lanes, real)
+        self.mass = ti.Vector.field(lanes, real)
+        self.prm = ti.field(real)
+        self.off = ti.field(ti.i32)
+        fb.dense(ti.ij, (4 * dim, capacity)).place(self.state)
+        fb.dense(ti.ij, (3, capacity)).place(self.mass)
+        fb.dense(ti.i, dim + 1 + 3 * _N_OFF).place(self.prm)
+        fb.dense(ti.i, 2 * _N_OFF).place(self.off)
+        self.tree = fb.finalize()
+        self.off.from_numpy(np.array([a for dc, dr, _ in GRID_STENCIL for a in (dc, dr)], dtype=np.int32))
+        self.capacity = capacity
+
+
+_POOLS: dict = {}
+
+
+def _pool(real_name, dim, packs):
+    """The pool for (real_name, dim) with room for ``packs`` packs (grown by doubling)."""
+    key = (real_name, dim)
+    pool = _POOLS.get(key)
+    if pool is None or pool.capacity < packs:
+        cap = max(MIN_CAPACITY, pool.capacity if pool is not None else 0)
+        while cap < packs:
+            cap *= 2
+        t = kernel_types(real_name, dim)
+        if pool is not None:
+            pool.tree.destroy()
+        pool = _POOLS[key] = _Pool(t.ti, t.real, dim, LANES[real_name], cap)
+    return pool
+
+
+@cached_variants
+def lane_kernels(real_name, dim, colliders, spring_damping, medium_damping):
+    """``(pack, run, unpack)``: ``run[nsub]`` advances nsub in {1, 2, SUBSTEPS_PER_LAUNCH} substeps."""
+    t = kernel_types(real_name, dim)
+    ti, real = t.ti, t.real
+    L = LANES[real_name]
+    lane_vec = ti.types.vector(L, real)
+    respond = contact_response(real_name, dim)
+    h = dim + 1  # prm: gravity[dim], rho, k[12], rest[12], damp[12] (the P layout of kernels.py)
+
+    @ti.kernel
+    def pack(S: ti.template(), M: ti.template(), prm: ti.template(), x: t.vec_arr, v: t.vec_arr,
+             pinned: t.mask_arr, P: t.real_arr, nx: ti.i32, H: ti.i32):
+        n = x.shape[1]
+        ny = n // nx
+        npk = H * nx
+        for k in range(x.shape[0] * npk):
+            if k == 0:
+                for q in range(h):
+                    prm[q] = P[q]
+                for q in range(3 * _N_OFF):
+                    prm[h + q] = P[h + 2 * n + q]
+            b = k // npk
+            p = k - b * npk
+            r = p // nx
+            c = p - r * nx
+            X = ti.Matrix.zero(real, 2 * dim + 3, L)  # x, v components, mass, inverse mass, free; one column per lane
+            for lane in ti.static(range(L)):
+                row = lane * H + r
+                if row < ny:  # padding lanes stay zero: no mass, pinned, at rest at the origin
+                    i = row * nx + c
+                    xi = x[b, i]
+                    vi = v[b, i]
+                    for a in ti.static(range(dim)):
+                        X[a, lane] = xi[a]
+                        X[dim + a, lane] = vi[a]
+                    X[2 * dim, lane] = P[h + i]
+                    X[2 * dim + 1, lane] = P[h + n + i]
+                    if pinned[b, i] == 0:
+                        X[2 * dim + 2, lane] = 1
+            for a in ti.static(range(2 * dim)):
+                S[a, k] = ti.Vector([X[a, lane] for lane in range(L)])
+            for a in ti.static(range(3)):
+                M[a, k] = ti.Vector([X[2 * dim + a, lane] for lane in range(L)])
+
+    @ti.kernel
+    def unpack(S: ti.template(), src: ti.template(), x: t.vec_arr, v: t.vec_arr, nx: ti.i32, H: ti.i32):
+        n = x.shape[1]
+        ny = n // nx
+        npk = H * nx
+        for k in range(x.shape[0] * npk):
+            b = k // npk
+            p = k - b * npk
+            r = p // nx
+            c = p - r * nx
+            u = [S[src * 2 * dim + a, k] for a in ti.static(range(2 * dim))]
+            for lane in ti.static(range(L)):
+                row = lane * H + r
+                if row < ny:
+                    i = row * nx + c
+                    x[b, i] = ti.Vector([u[a][lane] for a in range(dim)])
+                    v[b, i] = ti.Vector([u[dim + a][lane] for a in range(dim)])
+
+    @ti.func
+    def fetch(S: ti.template(), q, base, rr, cc, nx, H):
+        """Component row q of the neighbour packs at band row rr (may leave [0, H)), column cc."""
+        w = lane_vec(0)
+        if rr < 0:  # lane l reads lane l - 1, H rows further down
+            u = S[q, base + (rr + H) * nx + cc]
+            for lane in ti.static(range(L)):
+                w[lane] = u[max(lane - 1, 0)]
+        elif rr >= H:  # lane l reads lane l + 1, H rows further up
+            u = S[q, base + (rr - H) * nx + cc]
+            for lane in ti.static(range(L)):
+                w[lane] = u[min(lane + 1, L - 1)]
+        else:
+            w = S[q, base + rr * nx + cc]
+        return w
+
+    @ti.func
+    def spring_force(s, n, damp, dot):
+        """One component of kernels.pair_force: s n, minus the damping (damp dot) n."""
+        f = s * n
+        if ti.static(spring_damping):
+            f -= damp * dot * n
+        return f
+
+    @ti.func
+    def add_spring(S: ti.template(), prm: ti.template(), f0, f1, f2, xi: ti.template(), vi: ti.template(), xs: ti.template(), o, dc, dr, base, r, c, nx, ny, H):
+        zero = lane_vec(0)
+        lane_row = ti.Vector([lane * H for lane in range(L)])
+        cc = c + dc
+        rr = r + dr
+        if 0 <= cc < nx:
+            g_row = lane_row + rr
+            valid = (g_row >= 0) & (g_row < ny)
+            d = [xi[a] - fetch(S, xs + a, base, rr, cc, nx, H) for a in ti.static(range(dim))]
+            len2 = d[0] * d[0]
+            for a in ti.static(range(1, dim)):
+                len2 += d[a] * d[a]
+            length = ti.sqrt(len2)
+            inv_len = ti.select(length > 0, 1 / length, zero)
+            s = -prm[h + o] * (length - prm[h + _N_OFF + o])
+            nrm = [d[a] * inv_len for a in ti.static(range(dim))]
+            dot = zero
+            if ti.static(spring_damping):
+                dv = [vi[a] - fetch(S, xs + dim + a, base, rr, cc, nx, H) for a in ti.static(range(dim))]
+                dot = dv[0] * nrm[0]
+                for a in ti.static(range(1, dim)):
+                    dot += dv[a] * nrm[a]
+            pf = [spring_force(s, nrm[a], prm[h + 2 * _N_OFF + o], dot) for a in ti.static(range(dim))]
+            f0 += ti.select(valid, pf[0], zero)
+            f1 += ti.select(valid, pf[1], zero)
+            if ti.static(dim == 3):
+                f2 += ti.select(valid, pf[2], zero)
+        return f0, f1, f2
+
+    @ti.func
+    def substep(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: ti.template(),
+                src: ti.template(), k, npk, nx, ny, H, dt):
+        """One symplectic Euler substep of pack k, read from buffer src, written to the other."""
+        xs = src * 2 * dim
+        xd = (1 - src) * 2 * dim
+        b = k // npk
+        p = k - b * npk
+        base = b * npk
+        r = p // nx
+        c = p - r * nx
+        xi = [S[xs + a, k] for a in ti.static(range(dim))]
+        vi = [S[xs + dim + a, k] for a in ti.static(range(dim))]
+        m = M[0, k]
+        zero = lane_vec(0)
+        # The force sum is carried across a runtime loop, so it lives in named variables (f2 unused in 2D).
+        f0 = m * prm[0]  # m g
+        f1 = m * prm[1]
+        f2 = zero
+        if ti.static(dim == 3):
+            f2 = m * prm[2]
+        if ti.static(medium_damping):
+            f0 -= prm[dim] * vi[0]
+            f1 -= prm[dim] * vi[1]
+            if ti.static(dim == 3):
+                f2 -= prm[dim] * vi[2]
+        lane_row = ti.Vector([lane * H for lane in range(L)])
+        # The stencil in GRID_STENCIL order, as kernels.accel sums it. A runtime loop: unrolled (offsets as
+        # constants) it ran about 1.2x faster but took 30-100 s to compile.
+        for o in range(_N_OFF):
+            f0, f1, f2 = add_spring(S, prm, f0, f1, f2, xi, vi, xs, o, off[2 * o], off[2 * o + 1], base, r, c, nx, ny, H)
+        f = [f0, f1, f2]
+        free = M[2, k] > 0
+        im = M[1, k]
+        for a in ti.static(range(dim)):
+            vn = vi[a] + dt * ti.select(free, f[a] * im, zero)
+            S[xd + dim + a, k] = vn
+            S[xd + a, k] = xi[a] + dt * vn
+        if ti.static(colliders):  # per lane, on the stored values (exact: a float32 store and load)
+            g2 = prm[0] * prm[0]
+            for a in ti.static(range(1, dim)):
+                g2 += prm[a] * prm[a]
+            g_norm = ti.sqrt(g2)
+            for lane in range(L):  # a runtime loop: unrolled, the contact code would be copied L x nsub times
+                if M[2, k][lane] > 0:
+                    xl = ti.Vector([S[xd + a, k][lane] for a in range(dim)])
+                    vl = ti.Vector([S[xd + dim + a, k][lane] for a in range(dim)])
+                    xl, vl = respond(xl, vl, coll, g_norm, dt)
+                    for a in ti.static(range(dim)):
+                        S[xd + a, k][lane] = xl[a]
+                        S[xd + dim + a, k][lane] = vl[a]
+
+    def make_run(nsub):
+        @ti.kernel
+        def run(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: t.real2_arr,
+                packs: ti.i32, npk: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real):
+            for s in ti.static(range(nsub)):  # each top-level loop ends in a barrier
+                for k in range(packs):
+                    substep(S, M, prm, off, coll, s % 2, k, npk, nx, ny, H, dt)
+
+        return run
+
+    runs = {n: make_run(n) for n in (1, 2, SUBSTEPS_PER_LAUNCH)}
+    return pack, runs, unpack
+
+
+def launch_lanes(model, state, dt: float, substeps: int, data) -> None:
+    """Advance ``state`` by ``substeps`` symplectic Euler steps of ``dt`` in the lanes layout
+    (no validation: :func:`tianim.physics.solvers.launch` is the caller). ``data`` is
+    ``model.kernel_data(state.dtype)``."""
+    g = model.grid
+    real_name = state.dtype.name
+    L = LANES[real_name]
+    H = -(-g.ny // L)
+    npk = H * g.nx
+    packs = state.batch * npk
+    pool = _pool(real_name, model.dim, packs)
+    pack, runs, unpack = lane_kernels(real_name, model.dim, len(model.colliders) > 0,
+                                      model.has_spring_damping, model.medium_damping > 0)
+    S, M, prm, off = pool.state, pool.mass, pool.prm, pool.off
+    pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], g.nx, H)
+    dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
+    args = (S, M, prm, off, data["coll"], packs, npk, g.nx, g.ny, H, dt)
+    for _ in range(substeps // SUBSTEPS_PER_LAUNCH):
+        runs[SUBSTEPS_PER_LAUNCH](*args)
+    rest = substeps % SUBSTEPS_PER_LAUNCH
+    for _ in range(rest // 2):
+        runs[2](*args)
+    if rest % 2:
+        runs[1](*args)
+    unpack(S, rest % 2, state.x, state.v, g.nx, H)
