@@ -1,0 +1,120 @@
+"""The lanes layout (tianim.physics.lanes): bit-identical to the other layouts, chosen where it runs,
+refused where it cannot, thread-count independent, and no recompilation for new scenes."""
+
+import textwrap
+
+import numpy as np
+import pytest
+
+import tianim.physics as tp
+from tianim.physics import lanes
+from tianim.physics.reference import NumpyModel
+from tianim.runtime import compiled_kernel_count
+from _threads import digests_by_thread_count
+
+
+def loaded(model, batch, seed, dtype=np.float32):
+    """A state with jittered positions and velocities, pinned particles moving too."""
+    state = model.state(batch=batch, dtype=dtype)
+    rng = np.random.default_rng(seed)
+    free = ~state.pinned[..., None]
+    state.x += (free * rng.normal(0, 0.01, state.x.shape)).astype(dtype)
+    state.v += rng.normal(0, 0.1, state.v.shape).astype(dtype)  # pinned particles drift with their velocity
+    return state
+
+
+SCENES = {
+    "plain": lambda: tp.cloth(13, 11),
+    "damped_colliders": lambda: tp.cloth(12, 19, damping=(0.05, 0.02, 0.01), medium_damping=0.02,
+                                         colliders=[tp.Sphere((0, 0.8, 0), 0.2), tp.Ground(0.3, friction=0.5)]),
+    "free_on_ground": lambda: tp.cloth(9, 10, pins="none", colliders=[tp.Ground(0.45)]),
+}
+
+
+@pytest.mark.parametrize("scene", sorted(SCENES))
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_lanes_equal_the_substep_layout_bit_for_bit(scene, dtype):
+    model = SCENES[scene]()
+    for batch, substeps in ((1, 37), (3, 16), (2, 1), (1, 2)):
+        a, b = loaded(model, batch, 4, dtype), loaded(model, batch, 4, dtype)
+        tp.step(model, a, 3e-4, substeps=substeps, layout="substep", check=False)
+        tp.step(model, b, 3e-4, substeps=substeps, layout="lanes", check=False)
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v), (batch, substeps)
+        assert not np.array_equal(a.x, loaded(model, batch, 4, dtype).x)  # it moved
+
+
+def test_lanes_agree_with_the_numpy_reference():
+    model = tp.cloth(11, 10, damping=(0.1, 0.05, 0.01), medium_damping=0.01)
+    state = loaded(model, 2, 7, np.float64)
+    x, v = state.x.copy(), state.v.copy()
+    tp.step(model, state, 1e-4, substeps=50, layout="lanes", check=False)
+    NumpyModel(model).step(x, v, state.pinned, 1e-4, 50, "symplectic_euler")
+    np.testing.assert_allclose(state.x, x, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(state.v, v, rtol=0, atol=1e-10)
+
+
+def test_auto_chooses_lanes_for_large_grids_under_symplectic_euler():
+    big, rope = tp.cloth(32, 32), tp.rope(2000)
+    assert tp.choose_layout(big, 1, "symplectic_euler", 16) == "lanes"
+    assert tp.choose_layout(big, 1, "symplectic_euler", 1) == "substep"  # packing would cost more than it saves
+    assert tp.choose_layout(big, 1, "rk4", 16) == "substep"
+    assert tp.choose_layout(rope, 1, "symplectic_euler", 16) == "substep"
+    assert tp.choose_layout(tp.cloth(8, 8), 1, "symplectic_euler", 16) == "serial"
+    assert lanes.supports(tp.cloth(3, 9), np.float32) and not lanes.supports(tp.cloth(30, 8), np.float32)
+
+
+def test_lanes_refused_where_it_cannot_run():
+    rope = tp.rope(20)
+    with pytest.raises(ValueError, match="layout='lanes'.*use layout='auto'"):
+        tp.step(rope, rope.state(), 1e-4, substeps=4, layout="lanes")
+    cloth = tp.cloth(12, 12)
+    s = cloth.state()
+    with pytest.raises(ValueError, match="layout='lanes' runs symplectic_euler"):
+        tp.step(cloth, s, 1e-4, substeps=4, method="rk4", layout="lanes")
+    short = tp.cloth(40, 8)  # 8 rows: one row per band, the bend springs would reach two bands away
+    s = short.state()
+    before = s.x.copy()
+    with pytest.raises(ValueError, match="at least 9 rows"):
+        tp.step(short, s, 1e-4, substeps=4, layout="lanes")
+    assert np.array_equal(s.x, before)
+
+
+def test_pool_growth_keeps_results():
+    model = tp.cloth(16, 16)
+    old = lanes.MIN_CAPACITY
+    try:
+        lanes._POOLS.clear()
+        lanes.MIN_CAPACITY = 8  # 16x16 in 8 lanes: 32 packs a copy; a batch of 5 grows the pool twice
+        for batch in (1, 5):
+            a, b = loaded(model, batch, 9), loaded(model, batch, 9)
+            tp.step(model, a, 2e-4, substeps=8, layout="substep", check=False)
+            tp.step(model, b, 2e-4, substeps=8, layout="lanes", check=False)
+            assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
+        assert lanes._POOLS[("float32", 3)].capacity == 256
+    finally:
+        lanes.MIN_CAPACITY = old
+        lanes._POOLS.clear()
+
+
+def test_second_scene_and_batch_compile_nothing_new():
+    m1 = tp.cloth(40, 30, colliders=[tp.Ground()])
+    tp.step(m1, m1.state(batch=2), 1e-4, substeps=21, layout="lanes")
+    count = compiled_kernel_count()
+    m2 = tp.cloth(33, 45, size=(2.0, 1.0), stiffness=(900.0, 300.0, 30.0), colliders=[tp.Ground(height=0.2)])
+    tp.step(m2, m2.state(batch=3), 1e-4, substeps=21, layout="lanes")
+    assert compiled_kernel_count() == count
+
+
+_THREAD_SCRIPT = textwrap.dedent("""
+    import hashlib, numpy as np, tianim.physics as tp
+    model = tp.cloth(40, 40, damping=(0.05, 0.02, 0.01), colliders=[tp.Sphere((0, 0.6, 0), 0.25)], pins="none")
+    state = model.state(batch=2)
+    state.x[1] += 0.01
+    tp.step(model, state, 1e-4, substeps=100, layout="lanes")
+    print(hashlib.sha256(state.x.tobytes() + state.v.tobytes()).hexdigest())
+""")
+
+
+def test_lanes_bit_identical_with_one_and_two_threads():
+    digests = digests_by_thread_count(_THREAD_SCRIPT)
+    assert digests[0] == digests[1]
