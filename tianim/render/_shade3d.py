@@ -27,8 +27,13 @@ GROUND_MISS_T = 1e30
 MAX_FOOTPRINT, MIN_FOOTPRINT = 1.0e3, 1e-3
 #: Length below which a shading normal is left unnormalised (avoids 0/0).
 SHADE_NORMALIZE_EPS = 1e-12
-#: Length of the parameter vector of :func:`resolve` (layout in its docstring).
-RESOLVE_PARAMS = 69
+#: Offsets in the parameter vector of :func:`resolve` (layout in its docstring): the ground's shadow
+#: region on screen (mode, then a quadrilateral), the camera rows, the light-space rows, the light.
+P_SHADOW, P_CAMERA, P_LIGHT_FRAME, P_LIGHT_DIR, RESOLVE_PARAMS = 38, 47, 59, 71, 74
+#: Modes of the shadow region: no pixel's ground can be in shadow, those inside the quadrilateral, all.
+SHADOW_NONE, SHADOW_QUAD, SHADOW_ALL = 0, 1, 2
+#: Margin [px] around the shadow quadrilateral (its corners are rounded float32 projections).
+SHADOW_QUAD_PAD = 2.0
 
 
 @_ti.cached_kernels
@@ -163,7 +168,36 @@ def kernels():
     @ti.func
     def _camera(params: ti.template()):
         """Rows right, up, forward, eye of the camera in ``params`` (see :func:`resolve`)."""
-        return _vec3(params, 42), _vec3(params, 45), _vec3(params, 48), _vec3(params, 51)
+        return (_vec3(params, P_CAMERA), _vec3(params, P_CAMERA + 3), _vec3(params, P_CAMERA + 6),
+                _vec3(params, P_CAMERA + 9))
+
+    @ti.func
+    def _shadow_span(params: ti.template(), y, Wo):
+        """First and last pixel of output row y whose ground may be in shadow (empty: first > last):
+        the pixels within SHADOW_QUAD_PAD of the quadrilateral params[P_SHADOW + 1 : + 9] (x, y of its
+        corners in order), found by clipping its edges to the slab of rows y +- pad."""
+        mode = ti.cast(params[P_SHADOW], ti.i32)
+        first, last = 1, 0
+        if mode == SHADOW_ALL:
+            first, last = 0, Wo - 1
+        elif mode == SHADOW_QUAD:
+            ylo, yhi = y + 0.5 - SHADOW_QUAD_PAD, y + 0.5 + SHADOW_QUAD_PAD
+            xl, xr = ti.f32(3.0e38), ti.f32(-3.0e38)
+            for e in ti.static(range(4)):
+                ax, ay = params[P_SHADOW + 1 + 2 * e], params[P_SHADOW + 2 + 2 * e]
+                bx, by = params[P_SHADOW + 1 + 2 * ((e + 1) % 4)], params[P_SHADOW + 2 + 2 * ((e + 1) % 4)]
+                if ti.max(ay, by) >= ylo and ti.min(ay, by) <= yhi:
+                    if ti.abs(by - ay) > 1e-6:  # x where the edge enters and leaves the slab
+                        for yb in ti.static((0, 1)):
+                            yc = ti.min(ti.max(yhi if yb else ylo, ti.min(ay, by)), ti.max(ay, by))
+                            xc = ax + (yc - ay) / (by - ay) * (bx - ax)
+                            xl, xr = ti.min(xl, xc), ti.max(xr, xc)
+                    else:
+                        xl, xr = ti.min(xl, ax, bx), ti.max(xr, ax, bx)
+            if xl <= xr:
+                first = ti.max(ti.cast(ti.floor(xl - SHADOW_QUAD_PAD), ti.i32), 0)
+                last = ti.min(ti.cast(ti.ceil(xr + SHADOW_QUAD_PAD), ti.i32), Wo - 1)
+        return first, last
 
     @ti.kernel
     def ground_cache(params: f32a1, step: ti.f32, fsample: ti.f32, ssaa: ti.template(), cache: f32a3, lit_rgb: u32a2):
@@ -188,7 +222,7 @@ def kernels():
         gc2 = _lin(ti.Vector([params[17], params[18], params[19]]))
         gcen = ti.Vector([params[21], params[22], params[23]])
         R, U, Fw, eye = _camera(params)
-        L = _vec3(params, 66)
+        L = _vec3(params, P_LIGHT_DIR)
         upv = ti.Vector([params[25], params[26], params[27]])
         e1 = ti.Vector([params[28], params[29], params[30]])
         e2 = ti.Vector([params[31], params[32], params[33]])
@@ -269,9 +303,11 @@ def kernels():
         [11] shadow-map focal [px/m], [12] ground on, [13] ground height [m], [14:17] and [17:20] checker rgb,
         [20] checker cell [m], [21:24] ground centre, [24] ground fade radius [m], [25:28] up,
         [28:31] and [31:34] ground axes, [34:38] x0, x1, y0, y1: the shadow-map texels that primitives
-        cover, [38:42] x0, x1, y0, y1: the output pixels whose ground may be in shadow (outside it,
-        a pixel without primitives copies ``lit_rgb``), [42:54] camera rows right, up, forward, eye,
-        [54:66] light-space rows right, up, forward, origin, [66:69] unit vector towards the light;
+        cover, [P_SHADOW] SHADOW_NONE / QUAD / ALL and [P_SHADOW + 1 : + 9] a quadrilateral (x, y [px] of
+        its corners in order): the output pixels whose ground may be in shadow (:func:`_shadow_span`;
+        elsewhere a pixel without primitives copies ``lit_rgb``), [P_CAMERA : + 12] camera rows right,
+        up, forward, eye, [P_LIGHT_FRAME : + 12] light-space rows right, up, forward, origin,
+        [P_LIGHT_DIR : + 3] unit vector towards the light;
         mats: (M, 3) back-side rgb per material; smap: the shadow map (depth bits per texel,
         (1, 1) for none); sph: (P, SPH_COLS) spheres (view-space centres [m], colours);
         gcache: the ground per pixel (per sample if ``per_sample``), see :func:`ground_cache`, and
@@ -290,14 +326,12 @@ def kernels():
         ambient, spec, bias, tol = params[1], params[2], params[3], params[4]
         lfocal = params[11]
         R, U, Fw, eye = _camera(params)
-        L = _vec3(params, 66)
+        L = _vec3(params, P_LIGHT_DIR)
         upv = ti.Vector([params[25], params[26], params[27]])
         h = eye.dot(upv) - params[13]  # eye height above the ground
         ground_on = params[12] > 0.5 and h > 0.0
         Rn, Un, Fn = R.dot(upv), U.dot(upv), Fw.dot(upv)
-        sx0, sx1 = ti.cast(params[38], ti.i32), ti.cast(params[39], ti.i32)
-        sy0, sy1 = ti.cast(params[40], ti.i32), ti.cast(params[41], ti.i32)
-        lcam = ti.Matrix([[params[54 + 3 * r + k] for k in ti.static(range(3))] for r in ti.static(range(4))])
+        lcam = ti.Matrix([[params[P_LIGHT_FRAME + 3 * r + k] for k in ti.static(range(3))] for r in ti.static(range(4))])
         lsh = _light_frame(smap, lcam, lfocal, bias, ti.Vector([params[34], params[35], params[36], params[37]]))
         kx = Rn * ifocal
         for y in range(Ho):  # parallel over rows, serial along a row (much faster than ndrange on CPU)
@@ -307,7 +341,7 @@ def kernels():
                 bg[k] = _lin(params[5 + k] * (1.0 - tt) + params[8 + k] * tt)
             lo, hi = spans[y, 0], spans[y, 1]
             spans[y, 0], spans[y, 1] = SPAN_EMPTY, -1
-            shadow_row = sy0 <= y <= sy1
+            sx0, sx1 = _shadow_span(params, y, Wo)
             bits = ti.u64(0)  # bytes waiting for a whole 32-bit word
             nbits = 0
             word = 0
@@ -325,7 +359,7 @@ def kernels():
                 rgb = ti.u64(0)
                 if all_keys == ti.i64(EMPTY) and per_sample == 0:
                     # no primitive in this pixel: sky and ground only, the ground shaded once
-                    if ground_on and not (shadow_row and sx0 <= x <= sx1):
+                    if ground_on and not sx0 <= x <= sx1:
                         rgb = ti.cast(lit_rgb[y, x], ti.u64)  # in full light: shaded by ground_cache
                     else:
                         G = ti.Vector([0.0, 0.0, 0.0])

@@ -507,7 +507,7 @@ class Scene3D:
         they, and the cached ground shading, stay put while the scene moves.
         """
         bg0, bg1 = self.background
-        sbox = [1.0, 0.0, 1.0, 0.0]  # no pixel's ground is in shadow
+        sbox = [S.SHADOW_NONE] + [0.0] * 8  # no pixel's ground is in shadow
         if self._ground is not None:
             if self.camera is None:
                 ref = (lo, hi)
@@ -523,24 +523,23 @@ class Scene3D:
             cell = float(cell) if cell is not None else max(extent / 8.0, 1e-3)
             ground = [1.0, h, *c1, *c2, cell, *centre, fade]
             if smap_size > 1:
-                sbox = self._shadow_box(camera, lcam, lfocal, bbox, smap_size, h)
+                sbox = self._shadow_region(camera, lcam, lfocal, bbox, smap_size, h)
         else:
             ground = [0.0] * 13
         axes = np.eye(3)[[self.up_axis, (self.up_axis + 1) % 3, (self.up_axis + 2) % 3]].ravel()
         return np.array([focal, self.ambient, self.specular, bias, _GROUP_DEPTH_TOL, *bg0, *bg1, lfocal, *ground,
                          *axes, *bbox, *sbox, *cam.ravel(), *lcam.ravel(), *self.light], dtype=np.float32)
 
-    def _shadow_box(self, camera, lcam, lfocal, bbox, smap_size, height):
-        """[x0, x1, y0, y1]: output pixels (inclusive) outside which no pixel's ground point can be in
-        shadow, so that resolve copies their fully lit shading from the ground cache.
+    def _shadow_region(self, camera, lcam, lfocal, bbox, smap_size, height):
+        """[mode, x0, y0, ..., x3, y3]: the output pixels whose ground point may be in shadow (the rest
+        copy their fully lit shading from the ground cache), see :func:`_shade3d._shadow_span`.
 
-        The shadow map's occupied texels ``bbox`` (plus the bilinear footprint) bound a rectangle in
-        light space; its preimage on the ground plane is a parallelogram, whose projected corners
-        bound the pixels in question (a projected convex polygon is the hull of its projected
-        corners). Widened by 2 pixels against rounding; the whole image when a corner is not in
-        front of the camera or the light grazes the ground.
+        The shadow map's occupied texels ``bbox`` (plus the bilinear footprint and a texel) bound a
+        rectangle in light space; its preimage on the ground plane is a parallelogram, which projects
+        to a convex quadrilateral [px] (all four corners in front of the camera). The whole image when
+        a corner is not, or the light grazes the ground.
         """
-        full = [0.0, self.width - 1.0, 0.0, self.height - 1.0]
+        full = [S.SHADOW_ALL] + [0.0] * 8
         up = np.eye(3)[self.up_axis]
         e1, e2 = np.eye(3)[(self.up_axis + 1) % 3], np.eye(3)[(self.up_axis + 2) % 3]
         r, u, o = (lcam[k].astype(np.float64) for k in (0, 1, 3))
@@ -551,7 +550,7 @@ class Scene3D:
         if abs(np.linalg.det(M)) < 1e-6 * lfocal * lfocal:
             return full
         x0, x1, y0, y1 = bbox[0] - 2.0, bbox[1] + 2.0, bbox[2] - 2.0, bbox[3] + 2.0
-        ab = np.linalg.solve(M, np.array([[x0, x0, x1, x1], [y0, y1, y0, y1]]) - t[:, None])
+        ab = np.linalg.solve(M, np.array([[x0, x1, x1, x0], [y0, y0, y1, y1]]) - t[:, None])  # in order
         P = height * up + np.outer(ab[0], e1) + np.outer(ab[1], e2)
         v = camera.to_view(P)
         if not np.all(v[:, 2] > 1e-6 * float(np.linalg.norm(np.subtract(camera.target, camera.eye)))):
@@ -559,9 +558,7 @@ class Scene3D:
         F = camera.focal(self.height)
         px = 0.5 * self.width + F * v[:, 0] / v[:, 2]
         py = 0.5 * self.height - F * v[:, 1] / v[:, 2]
-        box = [max(np.floor(px.min()) - 2.0, 0.0), min(np.ceil(px.max()) + 2.0, self.width - 1.0),
-               max(np.floor(py.min()) - 2.0, 0.0), min(np.ceil(py.max()) + 2.0, self.height - 1.0)]
-        return box if box[0] <= box[1] and box[2] <= box[3] else [1.0, 0.0, 1.0, 0.0]
+        return [S.SHADOW_QUAD, *np.stack([px, py], 1).ravel()]
 
     def _ground_pixels(self, camera, params):
         """The ground's shading per pixel (per sample when ``per_sample``) and, without ``per_sample``,
