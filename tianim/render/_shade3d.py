@@ -344,106 +344,123 @@ def kernels():
             sx0, sx1 = _shadow_span(params, y, Wo)
             bits = ti.u64(0)  # bytes waiting for a whole 32-bit word
             nbits = 0
-            word = 0
+            sky_rgb = _pack((NS * bg) * (1.0 / NS))  # a pixel of sky only
             # up . ray of sample (0, 0) of this row's pixels
             row_d = (0.5 - 0.5 * Ws) * kx - (y * ssaa + 0.5 - 0.5 * Hs) * Un * ifocal + Fn
-            for x in range(Wo):
-                keys = ti.Vector([ti.i64(EMPTY)] * NS, ti.i64)
-                if lo <= x <= hi:
-                    for s in ti.static(range(NS)):  # read once: leave the sample buffer empty for the next frame
-                        keys[s] = buf[y * ssaa + s // ssaa, x * ssaa + s % ssaa]
-                        buf[y * ssaa + s // ssaa, x * ssaa + s % ssaa] = ti.i64(EMPTY)
-                all_keys = keys[0]
-                for s in ti.static(range(1, NS)):
-                    all_keys &= keys[s]
-                rgb = ti.u64(0)
-                if all_keys == ti.i64(EMPTY) and per_sample == 0:
-                    # no primitive in this pixel: sky and ground only, the ground shaded once
-                    if ground_on and not sx0 <= x <= sx1:
-                        rgb = ti.cast(lit_rgb[y, x], ti.u64)  # in full light: shaded by ground_cache
+            for g in range((Wo + 3) // 4):  # groups of 4 pixels: 3 whole words of the image
+                p4 = 4 * g
+                if per_sample == 0 and (p4 + 3 < lo or p4 > hi) and (p4 + 3 < sx0 or p4 > sx1) and p4 + 3 < Wo:
+                    # no primitive and no shadow in these 4 pixels: the sky, or the fully lit ground
+                    r = ti.Vector([sky_rgb] * 4, ti.u64)
+                    if ground_on:
+                        r = ti.Vector([ti.cast(lit_rgb[y, p4 + k], ti.u64) for k in ti.static(range(4))])
+                    if words:
+                        out_words[y, 3 * g] = ti.cast((r[0] | (r[1] << ti.u64(24))) & ti.u64(0xFFFFFFFF), ti.u32)
+                        out_words[y, 3 * g + 1] = ti.cast(((r[1] >> ti.u64(8)) | (r[2] << ti.u64(16))) & ti.u64(0xFFFFFFFF), ti.u32)
+                        out_words[y, 3 * g + 2] = ti.cast(((r[2] >> ti.u64(16)) | (r[3] << ti.u64(8))) & ti.u64(0xFFFFFFFF), ti.u32)
                     else:
-                        G = ti.Vector([0.0, 0.0, 0.0])
-                        if ground_on:
-                            G = _ground(gcache, y, x, smap, lfocal, lsh)
-                        rgb = _pack(_sky_and_ground(_sample_ups(row_d, x, kx, Un, ifocal, ssaa), bg, ground_on, G, NS) * (1.0 / NS))
+                        for k in ti.static(range(4)):
+                            for c in ti.static(range(3)):
+                                out[y, p4 + k, c] = ti.cast((r[k] >> ti.u64(8 * c)) & ti.u64(0xFF), ti.u8)
                 else:
-                    dup = _sample_ups(row_d, x, kx, Un, ifocal, ssaa)
-                    cls = ti.Vector([0] * NS, ti.i32)
-                    zs = ti.Vector([0.0] * NS, ti.f32)
-                    for s in ti.static(range(NS)):
-                        cls[s], zs[s] = _classify(keys[s], dup[s], ground_on, h)
-                    mask = (1 << NS) - 1  # samples not yet accounted for
-                    acc = ti.Vector([0.0, 0.0, 0.0])
-                    while mask != 0:
-                        # the first sample left, and the samples of its group (same class, depth within tol)
-                        j = 0
-                        for s in ti.static(range(NS - 1, -1, -1)):
-                            if (mask >> s) & 1 == 1:
-                                j = s
-                        key, c, z = ti.i64(0), 0, 0.0
-                        for s in ti.static(range(NS)):
-                            if s == j:
-                                key, c, z = keys[s], cls[s], zs[s]
-                        n = 0
-                        for s in ti.static(range(NS)):
-                            if (mask >> s) & 1 == 1:
-                                if s == j or (per_sample == 0 and cls[s] == c and (c < 0 or ti.abs(zs[s] - z) <= tol * z)):
-                                    n += 1
-                                    mask ^= 1 << s
-                        py, px = y * ssaa + j // ssaa, x * ssaa + j % ssaa
-                        col = bg
-                        if c == -3:
-                            gy, gx = y, x
-                            if per_sample != 0:
-                                gy, gx = py, px
-                            col = _ground(gcache, gy, gx, smap, lfocal, lsh)
-                        elif c >= 0:
-                            ident = ti.cast(key & ti.i64(_ID_MASK), ti.i32)
-                            dx = (px + 0.5 - 0.5 * Ws) * ifocal
-                            dy = -(py + 0.5 - 0.5 * Hs) * ifocal
-                            D = dx * R + dy * U + Fw  # world ray direction; the hit at t has view depth t
-                            P = eye + z * D
-                            if ident >= n_tri:
-                                q = ident - n_tri
-                                hv = ti.Vector([dx * z - sph[q, SPH_VIEW], dy * z - sph[q, SPH_VIEW + 1],
-                                                z - sph[q, SPH_VIEW + 2]])
-                                N = (hv[0] * R + hv[1] * U + hv[2] * Fw).normalized(SHADE_NORMALIZE_EPS)
-                                lit = _shadow(_light_coords(P + N * bias, lsh), lsh, smap)
-                                Hh = (L - D.normalized()).normalized()
-                                col = _shade(N, upv, _lin(_row3(sph, q, SPH_COLOR)), Hh, L, ambient, spec, lit)
+                    word = 3 * g
+                    for x in range(p4, ti.min(p4 + 4, Wo)):
+                        keys = ti.Vector([ti.i64(EMPTY)] * NS, ti.i64)
+                        if lo <= x <= hi:
+                            for s in ti.static(range(NS)):  # read once: leave the sample buffer empty for the next frame
+                                keys[s] = buf[y * ssaa + s // ssaa, x * ssaa + s % ssaa]
+                                buf[y * ssaa + s // ssaa, x * ssaa + s % ssaa] = ti.i64(EMPTY)
+                        all_keys = keys[0]
+                        for s in ti.static(range(1, NS)):
+                            all_keys &= keys[s]
+                        rgb = ti.u64(0)
+                        if all_keys == ti.i64(EMPTY) and per_sample == 0:
+                            # no primitive in this pixel: sky and ground only, the ground shaded once
+                            if ground_on and not sx0 <= x <= sx1:
+                                rgb = ti.cast(lit_rgb[y, x], ti.u64)  # in full light: shaded by ground_cache
                             else:
-                                a, b, cc = faces[ident, 0], faces[ident, 1], faces[ident, 2]
-                                x0, y0 = attr[a, 0], attr[a, 1]
-                                x1, y1 = attr[b, 0], attr[b, 1]
-                                x2, y2 = attr[cc, 0], attr[cc, 1]
-                                cx, cy = px + 0.5, py + 0.5
-                                p0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * attr[a, 2]
-                                p1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * attr[b, 2]
-                                p2 = ((x0 - cx) * (y1 - cy) - (x1 - cx) * (y0 - cy)) * attr[cc, 2]
-                                sw = 1.0 / (p0 + p1 + p2)  # perspective-correct barycentrics p_k / sum
-                                p0, p1, p2 = p0 * sw, p1 * sw, p2 * sw
-                                N = (p0 * _row3(attr, a, 3) + p1 * _row3(attr, b, 3) + p2 * _row3(attr, cc, 3)).normalized(SHADE_NORMALIZE_EPS)
-                                Hh = p0 * _row3(attr, a, 12) + p1 * _row3(attr, b, 12) + p2 * _row3(attr, cc, 12)
-                                base = ti.Vector([0.0, 0.0, 0.0])
-                                if (c - (1 << 24)) % 2 == 0:  # even tag: the side facing away from the normals
-                                    N = -N
-                                    base = _lin(_row3(mats, fmat[ident], 0))
-                                else:
-                                    base = p0 * _row3(attr, a, 6) + p1 * _row3(attr, b, 6) + p2 * _row3(attr, cc, 6)
-                                lit = _shadow(_light_coords(P, lsh), lsh, smap)
-                                col = _shade(N, upv, base, Hh, L, ambient, spec, lit)
-                        acc += n * col
-                    rgb = _pack(acc * (1.0 / NS))
-                if words:
-                    bits |= rgb << ti.cast(nbits, ti.u64)
-                    nbits += 24
-                    if nbits >= 32:
-                        out_words[y, word] = ti.cast(bits & ti.u64(0xFFFFFFFF), ti.u32)
-                        word += 1
-                        bits >>= ti.u64(32)
-                        nbits -= 32
-                else:
-                    for k in ti.static(range(3)):
-                        out[y, x, k] = ti.cast((rgb >> ti.u64(8 * k)) & ti.u64(0xFF), ti.u8)
+                                G = ti.Vector([0.0, 0.0, 0.0])
+                                if ground_on:
+                                    G = _ground(gcache, y, x, smap, lfocal, lsh)
+                                rgb = _pack(_sky_and_ground(_sample_ups(row_d, x, kx, Un, ifocal, ssaa), bg, ground_on, G, NS) * (1.0 / NS))
+                        else:
+                            dup = _sample_ups(row_d, x, kx, Un, ifocal, ssaa)
+                            cls = ti.Vector([0] * NS, ti.i32)
+                            zs = ti.Vector([0.0] * NS, ti.f32)
+                            for s in ti.static(range(NS)):
+                                cls[s], zs[s] = _classify(keys[s], dup[s], ground_on, h)
+                            mask = (1 << NS) - 1  # samples not yet accounted for
+                            acc = ti.Vector([0.0, 0.0, 0.0])
+                            while mask != 0:
+                                # the first sample left, and the samples of its group (same class, depth within tol)
+                                j = 0
+                                for s in ti.static(range(NS - 1, -1, -1)):
+                                    if (mask >> s) & 1 == 1:
+                                        j = s
+                                key, c, z = ti.i64(0), 0, 0.0
+                                for s in ti.static(range(NS)):
+                                    if s == j:
+                                        key, c, z = keys[s], cls[s], zs[s]
+                                n = 0
+                                for s in ti.static(range(NS)):
+                                    if (mask >> s) & 1 == 1:
+                                        if s == j or (per_sample == 0 and cls[s] == c and (c < 0 or ti.abs(zs[s] - z) <= tol * z)):
+                                            n += 1
+                                            mask ^= 1 << s
+                                py, px = y * ssaa + j // ssaa, x * ssaa + j % ssaa
+                                col = bg
+                                if c == -3:
+                                    gy, gx = y, x
+                                    if per_sample != 0:
+                                        gy, gx = py, px
+                                    col = _ground(gcache, gy, gx, smap, lfocal, lsh)
+                                elif c >= 0:
+                                    ident = ti.cast(key & ti.i64(_ID_MASK), ti.i32)
+                                    dx = (px + 0.5 - 0.5 * Ws) * ifocal
+                                    dy = -(py + 0.5 - 0.5 * Hs) * ifocal
+                                    D = dx * R + dy * U + Fw  # world ray direction; the hit at t has view depth t
+                                    P = eye + z * D
+                                    if ident >= n_tri:
+                                        q = ident - n_tri
+                                        hv = ti.Vector([dx * z - sph[q, SPH_VIEW], dy * z - sph[q, SPH_VIEW + 1],
+                                                        z - sph[q, SPH_VIEW + 2]])
+                                        N = (hv[0] * R + hv[1] * U + hv[2] * Fw).normalized(SHADE_NORMALIZE_EPS)
+                                        lit = _shadow(_light_coords(P + N * bias, lsh), lsh, smap)
+                                        Hh = (L - D.normalized()).normalized()
+                                        col = _shade(N, upv, _lin(_row3(sph, q, SPH_COLOR)), Hh, L, ambient, spec, lit)
+                                    else:
+                                        a, b, cc = faces[ident, 0], faces[ident, 1], faces[ident, 2]
+                                        x0, y0 = attr[a, 0], attr[a, 1]
+                                        x1, y1 = attr[b, 0], attr[b, 1]
+                                        x2, y2 = attr[cc, 0], attr[cc, 1]
+                                        cx, cy = px + 0.5, py + 0.5
+                                        p0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * attr[a, 2]
+                                        p1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * attr[b, 2]
+                                        p2 = ((x0 - cx) * (y1 - cy) - (x1 - cx) * (y0 - cy)) * attr[cc, 2]
+                                        sw = 1.0 / (p0 + p1 + p2)  # perspective-correct barycentrics p_k / sum
+                                        p0, p1, p2 = p0 * sw, p1 * sw, p2 * sw
+                                        N = (p0 * _row3(attr, a, 3) + p1 * _row3(attr, b, 3) + p2 * _row3(attr, cc, 3)).normalized(SHADE_NORMALIZE_EPS)
+                                        Hh = p0 * _row3(attr, a, 12) + p1 * _row3(attr, b, 12) + p2 * _row3(attr, cc, 12)
+                                        base = ti.Vector([0.0, 0.0, 0.0])
+                                        if (c - (1 << 24)) % 2 == 0:  # even tag: the side facing away from the normals
+                                            N = -N
+                                            base = _lin(_row3(mats, fmat[ident], 0))
+                                        else:
+                                            base = p0 * _row3(attr, a, 6) + p1 * _row3(attr, b, 6) + p2 * _row3(attr, cc, 6)
+                                        lit = _shadow(_light_coords(P, lsh), lsh, smap)
+                                        col = _shade(N, upv, base, Hh, L, ambient, spec, lit)
+                                acc += n * col
+                            rgb = _pack(acc * (1.0 / NS))
+                        if words:
+                            bits |= rgb << ti.cast(nbits, ti.u64)
+                            nbits += 24
+                            if nbits >= 32:
+                                out_words[y, word] = ti.cast(bits & ti.u64(0xFFFFFFFF), ti.u32)
+                                word += 1
+                                bits >>= ti.u64(32)
+                                nbits -= 32
+                        else:
+                            for k in ti.static(range(3)):
+                                out[y, x, k] = ti.cast((rgb >> ti.u64(8 * k)) & ti.u64(0xFF), ti.u8)
 
     return SimpleNamespace(ground_cache=ground_cache, resolve=resolve)
