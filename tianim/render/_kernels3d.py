@@ -99,25 +99,16 @@ def kernels():
         return ti.bit_cast(ti.cast(key >> 32, ti.i32), ti.f32)
 
     @ti.func
-    def _write(buf: ti.template(), dmap: ti.template(), ortho: ti.template(), atomic: ti.template(), py, px, z,
-               ident, tag):
-        """Keep the nearest: the key in ``buf`` (camera) or the depth bits in ``dmap`` (shadow map);
-        ``atomic`` when other threads may write the same sample, else a plain read and store
-        (the caller owns the sample's row)."""
+    def _write(buf: ti.template(), dmap: ti.template(), ortho: ti.template(), py, px, z, ident, tag):
+        """Keep the nearest: the key in ``buf`` (camera) or the depth bits in ``dmap`` (shadow map)."""
         if ti.static(ortho):
             d = ti.bit_cast(z, ti.i32)
             if d < dmap[py, px]:  # a plain read first: most samples need no atomic
-                if ti.static(atomic):
-                    ti.atomic_min(dmap[py, px], d)
-                else:
-                    dmap[py, px] = d
+                ti.atomic_min(dmap[py, px], d)
         else:
             k = _key(z, ident, tag)
             if k < buf[py, px]:
-                if ti.static(atomic):
-                    ti.atomic_min(buf[py, px], k)
-                else:
-                    buf[py, px] = k
+                ti.atomic_min(buf[py, px], k)
 
     @ti.func
     def _row3(a: ti.template(), i, c0: ti.template()):
@@ -211,42 +202,32 @@ def kernels():
         return lo, hi
 
     @ti.func
-    def _cover_row(spans: ti.template(), atomic: ti.template(), row, xa, xb):
-        """Widen the span of output pixel row ``row`` to contain pixels xa..xb (read first; integer
-        atomics when ``atomic``, else plain stores: the caller owns the row)."""
+    def _cover_row(spans: ti.template(), row, xa, xb):
+        """Widen the span of output pixel row ``row`` to contain pixels xa..xb (integer atomics, read first)."""
         if xa < spans[row, 0]:
-            if ti.static(atomic):
-                ti.atomic_min(spans[row, 0], xa)
-            else:
-                spans[row, 0] = xa
+            ti.atomic_min(spans[row, 0], xa)
         if xb > spans[row, 1]:
-            if ti.static(atomic):
-                ti.atomic_max(spans[row, 1], xb)
-            else:
-                spans[row, 1] = xb
+            ti.atomic_max(spans[row, 1], xb)
 
     @ti.func
     def _triangle(attr: ti.template(), col: ti.template(), faces: ti.template(), fmat: ti.template(), f,
-                  ortho: ti.template(), atomic: ti.template(), inear, buf: ti.template(), dmap: ti.template(),
-                  spans: ti.template(), ss: ti.template(), r0, r1):
-        """Scan-convert the rows r0 <= py < r1 of triangle ``f`` into ``buf`` (keys) or, ``ortho``,
-        ``dmap`` (depth bits), with integer atomics if ``atomic``, else plain stores (the caller owns
-        the rows); see :func:`raster`."""
+                  ortho: ti.template(), inear, buf: ti.template(), dmap: ti.template(), spans: ti.template(),
+                  ss: ti.template()):
+        """Scan-convert triangle ``f`` into ``buf`` (keys) or, ``ortho``, ``dmap`` (depth bits); see :func:`raster`."""
         H, W = buf.shape[0], buf.shape[1]
         if ti.static(ortho):
             H, W = dmap.shape[0], dmap.shape[1]
         a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
-        y0, y1, y2 = attr[a, col + 1], attr[b, col + 1], attr[c, col + 1]
-        ymin = ti.max(ti.cast(ti.floor(ti.min(y0, y1, y2) - 0.5), ti.i32), r0)
-        ymax = ti.min(ti.cast(ti.ceil(ti.max(y0, y1, y2) - 0.5), ti.i32), r1 - 1)
-        x0, q0 = attr[a, col], attr[a, col + 2]
-        x1, q1 = attr[b, col], attr[b, col + 2]
-        x2, q2 = attr[c, col], attr[c, col + 2]
+        x0, y0, q0 = attr[a, col], attr[a, col + 1], attr[a, col + 2]
+        x1, y1, q1 = attr[b, col], attr[b, col + 1], attr[b, col + 2]
+        x2, y2, q2 = attr[c, col], attr[c, col + 1], attr[c, col + 2]
         area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0)
-        visible = ymin <= ymax and (ti.static(ortho) or (ti.min(q0, q1, q2) > 0.0 and ti.max(q0, q1, q2) < inear))
+        visible = ti.static(ortho) or (ti.min(q0, q1, q2) > 0.0 and ti.max(q0, q1, q2) < inear)
         if visible and ti.abs(area) > MIN_AREA:
             xmin = ti.max(ti.cast(ti.floor(ti.min(x0, x1, x2) - 0.5), ti.i32), 0)
             xmax = ti.min(ti.cast(ti.ceil(ti.max(x0, x1, x2) - 0.5), ti.i32), W - 1)
+            ymin = ti.max(ti.cast(ti.floor(ti.min(y0, y1, y2) - 0.5), ti.i32), 0)
+            ymax = ti.min(ti.cast(ti.ceil(ti.max(y0, y1, y2) - 0.5), ti.i32), H - 1)
             inv = 1.0 / area
             # y points down: counter-clockwise on screen (area > 0) faces away from the triangle normal
             tag = 1 + 2 * (fmat[f] % 127) + ti.cast(area > 0.0, ti.i32)
@@ -272,7 +253,7 @@ def kernels():
                 pb = ti.min(ti.cast(ti.floor(x0 + hi - SPAN_HI_OFFSET), ti.i32), xmax)
                 if ti.static(not ortho):
                     if pa <= pb:
-                        _cover_row(spans, atomic, py // ss, pa // ss, pb // ss)
+                        _cover_row(spans, py // ss, pa // ss, pb // ss)
                 for px in range(pa, pb + 1):
                     cx = px + 0.5
                     w0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * inv
@@ -282,7 +263,7 @@ def kernels():
                         z = w0 * q0 + w1 * q1 + w2 * q2
                         if ti.static(not ortho):
                             z = 1.0 / z
-                        _write(buf, dmap, ortho, atomic, py, px, z, f, tag)
+                        _write(buf, dmap, ortho, py, px, z, f, tag)
 
     @ti.func
     def _sphere(sph: ti.template(), p, c0: ti.template(), focal, ortho: ti.template(), near, id_offset,
@@ -309,7 +290,7 @@ def kernels():
             if ti.static(not ortho):
                 if xmin <= xmax:
                     for row in range(ymin // ss, ymax // ss + 1):
-                        _cover_row(spans, True, row, xmin // ss, xmax // ss)
+                        _cover_row(spans, row, xmin // ss, xmax // ss)
             c2 = cx * cx + cy * cy + cz * cz - r * r
             for py in range(ymin, ymax + 1):
                 dy = -(py + 0.5 - oy) * ifocal
@@ -319,7 +300,7 @@ def kernels():
                         ex, ey = dx - cx, dy - cy
                         h = r * r - ex * ex - ey * ey
                         if h >= 0.0:
-                            _write(buf, dmap, ortho, True, py, px, cz - ti.sqrt(h), p + id_offset, 0)
+                            _write(buf, dmap, ortho, py, px, cz - ti.sqrt(h), p + id_offset, 0)
                     else:
                         a = dx * dx + dy * dy + 1.0
                         b = dx * cx + dy * cy + cz
@@ -327,56 +308,38 @@ def kernels():
                         if disc >= 0.0:
                             t = (b - ti.sqrt(disc)) / a
                             if t > near:
-                                _write(buf, dmap, ortho, True, py, px, t, p + id_offset, 0)
+                                _write(buf, dmap, ortho, py, px, t, p + id_offset, 0)
 
     @ti.kernel
-    def raster(attr: f32a2, faces: i32a2, fmat: i32a1, sph: f32a2, bands: i32a2, focal: ti.f32, near: ti.f32,
-               lfocal: ti.f32, shadow: ti.i32, ss: ti.template(), banded: ti.template(), buf: i64a2, spans: i32a2,
-               smap: i32a2):
+    def raster(attr: f32a2, faces: i32a2, fmat: i32a1, sph: f32a2, focal: ti.f32, near: ti.f32, lfocal: ti.f32,
+               shadow: ti.i32, ss: ti.template(), buf: i64a2, spans: i32a2, smap: i32a2):
         """Pass 1 in one launch: the camera's visibility buffer, then (``shadow`` = 1) the shadow map.
 
         attr: (V, ATTR_COLS) rows of :func:`vertices`; faces: (F, 3); fmat: (F,) mesh index of each face
         (for the tag of the key); sph: (P, SPH_COLS) spheres (view-space centre, light-space centre, radius);
-        bands: (2, T + 1) increasing row boundaries (multiples of ``ss``) splitting the sample grid (row 0)
-        and the shadow map (row 1) into T bands; focal: of the sample grid [px]; near [m]: a triangle with
-        a vertex nearer is skipped, a sphere whose near point is; lfocal: of the shadow map [texels/m];
-        ss: samples per pixel per axis (compile-time constant); banded: False on GPUs, where one
-        thread per triangle with integer atomics is the better layout (``bands`` unused).
-        buf: (H, W) keys, which must be EMPTY on entry (``resolve`` leaves them so); spans: (H / ss, 2)
+        focal: of the sample grid [px]; near [m]: a triangle with a vertex nearer is skipped, a sphere
+        whose near point is; lfocal: of the shadow map [texels/m].
+        buf: (H, W) keys, which must be EMPTY on entry (``resolve`` leaves them so); spans: (H / ssaa, 2)
         per output pixel row the first and last pixel any primitive may cover (widened here, from
         (SPAN_EMPTY, -1)); smap: (S, S) shadow map, all EMPTY_DEPTH on entry (a NumPy fill is a memset,
-        ~8x faster than a loop here), filled with depth bits.
+        ~8x faster than a loop here), filled with depth bits; ss: samples per pixel per axis.
 
-        Triangles: one task per band, which scans every triangle's rows inside its band with plain
-        stores (it owns them: no atomics, ~30 % of the raster's time otherwise; the bands come from
-        the rows of the vertices, so they hold about equal work); the camera pass interpolates the
-        inverse depth 1/z linearly (perspective-correct depth), the light pass (orthographic) the depth
-        itself. A sample at (px + 0.5, py + 0.5) is covered when its three barycentrics are >= 0.
-        Spheres (after the triangles, one task per sphere, integer atomics): the ray through a pixel is
-        t (dx, dy, 1), so t is the depth of the hit; orthographic: pixel = focal * (x, y) + centre of the
-        map, depth = z. Each top-level loop is one parallel task; they run in order.
+        Triangles: the camera pass interpolates the inverse depth 1/z linearly (perspective-correct
+        depth); the light pass (orthographic) the depth itself. A sample at (px + 0.5, py + 0.5) is
+        covered when its three barycentrics are >= 0. Spheres: the ray through a pixel is t (dx, dy, 1),
+        so t is the depth of the hit; orthographic: pixel = focal * (x, y) + centre of the map, depth = z.
+        Each top-level loop is one parallel task (one thread per triangle or sphere, dynamically
+        scheduled); they run in order. Row bands owned by threads (plain stores instead of atomics)
+        measured no faster here on 1-2 threads, and a static split stalls when a thread is preempted.
         """
         n_tri, n_sph = faces.shape[0], sph.shape[0]
-        n_bands = bands.shape[1] - 1
         inear = 1.0 / near
-        if ti.static(banded):
-            for t in range(n_bands):
-                for f in range(n_tri):
-                    _triangle(attr, ATTR_SCREEN, faces, fmat, f, False, False, inear, buf, smap, spans, ss,
-                              bands[0, t], bands[0, t + 1])
-        else:
-            for f in range(n_tri):
-                _triangle(attr, ATTR_SCREEN, faces, fmat, f, False, True, inear, buf, smap, spans, ss, 0, buf.shape[0])
+        for f in range(n_tri):
+            _triangle(attr, ATTR_SCREEN, faces, fmat, f, False, inear, buf, smap, spans, ss)
         for p in range(n_sph):
             _sphere(sph, p, SPH_VIEW, focal, False, near, n_tri, buf, smap, spans, ss)
-        if ti.static(banded):
-            for t in range(n_bands * shadow):
-                for f in range(n_tri):
-                    _triangle(attr, ATTR_LIGHT, faces, fmat, f, True, False, inear, buf, smap, spans, ss,
-                              bands[1, t], bands[1, t + 1])
-        else:
-            for f in range(n_tri * shadow):
-                _triangle(attr, ATTR_LIGHT, faces, fmat, f, True, True, inear, buf, smap, spans, ss, 0, smap.shape[0])
+        for f in range(n_tri * shadow):
+            _triangle(attr, ATTR_LIGHT, faces, fmat, f, True, inear, buf, smap, spans, ss)
         for p in range(n_sph * shadow):
             _sphere(sph, p, SPH_LIGHT, lfocal, True, 0.0, 0, buf, smap, spans, ss)
 

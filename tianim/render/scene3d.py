@@ -27,7 +27,7 @@ from tianim.render import _shade3d as S
 from tianim.render.camera import Camera
 from tianim.render.colors import rgb, rgb_array
 from tianim._checks import check_bool, check_finite_scalar, check_size, fmt, points_array
-from tianim.runtime import current_arch, ensure_taichi, num_threads
+from tianim.runtime import ensure_taichi
 
 _GRID_FACES: dict = {}
 #: Samples of one pixel on the same side of one mesh share a shade when their depths differ by less than this
@@ -72,27 +72,6 @@ def _alpha_mask(alpha, ids, n: int) -> np.ndarray:
         z ^= z >> np.uint64(31)
     u = (z >> np.uint64(11)).astype(np.float64) / float(1 << 53)
     return u < a
-
-
-def _raster_bands() -> int:
-    """Bands of rows the raster pass splits the triangles into: one per CPU thread (each thread then
-    owns its rows and needs no atomics), 0 on a GPU (one thread per triangle, with atomics)."""
-    if current_arch() not in ("x64", "arm64"):
-        return 0
-    return max(int(num_threads() or 1), 1)
-
-
-def _band_rows(y, n_rows: int, step: int, n_bands: int) -> np.ndarray:
-    """(n_bands + 1,) int32 row boundaries 0 = b_0 <= ... <= b_T = n_rows, multiples of ``step`` (but the
-    last), at quantiles of the rows ``y`` of the vertices: bands with about equal numbers of vertices,
-    hence of triangles and, on an even mesh, of samples (any split gives the same image)."""
-    if n_bands <= 1 or len(y) == 0:
-        return np.array([0] + [n_rows] * max(n_bands, 1), np.int32)  # band 0 holds all rows
-    sub = np.clip(np.nan_to_num(np.asarray(y[:: max(1, len(y) // 4096)], np.float64)), 0.0, n_rows)
-    ks = [len(sub) * k // n_bands for k in range(1, n_bands)]
-    q = np.partition(sub, ks)[ks]
-    b = np.concatenate([[0], step * np.floor(q / step), [n_rows]])
-    return np.maximum.accumulate(np.minimum(b, n_rows)).astype(np.int32)
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -462,12 +441,8 @@ class Scene3D:
         if len(V):
             prm = np.concatenate([cam.ravel(), lcam.ravel(), [focal, W, H, lfocal, smap.shape[0]], self.light])
             K.kernels().vertices(V, N, C, G, prm.astype(np.float32), attr)
-        n_bands = _raster_bands()
-        bands = np.empty((2, max(n_bands, 1) + 1), np.int32)
-        bands[0] = _band_rows(attr[:, K.ATTR_SCREEN + 1], H, self.ssaa, n_bands)
-        bands[1] = _band_rows(attr[:, K.ATTR_LIGHT + 1], smap.shape[0], 1, n_bands)
-        K.kernels().raster(attr, F, FM, sph, bands, focal, near, lfocal, int(smap.shape[0] > 1), self.ssaa,
-                           n_bands > 0, buf, spans, smap)
+        K.kernels().raster(attr, F, FM, sph, focal, near, lfocal, int(smap.shape[0] > 1), self.ssaa, buf, spans,
+                           smap)
         bbox = [0.0] * 4
         if smap.shape[0] > 1:
             # texels that can hold a depth: the scene's bounding box seen from the light
