@@ -19,9 +19,17 @@ def test_grid_normals_match_the_analytic_normal_of_a_paraboloid():
     a, n = 0.7, 9
     g = _paraboloid(n, a)
     v = g.reshape(-1, 3)
-    out = np.zeros_like(v)
-    K.kernels().grid_normals(v, 0, n, n, out)
-    out /= np.linalg.norm(out, axis=1, keepdims=True)
+    # the vertices pass packs the unit normal of each grid vertex into attr columns ATTR_NORMAL..+2
+    prm = np.zeros(K.VERTEX_PARAMS, np.float32)
+    prm[[0, 4, 8]] = 1.0                      # camera rows right, up, forward: the identity
+    prm[[12, 16, 20]] = 1.0                   # the same for the light
+    prm[24:29] = 100.0, 64.0, 48.0, 1.0, 16.0  # focal, sample grid, shadow-map focal and size
+    prm[29:32] = 0.0, 1.0, 0.0
+    prm[11] = -3.0                            # eye at z = -3
+    attr = np.zeros((len(v), K.ATTR_COLS), np.float32)
+    K.kernels().vertices(v, np.zeros((1, 3), np.float32), np.zeros_like(v), np.array([[0, n, n]], np.int32),
+                         prm, attr)
+    out = attr[:, K.ATTR_NORMAL:K.ATTR_NORMAL + 3]
     # y = a (x^2 + z^2): normal ~ (-2 a x, 1, -2 a z); central differences are exact for a quadratic
     ref = np.stack([-2 * a * v[:, 0], np.ones(len(v)), -2 * a * v[:, 2]], 1)
     ref /= np.linalg.norm(ref, axis=1, keepdims=True)

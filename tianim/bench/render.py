@@ -9,10 +9,17 @@
 * ``particles_frame_ms``: 10,000 shaded particles (sphere impostors) at 640x480.
 * ``canvas2d_frame_ms``: 10,000 anti-aliased 2D discs at 640x480.
 * Reference in the same run: ``gui_cloth_frame_ms``, Taichi's ``ti.GUI(show_gui=False)``
-  canvas drawing the same triangles flat-shaded, painter-sorted, without supersampling.
+  canvas drawing the same triangles flat-shaded, painter-sorted, without supersampling
+  (None, with ``cloth_vs_gui``, on quadrants, which has no ``ti.GUI``).
+* ``cloth_stage_ms``: where ``cloth_frame_ms`` goes, the medians per frame of each kernel of the
+  renderer (``vertices``, ``raster``: visibility buffer and shadow map, ``resolve``: shading and the
+  uint8 image) timed between ``ti.sync()`` calls, and of the rest (``python``: NumPy and Python).
 """
 
 from __future__ import annotations
+
+import statistics
+import time
 
 import numpy as np
 
@@ -52,7 +59,47 @@ def _gui_reference(grid, scene, repeats):
     return median_time(draw, repeats=repeats)
 
 
+def _stages(frame, repeats: int) -> dict:
+    """Median milliseconds per call of ``frame()`` spent in each kernel of the 3D renderer (timed
+    between ``ti.sync()`` calls) and, as ``python``, in everything else."""
+    from tianim import _ti
+    from tianim.render import _kernels3d, _shade3d
+
+    ti = _ti.get()
+    stages = {"vertices": _kernels3d.kernels(), "raster": _kernels3d.kernels(), "resolve": _shade3d.kernels()}
+    spent = {name: [0.0] for name in stages}
+    originals = {name: getattr(ns, name) for name, ns in stages.items()}
+
+    def timed(name, kernel):
+        def call(*args):
+            ti.sync()
+            t0 = time.perf_counter()
+            kernel(*args)
+            ti.sync()
+            spent[name][-1] += time.perf_counter() - t0
+        return call
+
+    totals = []
+    try:
+        for name, ns in stages.items():
+            setattr(ns, name, timed(name, originals[name]))
+        frame()  # warm-up
+        for _ in range(repeats):
+            for v in spent.values():
+                v.append(0.0)
+            t0 = time.perf_counter()
+            frame()
+            totals.append(time.perf_counter() - t0)
+    finally:
+        for name, ns in stages.items():
+            setattr(ns, name, originals[name])
+    out = {name: 1e3 * statistics.median(v[1:]) for name, v in spent.items()}
+    out["python"] = 1e3 * statistics.median([t - sum(v[i + 1] for v in spent.values()) for i, t in enumerate(totals)])
+    return out
+
+
 def main(argv=None) -> int:
+    from tianim import _ti
     from tianim.render import Canvas2D, Scene3D
     from tianim.runtime import ensure_taichi, num_threads
 
@@ -93,15 +140,19 @@ def main(argv=None) -> int:
         {"case": f"cloth {n}x{n}, ssaa 2 per sample", "ms": 1e3 * median_time(rebuild(s_super), repeats=reps)},
         {"case": "10k particles 3D", "ms": 1e3 * median_time(s_part.render, repeats=reps)},
         {"case": "10k discs 2D", "ms": 1e3 * median_time(canvas, repeats=reps)},
-        {"case": "ti.GUI canvas reference (flat, no AA)", "ms": 1e3 * _gui_reference(grid, s_best, reps)},
+        {"case": "ti.GUI canvas reference (flat, no AA)",
+         "ms": 1e3 * _gui_reference(grid, s_best, reps) if hasattr(_ti.get(), "GUI") else None},
     ]
+    stages = _stages(rebuild(s_best), reps)
     print_table(rows)
+    print("cloth frame by stage [ms]: " + ", ".join(f"{k} {v:.3g}" for k, v in stages.items()))
     summary = {
         "cloth_frame_ms": rows[0]["ms"], "cloth_frame_fast_ms": rows[1]["ms"],
         "cloth_frame_supersampled_ms": rows[2]["ms"],
         "particles_frame_ms": rows[3]["ms"], "canvas2d_frame_ms": rows[4]["ms"],
-        "gui_cloth_frame_ms": rows[5]["ms"], "cloth_vs_gui": rows[0]["ms"] / rows[5]["ms"],
-        "cloth_grid": n, "threads": num_threads(),
+        "gui_cloth_frame_ms": rows[5]["ms"],
+        "cloth_vs_gui": rows[0]["ms"] / rows[5]["ms"] if rows[5]["ms"] is not None else None,
+        "cloth_grid": n, "threads": num_threads(), "cloth_stage_ms": stages,
     }
     write_json(args.json, summary, rows=rows)
     return 0

@@ -10,7 +10,7 @@ from types import SimpleNamespace
 
 from tianim import _ti
 from tianim.render import _kernels3d
-from tianim.render._kernels3d import EMPTY, _ID_MASK
+from tianim.render._kernels3d import EMPTY, SPAN_EMPTY, SPH_COLOR, SPH_VIEW, _ID_MASK
 
 #: Hemisphere ambient: ambient * (HEMI_MEAN + HEMI_TILT * N.up), 1 for a normal facing up, 0.55 facing down.
 HEMI_MEAN, HEMI_TILT = 0.775, 0.225
@@ -27,6 +27,13 @@ GROUND_MISS_T = 1e30
 MAX_FOOTPRINT, MIN_FOOTPRINT = 1.0e3, 1e-3
 #: Length below which a shading normal is left unnormalised (avoids 0/0).
 SHADE_NORMALIZE_EPS = 1e-12
+#: Offsets in the parameter vector of :func:`resolve` (layout in its docstring): the ground's shadow
+#: region on screen (mode, then a quadrilateral), the camera rows, the light-space rows, the light.
+P_SHADOW, P_CAMERA, P_LIGHT_FRAME, P_LIGHT_DIR, RESOLVE_PARAMS = 38, 47, 59, 71, 74
+#: Modes of the shadow region: no pixel's ground can be in shadow, those inside the quadrilateral, all.
+SHADOW_NONE, SHADOW_QUAD, SHADOW_ALL = 0, 1, 2
+#: Margin [px] around the shadow quadrilateral (its corners are rounded float32 projections).
+SHADOW_QUAD_PAD = 2.0
 
 
 @_ti.cached_kernels
@@ -34,7 +41,7 @@ def kernels():
     """The shading kernels (built once per process): ``ground_cache`` and ``resolve``."""
     ti = _ti.get()
     k3 = _kernels3d.kernels()
-    _depth, _row3 = k3._depth, k3._row3
+    _depth, _row3, _vec3 = k3._depth, k3._row3, k3._vec3
     f32a1, f32a2, f32a3, i32a1, i32a2 = k3.f32a1, k3.f32a2, k3.f32a3, k3.i32a1, k3.i32a2
     i64a2, u8a3, u32a2 = k3.i64a2, k3.u8a3, k3.u32a2
 
@@ -137,8 +144,63 @@ def kernels():
         c = ti.Vector([ti.cast(ti.min(ti.sqrt(ti.max(acc[k], 0.0)), 1.0) * 255.0 + 0.5, ti.i32) for k in ti.static(range(3))])
         return ti.cast(c[0] | (c[1] << 8) | (c[2] << 16), ti.u64)
 
+    @ti.func
+    def _sample_ups(row_d, x, kx, Un, ifocal, ssaa: ti.template()):
+        """up . ray of the ``ssaa**2`` samples of pixel x of a row whose sample (0, 0) has ``row_d``;
+        kx and -Un * ifocal: its change per sample column and row."""
+        d0 = row_d + (x * ssaa) * kx
+        return ti.Vector([d0 + (s % ssaa) * kx - (s // ssaa) * Un * ifocal for s in ti.static(range(ssaa * ssaa))])
+
+    @ti.func
+    def _sky_and_ground(dup, bg, ground_on, G, NS: ti.template()):
+        """Linear colour sum of a pixel without primitives: ``bg`` for each sample above the horizon
+        (``dup`` >= 0), ``G`` (the ground's colour at the pixel centre) for each below."""
+        ng = 0
+        if ground_on:
+            for s in ti.static(range(NS)):
+                if dup[s] < 0.0:
+                    ng += 1
+        acc = (NS - ng) * bg
+        if ng > 0:
+            acc += ng * G
+        return acc
+
+    @ti.func
+    def _camera(params: ti.template()):
+        """Rows right, up, forward, eye of the camera in ``params`` (see :func:`resolve`)."""
+        return (_vec3(params, P_CAMERA), _vec3(params, P_CAMERA + 3), _vec3(params, P_CAMERA + 6),
+                _vec3(params, P_CAMERA + 9))
+
+    @ti.func
+    def _shadow_span(params: ti.template(), y, Wo):
+        """First and last pixel of output row y whose ground may be in shadow (empty: first > last):
+        the pixels within SHADOW_QUAD_PAD of the quadrilateral params[P_SHADOW + 1 : + 9] (x, y of its
+        corners in order), found by clipping its edges to the slab of rows y +- pad."""
+        mode = ti.cast(params[P_SHADOW], ti.i32)
+        first, last = 1, 0
+        if mode == SHADOW_ALL:
+            first, last = 0, Wo - 1
+        elif mode == SHADOW_QUAD:
+            ylo, yhi = y + 0.5 - SHADOW_QUAD_PAD, y + 0.5 + SHADOW_QUAD_PAD
+            xl, xr = ti.f32(3.0e38), ti.f32(-3.0e38)
+            for e in ti.static(range(4)):
+                ax, ay = params[P_SHADOW + 1 + 2 * e], params[P_SHADOW + 2 + 2 * e]
+                bx, by = params[P_SHADOW + 1 + 2 * ((e + 1) % 4)], params[P_SHADOW + 2 + 2 * ((e + 1) % 4)]
+                if ti.max(ay, by) >= ylo and ti.min(ay, by) <= yhi:
+                    if ti.abs(by - ay) > 1e-6:  # x where the edge enters and leaves the slab
+                        for yb in ti.static((0, 1)):
+                            yc = ti.min(ti.max(yhi if yb else ylo, ti.min(ay, by)), ti.max(ay, by))
+                            xc = ax + (yc - ay) / (by - ay) * (bx - ax)
+                            xl, xr = ti.min(xl, xc), ti.max(xr, xc)
+                    else:
+                        xl, xr = ti.min(xl, ax, bx), ti.max(xr, ax, bx)
+            if xl <= xr:
+                first = ti.max(ti.cast(ti.floor(xl - SHADOW_QUAD_PAD), ti.i32), 0)
+                last = ti.min(ti.cast(ti.ceil(xr + SHADOW_QUAD_PAD), ti.i32), Wo - 1)
+        return first, last
+
     @ti.kernel
-    def ground_cache(cam: f32a2, light: f32a1, params: f32a1, step: ti.f32, cache: f32a3):
+    def ground_cache(params: f32a1, step: ti.f32, fsample: ti.f32, ssaa: ti.template(), cache: f32a3, lit_rgb: u32a2):
         """The ground's unshadowed shading per pixel, kept while the camera and ground stay the same.
 
         cache: (H, W, 9) for an image of H x W pixels (or samples): ambient rgb A, direct rgb B
@@ -148,6 +210,9 @@ def kernels():
         step of one pixel (1 / focal [1/px], times ssaa for a multisampled pixel). The ground fades
         into the sky with distance from its centre (smoothstep). params as in :func:`resolve`, with
         [0] the focal length of this grid [px]. Rays that miss the plane get A = sky, B = 0.
+        lit_rgb: (H, W) packed bytes (as :func:`resolve` writes them) of each pixel of a multisampled
+        image (``ssaa`` samples per axis, sample-grid focal ``fsample`` [px]) without primitives, fully
+        lit: what ``resolve`` copies outside the shadow's screen box; (1, 1) to skip it.
         """
         H, W = cache.shape[0], cache.shape[1]
         ifocal = 1.0 / params[0]
@@ -156,22 +221,28 @@ def kernels():
         gc1 = _lin(ti.Vector([params[14], params[15], params[16]]))
         gc2 = _lin(ti.Vector([params[17], params[18], params[19]]))
         gcen = ti.Vector([params[21], params[22], params[23]])
-        R, U, Fw, eye = _row3(cam, 0, 0), _row3(cam, 1, 0), _row3(cam, 2, 0), _row3(cam, 3, 0)
-        L = ti.Vector([light[0], light[1], light[2]])
+        R, U, Fw, eye = _camera(params)
+        L = _vec3(params, P_LIGHT_DIR)
         upv = ti.Vector([params[25], params[26], params[27]])
         e1 = ti.Vector([params[28], params[29], params[30]])
         e2 = ti.Vector([params[31], params[32], params[33]])
         h = eye.dot(upv) - gh
-        Rn, Un = R.dot(upv), U.dot(upv)
+        Rn, Un, Fn = R.dot(upv), U.dot(upv), Fw.dot(upv)
         inv_cell = 1.0 / cell
         inv_fade2 = 1.0 / (fade * fade)
         gc_1, gc_2 = gcen.dot(e1), gcen.dot(e2)
         g_dif = (1.0 - ambient) * ti.max(upv.dot(L), 0.0)
+        packed = lit_rgb.shape[0] == H and lit_rgb.shape[1] == W
+        NS = ti.static(ssaa * ssaa)
+        Hs, Ws = H * ssaa, W * ssaa
+        isf = 1.0 / fsample  # of the sample grid
+        kx = Rn * isf
         for y in range(H):
             tt = (y + 0.5) / H
             bg = ti.Vector([0.0, 0.0, 0.0])
             for k in ti.static(range(3)):
                 bg[k] = _lin(params[5 + k] * (1.0 - tt) + params[8 + k] * tt)
+            row_d = (0.5 - 0.5 * Ws) * kx - (y * ssaa + 0.5 - 0.5 * Hs) * Un * isf + Fn
             for x in range(W):
                 dx = (x + 0.5 - 0.5 * W) * ifocal
                 dy = -(y + 0.5 - 0.5 * H) * ifocal
@@ -197,42 +268,50 @@ def kernels():
                     cache[y, x, k] = A[k]
                     cache[y, x, 3 + k] = B[k]
                     cache[y, x, 6 + k] = P[k]
+                if packed:
+                    G = ti.Vector([A[k] + 1.0 * B[k] for k in ti.static(range(3))])  # lit = 1, as in _ground
+                    acc = _sky_and_ground(_sample_ups(row_d, x, kx, Un, isf, ssaa), bg, True, G, NS)
+                    lit_rgb[y, x] = ti.cast(_pack(acc * (1.0 / NS)), ti.u32)
 
     @ti.kernel
     def resolve(
         buf: i64a2,
+        spans: i32a2,
         ssaa: ti.template(),
         per_sample: ti.i32,
-        n_tri: ti.i32,
         attr: f32a2,
         faces: i32a2,
         fmat: i32a1,
         mats: f32a2,
-        sph_view: f32a2,
-        sph_col: f32a2,
-        cam: f32a2,
-        light: f32a1,
+        sph: f32a2,
         params: f32a1,
         smap: i32a2,
-        lcam: f32a2,
         gcache: f32a3,
+        lit_rgb: u32a2,
         out_words: u32a2,
         out: u8a3,
     ):
         """Shade the samples of each output pixel into the (H, W, 3) uint8 image.
 
-        buf: (H*ssaa, W*ssaa) keys; ssaa: samples per pixel per axis (a compile-time constant,
-        so the samples of a pixel live in registers); attr: packed vertex rows (see :func:`vertices`);
-        cam: (4, 3) rows right, up, forward, eye; light: (3,) unit vector towards the light;
-        params: [0] focal of the sample grid [px], [1] ambient, [2] specular, [3] shadow bias [m],
+        buf: (H*ssaa, W*ssaa) keys; spans: (H, 2) per pixel row the first and last pixel whose samples
+        may hold a key (from :func:`_kernels3d.raster`; the others are empty and not read); both are
+        left empty for the next frame. ssaa: samples per pixel per axis (a compile-time constant,
+        so the samples of a pixel live in registers); attr: packed vertex rows (see
+        :func:`_kernels3d.vertices`); faces (F, 3), fmat (F,) mesh of each face;
+        params (RESOLVE_PARAMS,): [0] focal of the sample grid [px], [1] ambient, [2] specular, [3] shadow bias [m],
         [4] relative depth tolerance of a surface group, [5:8] sky top rgb, [8:11] sky bottom rgb,
         [11] shadow-map focal [px/m], [12] ground on, [13] ground height [m], [14:17] and [17:20] checker rgb,
         [20] checker cell [m], [21:24] ground centre, [24] ground fade radius [m], [25:28] up,
         [28:31] and [31:34] ground axes, [34:38] x0, x1, y0, y1: the shadow-map texels that primitives
-        cover; mats: (M, 3) back-side rgb per material; smap: the shadow map (depth bits per texel,
-        (1, 1) for none); lcam: (4, 3) light-space basis rows and origin; sph_view, sph_col: (P, 3) view-space centres [m]
-        and colours of the spheres; gcache: the ground per pixel (per sample if ``per_sample``),
-        see :func:`ground_cache`.
+        cover, [P_SHADOW] SHADOW_NONE / QUAD / ALL and [P_SHADOW + 1 : + 9] a quadrilateral (x, y [px] of
+        its corners in order): the output pixels whose ground may be in shadow (:func:`_shadow_span`;
+        elsewhere a pixel without primitives copies ``lit_rgb``), [P_CAMERA : + 12] camera rows right,
+        up, forward, eye, [P_LIGHT_FRAME : + 12] light-space rows right, up, forward, origin,
+        [P_LIGHT_DIR : + 3] unit vector towards the light;
+        mats: (M, 3) back-side rgb per material; smap: the shadow map (depth bits per texel,
+        (1, 1) for none); sph: (P, SPH_COLS) spheres (view-space centres [m], colours);
+        gcache: the ground per pixel (per sample if ``per_sample``), see :func:`ground_cache`, and
+        lit_rgb its fully lit pixels (used only without ``per_sample``).
         The image goes to ``out_words`` (H, 3W/4) uint32, the bytes of an (H, W, 3) image, when it has
         more than one row (one store per 4/3 pixels), else to ``out`` (H, W, 3); H, W = buf's shape / ssaa.
         The samples of a pixel are grouped by :func:`_classify` (and, within a class, by depth
@@ -241,123 +320,147 @@ def kernels():
         NS = ti.static(ssaa * ssaa)
         Hs, Ws = buf.shape[0], buf.shape[1]
         Ho, Wo = Hs // ssaa, Ws // ssaa
+        n_tri = faces.shape[0]
         words = out_words.shape[0] > 1
         ifocal = 1.0 / params[0]
         ambient, spec, bias, tol = params[1], params[2], params[3], params[4]
         lfocal = params[11]
-        R, U, Fw, eye = _row3(cam, 0, 0), _row3(cam, 1, 0), _row3(cam, 2, 0), _row3(cam, 3, 0)
-        L = ti.Vector([light[0], light[1], light[2]])
+        R, U, Fw, eye = _camera(params)
+        L = _vec3(params, P_LIGHT_DIR)
         upv = ti.Vector([params[25], params[26], params[27]])
         h = eye.dot(upv) - params[13]  # eye height above the ground
         ground_on = params[12] > 0.5 and h > 0.0
         Rn, Un, Fn = R.dot(upv), U.dot(upv), Fw.dot(upv)
+        lcam = ti.Matrix([[params[P_LIGHT_FRAME + 3 * r + k] for k in ti.static(range(3))] for r in ti.static(range(4))])
         lsh = _light_frame(smap, lcam, lfocal, bias, ti.Vector([params[34], params[35], params[36], params[37]]))
+        kx = Rn * ifocal
         for y in range(Ho):  # parallel over rows, serial along a row (much faster than ndrange on CPU)
             tt = (y + 0.5) / Ho
             bg = ti.Vector([0.0, 0.0, 0.0])
             for k in ti.static(range(3)):
                 bg[k] = _lin(params[5 + k] * (1.0 - tt) + params[8 + k] * tt)
+            lo, hi = spans[y, 0], spans[y, 1]
+            spans[y, 0], spans[y, 1] = SPAN_EMPTY, -1
+            sx0, sx1 = _shadow_span(params, y, Wo)
             bits = ti.u64(0)  # bytes waiting for a whole 32-bit word
             nbits = 0
-            word = 0
-            # d(up . ray)/d(sample column) and the value at sample (0, 0) of this row's pixels
-            kx = Rn * ifocal
+            sky_rgb = _pack((NS * bg) * (1.0 / NS))  # a pixel of sky only
+            # up . ray of sample (0, 0) of this row's pixels
             row_d = (0.5 - 0.5 * Ws) * kx - (y * ssaa + 0.5 - 0.5 * Hs) * Un * ifocal + Fn
-            for x in range(Wo):
-                keys = ti.Vector([buf[y * ssaa + s // ssaa, x * ssaa + s % ssaa] for s in ti.static(range(NS))], ti.i64)
-                for s in ti.static(range(NS)):  # read once: leave the sample buffer empty for the next frame
-                    buf[y * ssaa + s // ssaa, x * ssaa + s % ssaa] = ti.i64(EMPTY)
-                d0 = row_d + (x * ssaa) * kx
-                dup = ti.Vector([d0 + (s % ssaa) * kx - (s // ssaa) * Un * ifocal for s in ti.static(range(NS))])
-                all_keys = keys[0]
-                for s in ti.static(range(1, NS)):
-                    all_keys &= keys[s]
-                acc = ti.Vector([0.0, 0.0, 0.0])
-                if all_keys == ti.i64(EMPTY) and per_sample == 0:
-                    # no primitive in this pixel: sky and ground only, the ground shaded once
-                    ng = 0
+            for g in range((Wo + 3) // 4):  # groups of 4 pixels: 3 whole words of the image
+                p4 = 4 * g
+                if per_sample == 0 and (p4 + 3 < lo or p4 > hi) and (p4 + 3 < sx0 or p4 > sx1) and p4 + 3 < Wo:
+                    # no primitive and no shadow in these 4 pixels: the sky, or the fully lit ground
+                    r = ti.Vector([sky_rgb] * 4, ti.u64)
                     if ground_on:
-                        for s in ti.static(range(NS)):
-                            if dup[s] < 0.0:
-                                ng += 1
-                    acc = (NS - ng) * bg
-                    if ng > 0:
-                        acc += ng * _ground(gcache, y, x, smap, lfocal, lsh)
+                        r = ti.Vector([ti.cast(lit_rgb[y, p4 + k], ti.u64) for k in ti.static(range(4))])
+                    if words:
+                        out_words[y, 3 * g] = ti.cast((r[0] | (r[1] << ti.u64(24))) & ti.u64(0xFFFFFFFF), ti.u32)
+                        out_words[y, 3 * g + 1] = ti.cast(((r[1] >> ti.u64(8)) | (r[2] << ti.u64(16))) & ti.u64(0xFFFFFFFF), ti.u32)
+                        out_words[y, 3 * g + 2] = ti.cast(((r[2] >> ti.u64(16)) | (r[3] << ti.u64(8))) & ti.u64(0xFFFFFFFF), ti.u32)
+                    else:
+                        for k in ti.static(range(4)):
+                            for c in ti.static(range(3)):
+                                out[y, p4 + k, c] = ti.cast((r[k] >> ti.u64(8 * c)) & ti.u64(0xFF), ti.u8)
                 else:
-                    cls = ti.Vector([0] * NS, ti.i32)
-                    zs = ti.Vector([0.0] * NS, ti.f32)
-                    for s in ti.static(range(NS)):
-                        cls[s], zs[s] = _classify(keys[s], dup[s], ground_on, h)
-                    mask = (1 << NS) - 1  # samples not yet accounted for
-                    while mask != 0:
-                        # the first sample left, and the samples of its group (same class, depth within tol)
-                        j = 0
-                        for s in ti.static(range(NS - 1, -1, -1)):
-                            if (mask >> s) & 1 == 1:
-                                j = s
-                        key, c, z = ti.i64(0), 0, 0.0
-                        for s in ti.static(range(NS)):
-                            if s == j:
-                                key, c, z = keys[s], cls[s], zs[s]
-                        n = 0
-                        for s in ti.static(range(NS)):
-                            if (mask >> s) & 1 == 1:
-                                if s == j or (per_sample == 0 and cls[s] == c and (c < 0 or ti.abs(zs[s] - z) <= tol * z)):
-                                    n += 1
-                                    mask ^= 1 << s
-                        py, px = y * ssaa + j // ssaa, x * ssaa + j % ssaa
-                        col = bg
-                        if c == -3:
-                            gy, gx = y, x
-                            if per_sample != 0:
-                                gy, gx = py, px
-                            col = _ground(gcache, gy, gx, smap, lfocal, lsh)
-                        elif c >= 0:
-                            ident = ti.cast(key & ti.i64(_ID_MASK), ti.i32)
-                            dx = (px + 0.5 - 0.5 * Ws) * ifocal
-                            dy = -(py + 0.5 - 0.5 * Hs) * ifocal
-                            D = dx * R + dy * U + Fw  # world ray direction; the hit at t has view depth t
-                            P = eye + z * D
-                            if ident >= n_tri:
-                                q = ident - n_tri
-                                hv = ti.Vector([dx * z - sph_view[q, 0], dy * z - sph_view[q, 1], z - sph_view[q, 2]])
-                                N = (hv[0] * R + hv[1] * U + hv[2] * Fw).normalized(SHADE_NORMALIZE_EPS)
-                                lit = _shadow(_light_coords(P + N * bias, lsh), lsh, smap)
-                                Hh = (L - D.normalized()).normalized()
-                                col = _shade(N, upv, _lin(_row3(sph_col, q, 0)), Hh, L, ambient, spec, lit)
+                    word = 3 * g
+                    for x in range(p4, ti.min(p4 + 4, Wo)):
+                        keys = ti.Vector([ti.i64(EMPTY)] * NS, ti.i64)
+                        if lo <= x <= hi:
+                            for s in ti.static(range(NS)):  # read once: leave the sample buffer empty for the next frame
+                                keys[s] = buf[y * ssaa + s // ssaa, x * ssaa + s % ssaa]
+                                buf[y * ssaa + s // ssaa, x * ssaa + s % ssaa] = ti.i64(EMPTY)
+                        all_keys = keys[0]
+                        for s in ti.static(range(1, NS)):
+                            all_keys &= keys[s]
+                        rgb = ti.u64(0)
+                        if all_keys == ti.i64(EMPTY) and per_sample == 0:
+                            # no primitive in this pixel: sky and ground only, the ground shaded once
+                            if ground_on and not sx0 <= x <= sx1:
+                                rgb = ti.cast(lit_rgb[y, x], ti.u64)  # in full light: shaded by ground_cache
                             else:
-                                a, b, cc = faces[ident, 0], faces[ident, 1], faces[ident, 2]
-                                x0, y0 = attr[a, 0], attr[a, 1]
-                                x1, y1 = attr[b, 0], attr[b, 1]
-                                x2, y2 = attr[cc, 0], attr[cc, 1]
-                                cx, cy = px + 0.5, py + 0.5
-                                p0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * attr[a, 2]
-                                p1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * attr[b, 2]
-                                p2 = ((x0 - cx) * (y1 - cy) - (x1 - cx) * (y0 - cy)) * attr[cc, 2]
-                                sw = 1.0 / (p0 + p1 + p2)  # perspective-correct barycentrics p_k / sum
-                                p0, p1, p2 = p0 * sw, p1 * sw, p2 * sw
-                                N = (p0 * _row3(attr, a, 3) + p1 * _row3(attr, b, 3) + p2 * _row3(attr, cc, 3)).normalized(SHADE_NORMALIZE_EPS)
-                                Hh = p0 * _row3(attr, a, 12) + p1 * _row3(attr, b, 12) + p2 * _row3(attr, cc, 12)
-                                base = ti.Vector([0.0, 0.0, 0.0])
-                                if (c - (1 << 24)) % 2 == 0:  # even tag: the side facing away from the normals
-                                    N = -N
-                                    base = _lin(_row3(mats, fmat[ident], 0))
-                                else:
-                                    base = p0 * _row3(attr, a, 6) + p1 * _row3(attr, b, 6) + p2 * _row3(attr, cc, 6)
-                                lit = _shadow(_light_coords(P, lsh), lsh, smap)
-                                col = _shade(N, upv, base, Hh, L, ambient, spec, lit)
-                        acc += n * col
-                rgb = _pack(acc * (1.0 / NS))
-                if words:
-                    bits |= rgb << ti.cast(nbits, ti.u64)
-                    nbits += 24
-                    if nbits >= 32:
-                        out_words[y, word] = ti.cast(bits & ti.u64(0xFFFFFFFF), ti.u32)
-                        word += 1
-                        bits >>= ti.u64(32)
-                        nbits -= 32
-                else:
-                    for k in ti.static(range(3)):
-                        out[y, x, k] = ti.cast((rgb >> ti.u64(8 * k)) & ti.u64(0xFF), ti.u8)
+                                G = ti.Vector([0.0, 0.0, 0.0])
+                                if ground_on:
+                                    G = _ground(gcache, y, x, smap, lfocal, lsh)
+                                rgb = _pack(_sky_and_ground(_sample_ups(row_d, x, kx, Un, ifocal, ssaa), bg, ground_on, G, NS) * (1.0 / NS))
+                        else:
+                            dup = _sample_ups(row_d, x, kx, Un, ifocal, ssaa)
+                            cls = ti.Vector([0] * NS, ti.i32)
+                            zs = ti.Vector([0.0] * NS, ti.f32)
+                            for s in ti.static(range(NS)):
+                                cls[s], zs[s] = _classify(keys[s], dup[s], ground_on, h)
+                            mask = (1 << NS) - 1  # samples not yet accounted for
+                            acc = ti.Vector([0.0, 0.0, 0.0])
+                            while mask != 0:
+                                # the first sample left, and the samples of its group (same class, depth within tol)
+                                j = 0
+                                for s in ti.static(range(NS - 1, -1, -1)):
+                                    if (mask >> s) & 1 == 1:
+                                        j = s
+                                key, c, z = ti.i64(0), 0, 0.0
+                                for s in ti.static(range(NS)):
+                                    if s == j:
+                                        key, c, z = keys[s], cls[s], zs[s]
+                                n = 0
+                                for s in ti.static(range(NS)):
+                                    if (mask >> s) & 1 == 1:
+                                        if s == j or (per_sample == 0 and cls[s] == c and (c < 0 or ti.abs(zs[s] - z) <= tol * z)):
+                                            n += 1
+                                            mask ^= 1 << s
+                                py, px = y * ssaa + j // ssaa, x * ssaa + j % ssaa
+                                col = bg
+                                if c == -3:
+                                    gy, gx = y, x
+                                    if per_sample != 0:
+                                        gy, gx = py, px
+                                    col = _ground(gcache, gy, gx, smap, lfocal, lsh)
+                                elif c >= 0:
+                                    ident = ti.cast(key & ti.i64(_ID_MASK), ti.i32)
+                                    dx = (px + 0.5 - 0.5 * Ws) * ifocal
+                                    dy = -(py + 0.5 - 0.5 * Hs) * ifocal
+                                    D = dx * R + dy * U + Fw  # world ray direction; the hit at t has view depth t
+                                    P = eye + z * D
+                                    if ident >= n_tri:
+                                        q = ident - n_tri
+                                        hv = ti.Vector([dx * z - sph[q, SPH_VIEW], dy * z - sph[q, SPH_VIEW + 1],
+                                                        z - sph[q, SPH_VIEW + 2]])
+                                        N = (hv[0] * R + hv[1] * U + hv[2] * Fw).normalized(SHADE_NORMALIZE_EPS)
+                                        lit = _shadow(_light_coords(P + N * bias, lsh), lsh, smap)
+                                        Hh = (L - D.normalized()).normalized()
+                                        col = _shade(N, upv, _lin(_row3(sph, q, SPH_COLOR)), Hh, L, ambient, spec, lit)
+                                    else:
+                                        a, b, cc = faces[ident, 0], faces[ident, 1], faces[ident, 2]
+                                        x0, y0 = attr[a, 0], attr[a, 1]
+                                        x1, y1 = attr[b, 0], attr[b, 1]
+                                        x2, y2 = attr[cc, 0], attr[cc, 1]
+                                        cx, cy = px + 0.5, py + 0.5
+                                        p0 = ((x1 - cx) * (y2 - cy) - (x2 - cx) * (y1 - cy)) * attr[a, 2]
+                                        p1 = ((x2 - cx) * (y0 - cy) - (x0 - cx) * (y2 - cy)) * attr[b, 2]
+                                        p2 = ((x0 - cx) * (y1 - cy) - (x1 - cx) * (y0 - cy)) * attr[cc, 2]
+                                        sw = 1.0 / (p0 + p1 + p2)  # perspective-correct barycentrics p_k / sum
+                                        p0, p1, p2 = p0 * sw, p1 * sw, p2 * sw
+                                        N = (p0 * _row3(attr, a, 3) + p1 * _row3(attr, b, 3) + p2 * _row3(attr, cc, 3)).normalized(SHADE_NORMALIZE_EPS)
+                                        Hh = p0 * _row3(attr, a, 12) + p1 * _row3(attr, b, 12) + p2 * _row3(attr, cc, 12)
+                                        base = ti.Vector([0.0, 0.0, 0.0])
+                                        if (c - (1 << 24)) % 2 == 0:  # even tag: the side facing away from the normals
+                                            N = -N
+                                            base = _lin(_row3(mats, fmat[ident], 0))
+                                        else:
+                                            base = p0 * _row3(attr, a, 6) + p1 * _row3(attr, b, 6) + p2 * _row3(attr, cc, 6)
+                                        lit = _shadow(_light_coords(P, lsh), lsh, smap)
+                                        col = _shade(N, upv, base, Hh, L, ambient, spec, lit)
+                                acc += n * col
+                            rgb = _pack(acc * (1.0 / NS))
+                        if words:
+                            bits |= rgb << ti.cast(nbits, ti.u64)
+                            nbits += 24
+                            if nbits >= 32:
+                                out_words[y, word] = ti.cast(bits & ti.u64(0xFFFFFFFF), ti.u32)
+                                word += 1
+                                bits >>= ti.u64(32)
+                                nbits -= 32
+                        else:
+                            for k in ti.static(range(3)):
+                                out[y, x, k] = ti.cast((rgb >> ti.u64(8 * k)) & ti.u64(0xFF), ti.u8)
 
     return SimpleNamespace(ground_cache=ground_cache, resolve=resolve)

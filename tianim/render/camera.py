@@ -62,16 +62,15 @@ class Camera:
         object.__setattr__(self, "target", tuple(target))
         object.__setattr__(self, "up", tuple(up))
         object.__setattr__(self, "fov", float(self.fov))
+        r = np.cross(f, up)
+        r /= np.linalg.norm(r)
+        # computed once (the camera is immutable; not a field: equality and hashing ignore it)
+        object.__setattr__(self, "_basis", np.stack([r, np.cross(r, f), f]))
 
     @property
     def basis(self) -> np.ndarray:
-        """(3, 3) rows right, up, forward (unit vectors in world space)."""
-        eye, target, up = (np.array(v) for v in (self.eye, self.target, self.up))
-        f = (target - eye) / np.linalg.norm(target - eye)
-        r = np.cross(f, up)
-        r /= np.linalg.norm(r)
-        u = np.cross(r, f)
-        return np.stack([r, u, f])
+        """(3, 3) rows right, up, forward (unit vectors in world space); a new array each call."""
+        return self._basis.copy()
 
     def focal(self, height: int) -> float:
         """Focal length in pixels for an image ``height`` pixels tall."""
@@ -80,7 +79,7 @@ class Camera:
     def to_view(self, points) -> np.ndarray:
         """World points (N, 3) [m] -> view-space points (N, 3) [m] (z = depth along the view axis)."""
         p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        return (p - np.asarray(self.eye)) @ self.basis.T
+        return (p - np.asarray(self.eye)) @ self._basis.T
 
     def project(self, points, width: int, height: int) -> np.ndarray:
         """World points (N, 3) -> (N, 3) array of pixel x, pixel y (origin top-left, y down), depth [m].

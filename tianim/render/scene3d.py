@@ -169,7 +169,9 @@ class Scene3D:
         self._buf_empty = False  # True once resolve has emptied the sample buffer
         self._smap = None
         self._no_smap = np.full((1, 1), K.EMPTY_DEPTH, np.int32)
-        self._no_buf = np.full((1, 1), K.EMPTY, np.int64)
+        self._no_spheres = np.zeros((0, K.SPH_COLS), np.float32)
+        self._no_grids = np.zeros((1, 3), np.int32)  # ny = 0: no grid surface
+        self._no_normals = np.zeros((1, 3), np.float32)
         self._dummy_u32 = np.zeros((1, 1), np.uint32)
         self._dummy_u8 = np.zeros((1, 1, 3), np.uint8)
         self._no_ground = np.zeros((1, 1, K.GROUND_CHANNELS), np.float32)
@@ -357,26 +359,33 @@ class Scene3D:
 
     # ------------------------------------------------------------------ rendering
     def _buffers(self):
+        """The sample buffer (H*ssaa, W*ssaa) int64 keys, the image (H, W, 3) uint8 and the row spans
+        (H, 2) int32, all left empty by the previous frame's resolve (filled here otherwise)."""
         ss = (self.height * self.ssaa, self.width * self.ssaa)
         if self._buf is None or self._buf.shape != ss:
             self._buf = np.empty(ss, dtype=np.int64)
+            self._spans = np.empty((self.height, 2), dtype=np.int32)
             self._out = np.empty((self.height, self.width, 3), dtype=np.uint8)
             self._buf_empty = False
         if not self._buf_empty:
-            # resolve empties every sample it reads; only a new buffer, or a render that stopped
-            # between rasterising and resolving, needs the fill
+            # resolve empties every sample and span it reads; only a new buffer, or a render that
+            # stopped between rasterising and resolving, needs the fill
             self._buf.fill(K.EMPTY)
+            self._spans[:, 0], self._spans[:, 1] = K.SPAN_EMPTY, -1
         self._buf_empty = False
         if self.shadows and (self._smap is None or self._smap.shape[0] != self.shadow_size):
             self._smap = np.empty((self.shadow_size, self.shadow_size), dtype=np.int32)
-        return self._buf, self._out
+        return self._buf, self._out, self._spans
 
     def _geometry(self):
-        """Concatenated meshes: vertices, faces, normals, colours (float32/int32), back colours, face materials."""
+        """Concatenated meshes: vertices, faces, colours (float32/int32); normals of the non-grid meshes
+        ((1, 3) when all are grids); (G, 3) int32 rows (first vertex, ny, nx) of the grid surfaces;
+        back colours per mesh; the mesh of each face."""
         M = self._meshes
         if not M:
             z3 = np.zeros((0, 3), np.float32)
-            return z3, np.zeros((0, 3), np.int32), z3, z3, np.zeros((1, 3), np.float32), np.zeros(0, np.int32)
+            return z3, np.zeros((0, 3), np.int32), z3, z3, self._no_grids, np.zeros((1, 3), np.float32), \
+                np.zeros(0, np.int32)
         if len(M) == 1:
             V, F, C = M[0][0], M[0][1], M[0][3]
         else:
@@ -385,87 +394,95 @@ class Scene3D:
             F = np.concatenate([m[1] + o for m, o in zip(M, offsets)])
             C = np.concatenate([m[3] for m in M])
         V, F, C = (np.ascontiguousarray(a, dtype=t) for a, t in ((V, np.float32), (F, np.int32), (C, np.float32)))
-        N = np.empty_like(V)
-        o = 0
+        grids, o = [], 0
+        N = None
         for v, f, n, *_, grid in M:
             if grid is None:
+                if N is None:
+                    N = np.empty_like(V)
                 N[o:o + len(v)] = n
             else:
-                K.kernels().grid_normals(V, o, grid[0], grid[1], N)
+                grids.append((o, grid[0], grid[1]))
             o += len(v)
+        N = self._no_normals if N is None else N
+        G = np.array(grids, np.int32).reshape(-1, 3) if grids else self._no_grids
         BK = np.stack([m[4] for m in M]).astype(np.float32)
         if len(M) == 1:
             FM = np.zeros(len(F), np.int32)
         else:
             FM = np.repeat(np.arange(len(M), dtype=np.int32), [len(m[1]) for m in M])
-        return V, F, N, C, BK, FM
+        return V, F, C, N, G, BK, FM
 
     def render(self) -> np.ndarray:
         """Rasterise the scene; returns a new (height, width, 3) uint8 array."""
+        n_tri, n_sph = sum(len(m[1]) for m in self._meshes), sum(len(s[1]) for s in self._spheres)
+        n_prims = n_tri + n_sph
+        if n_prims > K.MAX_PRIMITIVES:
+            raise ValueError(f"the scene has {n_tri} triangles and {n_sph} spheres; at most "
+                             f"{K.MAX_PRIMITIVES} in all can be rendered at once (split it, or use coarser meshes)")
         ensure_taichi()
-        buf, out = self._buffers()
+        buf, out, spans = self._buffers()
         camera = self.camera
         if camera is None:
             camera = Camera.framing(self._frame_points(), up=tuple(self.up), aspect=self.width / self.height)
         b = self.bounds()
         lo, hi = b if b is not None else (np.zeros(3), np.zeros(3))
-        V, F, N, C, BK, FM = self._geometry()
-        if self._spheres:
-            SP = np.concatenate([s[0] for s in self._spheres]).astype(np.float64)
-            SR = np.concatenate([s[1] for s in self._spheres]).astype(np.float32)
-            SC = np.concatenate([s[2] for s in self._spheres]).astype(np.float32)
-        else:
-            SP, SR, SC = np.zeros((0, 3)), np.zeros(0, np.float32), np.zeros((0, 3), np.float32)
+        V, F, C, N, G, BK, FM = self._geometry()
 
         W, H = self.width * self.ssaa, self.height * self.ssaa
-        focal = camera.focal(H)
+        focal = float(camera.focal(H))
         near = 1e-4 * float(np.linalg.norm(np.subtract(camera.target, camera.eye)))
         cam = np.concatenate([camera.basis, np.asarray(camera.eye)[None]]).astype(np.float32)
-        smap, lcam, lfocal, bias = self._light(lo, hi, len(F) + len(SR))
+        smap, lcam, lfocal, bias = self._light(lo, hi, n_prims)
+        sph = self._sphere_rows(camera, lcam, smap.shape[0] > 1)
         attr = np.empty((len(V), K.ATTR_COLS), np.float32)
-        if len(V):
-            prm = np.array([focal, W, H, lfocal, smap.shape[0], *self.light], np.float32)
-            K.kernels().vertices(V, N, C, cam, lcam, prm, attr)
-
-        if len(F) + len(SR) > K.MAX_PRIMITIVES:
-            raise ValueError(f"the scene has {len(F)} triangles and {len(SR)} spheres; at most "
-                             f"{K.MAX_PRIMITIVES} in all can be rendered at once (split it, or use coarser meshes)")
-        if len(F):
-            K.kernels().raster_triangles(attr, K.ATTR_SCREEN, F, FM, False, near, buf, self._no_smap)
-        if len(SR):
-            sview = camera.to_view(SP).astype(np.float32)
-            K.kernels().raster_spheres(sview, SR, focal, False, near, len(F), buf, self._no_smap)
-        else:
-            sview = np.zeros((0, 3), np.float32)
-        bbox = [0.0] * 4
         if smap.shape[0] > 1:
             smap.fill(K.EMPTY_DEPTH)
-            if len(F):
-                K.kernels().raster_triangles(attr, K.ATTR_LIGHT, F, FM, True, 0.0, self._no_buf, smap)
-            if len(SR):
-                lview = ((SP - lcam[3]) @ lcam[:3].T.astype(np.float64)).astype(np.float32)
-                K.kernels().raster_spheres(lview, SR, lfocal, True, 0.0, 0, self._no_buf, smap)
+        if len(V):
+            prm = np.concatenate([cam.ravel(), lcam.ravel(), [focal, W, H, lfocal, smap.shape[0]], self.light])
+            K.kernels().vertices(V, N, C, G, prm.astype(np.float32), attr)
+        K.kernels().raster(attr, F, FM, sph, focal, near, lfocal, int(smap.shape[0] > 1), self.ssaa, buf, spans,
+                           smap)
+        bbox = [0.0] * 4
+        if smap.shape[0] > 1:
             # texels that can hold a depth: the scene's bounding box seen from the light
             corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
             t = 0.5 * smap.shape[0] + lfocal * ((corners - lcam[3]) @ lcam[:2].T.astype(np.float64)) * [1.0, -1.0]
             bbox = [np.floor(t[:, 0].min()) - 1, np.ceil(t[:, 0].max()) + 1, np.floor(t[:, 1].min()) - 1,
                     np.ceil(t[:, 1].max()) + 1]
 
-        params = self._params(focal, bias, lfocal, lo, hi, bbox)
-        S.kernels().resolve(buf, self.ssaa, int(self.per_sample), len(F), attr, F, FM, BK, sview, SC, cam,
-                  self.light.astype(np.float32), params, smap, lcam, self._ground_pixels(camera, params),
-                  *self._out_views(out))
+        params = self._params(focal, bias, lfocal, lo, hi, bbox, camera, cam, lcam, smap.shape[0])
+        gcache, lit_rgb = self._ground_pixels(camera, params)
+        S.kernels().resolve(buf, spans, self.ssaa, int(self.per_sample), attr, F, FM, BK, sph, params, smap,
+                            gcache, lit_rgb, *self._out_views(out))
         self._buf_empty = True
         return out.copy()
 
-    def _params(self, focal, bias, lfocal, lo, hi, bbox):
-        """The float32 parameter vector of the resolve kernel (layout in :func:`_kernels3d.resolve`).
+    def _sphere_rows(self, camera, lcam, shadows):
+        """(P, SPH_COLS) float32 rows of all spheres: view-space centre [m], light-space centre [m]
+        (zeros without shadows), radius [m], sRGB colour."""
+        if not self._spheres:
+            return self._no_spheres
+        SP = np.concatenate([s[0] for s in self._spheres]).astype(np.float64)
+        rows = np.empty((len(SP), K.SPH_COLS), np.float32)
+        rows[:, K.SPH_VIEW:K.SPH_VIEW + 3] = camera.to_view(SP)
+        if shadows:
+            rows[:, K.SPH_LIGHT:K.SPH_LIGHT + 3] = (SP - lcam[3]) @ lcam[:3].T.astype(np.float64)
+        else:
+            rows[:, K.SPH_LIGHT:K.SPH_LIGHT + 3] = 0.0
+        rows[:, K.SPH_RADIUS] = np.concatenate([s[1] for s in self._spheres])
+        rows[:, K.SPH_COLOR:K.SPH_COLOR + 3] = np.concatenate([s[2] for s in self._spheres])
+        return rows
+
+    def _params(self, focal, bias, lfocal, lo, hi, bbox, camera, cam, lcam, smap_size):
+        """The float32 parameter vector of the resolve kernel (layout in :func:`_shade3d.resolve`).
 
         The ground's default fade radius, checker cell and centre follow the scene's bounds when
         the camera was set (by :meth:`frame` or the first render with a given camera), so that
         they, and the cached ground shading, stay put while the scene moves.
         """
         bg0, bg1 = self.background
+        sbox = [S.SHADOW_NONE] + [0.0] * 8  # no pixel's ground is in shadow
         if self._ground is not None:
             if self.camera is None:
                 ref = (lo, hi)
@@ -480,28 +497,62 @@ class Scene3D:
             fade = 0.5 * float(size) if size is not None else 2.5 * extent
             cell = float(cell) if cell is not None else max(extent / 8.0, 1e-3)
             ground = [1.0, h, *c1, *c2, cell, *centre, fade]
+            if smap_size > 1:
+                sbox = self._shadow_region(camera, lcam, lfocal, bbox, smap_size, h)
         else:
             ground = [0.0] * 13
         axes = np.eye(3)[[self.up_axis, (self.up_axis + 1) % 3, (self.up_axis + 2) % 3]].ravel()
         return np.array([focal, self.ambient, self.specular, bias, _GROUP_DEPTH_TOL, *bg0, *bg1, lfocal, *ground,
-                         *axes, *bbox], dtype=np.float32)
+                         *axes, *bbox, *sbox, *cam.ravel(), *lcam.ravel(), *self.light], dtype=np.float32)
+
+    def _shadow_region(self, camera, lcam, lfocal, bbox, smap_size, height):
+        """[mode, x0, y0, ..., x3, y3]: the output pixels whose ground point may be in shadow (the rest
+        copy their fully lit shading from the ground cache), see :func:`_shade3d._shadow_span`.
+
+        The shadow map's occupied texels ``bbox`` (plus the bilinear footprint and a texel) bound a
+        rectangle in light space; its preimage on the ground plane is a parallelogram, which projects
+        to a convex quadrilateral [px] (all four corners in front of the camera). The whole image when
+        a corner is not, or the light grazes the ground.
+        """
+        full = [S.SHADOW_ALL] + [0.0] * 8
+        up = np.eye(3)[self.up_axis]
+        e1, e2 = np.eye(3)[(self.up_axis + 1) % 3], np.eye(3)[(self.up_axis + 2) % 3]
+        r, u, o = (lcam[k].astype(np.float64) for k in (0, 1, 3))
+        c = 0.5 * smap_size - 0.5  # texel coordinates, centres at integers (see _shade3d._light_frame)
+        # texel (x, y) of the ground point height * up + a e1 + b e2 = M (a, b) + t
+        M = lfocal * np.array([[e1 @ r, e2 @ r], [-(e1 @ u), -(e2 @ u)]])
+        t = np.array([c + lfocal * ((height * up - o) @ r), c - lfocal * ((height * up - o) @ u)])
+        if abs(np.linalg.det(M)) < 1e-6 * lfocal * lfocal:
+            return full
+        x0, x1, y0, y1 = bbox[0] - 2.0, bbox[1] + 2.0, bbox[2] - 2.0, bbox[3] + 2.0
+        ab = np.linalg.solve(M, np.array([[x0, x1, x1, x0], [y0, y0, y1, y1]]) - t[:, None])  # in order
+        P = height * up + np.outer(ab[0], e1) + np.outer(ab[1], e2)
+        v = camera.to_view(P)
+        if not np.all(v[:, 2] > 1e-6 * float(np.linalg.norm(np.subtract(camera.target, camera.eye)))):
+            return full
+        F = camera.focal(self.height)
+        px = 0.5 * self.width + F * v[:, 0] / v[:, 2]
+        py = 0.5 * self.height - F * v[:, 1] / v[:, 2]
+        return [S.SHADOW_QUAD, *np.stack([px, py], 1).ravel()]
 
     def _ground_pixels(self, camera, params):
-        """The ground's shading per pixel (per sample when ``per_sample``), recomputed only when the
-        camera, the image size or the ground's look change (:func:`_kernels3d.ground_cache`)."""
+        """The ground's shading per pixel (per sample when ``per_sample``) and, without ``per_sample``,
+        each pixel's packed colour when no primitive covers it and it is fully lit; recomputed only
+        when the camera, the image size or the ground's look change (:func:`_shade3d.ground_cache`)."""
         if params[12] < 0.5:
-            return self._no_ground
+            return self._no_ground, self._dummy_u32
         grid = self.ssaa if self.per_sample else 1
-        key = (camera, self.width, self.height, grid, self.ssaa, params[1:3].tobytes(), params[5:34].tobytes(),
+        key = (camera, self.width, self.height, grid, self.ssaa, params[0:3].tobytes(), params[5:34].tobytes(),
                self.light.tobytes())
         if self._gcache is None or self._gcache[0] != key:
             cache = np.empty((self.height * grid, self.width * grid, K.GROUND_CHANNELS), np.float32)
+            lit = self._dummy_u32 if self.per_sample else np.empty((self.height, self.width), np.uint32)
             p = params.copy()
             p[0] = camera.focal(self.height * grid)
-            cam = np.concatenate([camera.basis, np.asarray(camera.eye)[None]]).astype(np.float32)
-            S.kernels().ground_cache(cam, self.light.astype(np.float32), p, float(self.ssaa // grid) / p[0], cache)
-            self._gcache = (key, cache)
-        return self._gcache[1]
+            step = float(np.float32(self.ssaa // grid) / p[0])  # one pixel of this grid in ray units
+            S.kernels().ground_cache(p, step, float(params[0]), self.ssaa, cache, lit)
+            self._gcache = (key, cache, lit)
+        return self._gcache[1], self._gcache[2]
 
     def _out_views(self, out):
         """(words, bytes) arguments of resolve: the image as (H, 3W/4) uint32 when W % 4 == 0 on a
