@@ -222,31 +222,34 @@ class Pickers:
         """One repeat of SoftGym's ``Picker.step`` on every copy: release, move (clipped to the box),
         pick, and carry the held particle by the picker's displacement (it becomes a pin: infinite
         mass, at rest, as FleX's inverse mass 0). ``action`` (B, count, 4) float32 in [-1, 1]."""
-        x, rows = state.x, np.arange(state.batch)
+        x, held = state.x, self.held
         pick = action[:, :, 3] > 0
-        for p in range(self.count):  # SoftGym releases for every picker first
-            drop = ~pick[:, p] & (self.held[:, p] >= 0)
-            state.pinned[rows[drop], self.held[drop, p]] = False
-            self.held[drop, p] = -1
-        for p in range(self.count):
-            old = self.pos[:, p].copy()
-            new = np.clip(old + action[:, p, :3] * np.float32(PICKER_STEP), self.low, self.high)
-            take = np.flatnonzero(pick[:, p] & (self.held[:, p] < 0))
-            if take.size:
-                d = _norm(x[take].astype(np.float64) - old[take, None, :].astype(np.float64))  # (T, N)
-                d[d > self.reach] = np.inf
-                for q in range(self.count):  # a particle another picker holds is not free
-                    other = self.held[take, q]
-                    d[np.flatnonzero(other >= 0), other[other >= 0]] = np.inf
-                near = np.argmin(d, axis=1)
-                ok = np.isfinite(d[np.arange(take.size), near])
-                self.held[take[ok], p] = near[ok]
-            on = np.flatnonzero(self.held[:, p] >= 0)
-            i = self.held[on, p]
-            x[on, i] = x[on, i] + (new[on] - old[on])
-            state.v[on, i] = 0.0
-            state.pinned[on, i] = True
-            self.pos[:, p] = new
+        drop = ~pick & (held >= 0)  # SoftGym releases for every picker first
+        if drop.any():
+            rows, cols = np.nonzero(drop)
+            state.pinned[rows, held[rows, cols]] = False
+            held[drop] = -1
+        new = np.clip(self.pos + action[:, :, :3] * np.float32(PICKER_STEP), self.low[:, None], self.high[:, None])
+        # Picker by picker (a particle another picker holds is not free, also one just picked), on the
+        # positions before this repeat's carries: a carry moves only held particles, never free ones.
+        take = pick & (held < 0)
+        for p in np.flatnonzero(take.any(axis=0)).tolist():
+            t = np.flatnonzero(take[:, p])
+            d = _norm(x[t].astype(np.float64) - self.pos[t, p, None, :].astype(np.float64))  # (T, N)
+            d[d > self.reach] = np.inf
+            others = held[t]
+            rows, cols = np.nonzero(others >= 0)
+            d[rows, others[rows, cols]] = np.inf
+            near = np.argmin(d, axis=1)
+            ok = np.isfinite(d[np.arange(t.size), near])
+            held[t[ok], p] = near[ok]
+        rows, cols = np.nonzero(held >= 0)  # every held particle follows its picker (pickers hold distinct ones)
+        if rows.size:
+            i = held[rows, cols]
+            x[rows, i] = x[rows, i] + (new[rows, cols] - self.pos[rows, cols])
+            state.v[rows, i] = 0.0
+            state.pinned[rows, i] = True
+        self.pos[...] = new
 
 
 # ----------------------------------------------------------------------------------------- task simulation
