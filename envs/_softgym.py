@@ -305,9 +305,17 @@ class PickerSim:
         self._start(idx, u)
         self.solver.watchdog.forget(s, idx)
 
-    def frame_step(self) -> np.ndarray:
-        """One frame (``FRAME_DT``) of physics on every copy; the copies that diverged (B,) bool."""
-        return self.solver.step(self.model, self.state, FRAME_DT / self.SUBSTEPS, self.SUBSTEPS).diverged
+    def frame_step(self, solver=None) -> np.ndarray:
+        """One frame (``FRAME_DT``) of physics on every copy with ``solver`` (default the env's own);
+        the copies that diverged (B,) bool."""
+        solver = self.solver if solver is None else solver
+        return solver.step(self.model, self.state, FRAME_DT / self.SUBSTEPS, self.SUBSTEPS).diverged
+
+    def physics(self, solver):
+        """The physics of one env step on every copy without picker actions: ``ACTION_REPEAT`` frames
+        of ``solver`` (one without watchdog gives the benchmark's kernel-only rate)."""
+        for _ in range(ACTION_REPEAT):
+            self.frame_step(solver)
 
     def step(self, actions: np.ndarray) -> np.ndarray:
         """Apply the picker actions (B, 4 count) ``ACTION_REPEAT`` times, one frame after each; return
