@@ -47,9 +47,10 @@ SoftGym caches 1000 such variations and draws one per reset; here :data:`VARIATI
 are generated once per process (fixed seeds 0..7, one batched run, a few seconds) and each
 reset draws one of them and turns it about the vertical by an angle uniform in
 [-pi, pi) (so that the starts differ also in how they lie on the coverage grid). Pickers at
-the centre of the cloth's bounding box, 0.2 m up, 0.1 m apart along z, holding nothing. The
-two draws per reset are Philox4x32-10 (``envs/_rng.py``) keyed by the seed (a vector env's copy
-k by seed + k) and counted by the episode: every copy that resets in one array pass.
+the centre of the cloth's bounding box, 0.2 m up, 0.1 m either side of it along z (0.2 m
+apart: SoftGym's circle of radius 2 x picker radius), holding nothing. The two draws per reset
+are Philox4x32-10 (``envs/_rng.py``) keyed by the seed (a vector env's copy k by seed + k) and
+counted by the episode: every copy that resets in one array pass.
 
 ## Episode end
 

@@ -54,8 +54,8 @@ scores p0 = -0.2 m; a perfect fold 0 (normalized 1).
 
 SoftGym's ``generate_env_variation``: the flat cloth centred at the origin and turned about
 the vertical by an angle uniform in [-pi/4, pi/4]; pickers at the middle of corners 0 and
-64 x 63 (the cloth's column-0 edge), 0.1 m up, 0.1 m apart along z (SoftGym's
-``_get_centered_picker_pos``), holding nothing. Drawn by Philox4x32-10 (``envs/_rng.py``) keyed
+64 x 63 (the cloth's column-0 edge), 0.1 m up, 0.1 m either side of it along z, 0.2 m
+apart (SoftGym's ``_get_centered_picker_pos``), holding nothing. Drawn by Philox4x32-10 (``envs/_rng.py``) keyed
 by the seed (a vector env's copy k by seed + k) and counted by the episode, every copy that
 resets in one array pass.
 

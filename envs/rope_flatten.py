@@ -53,9 +53,9 @@ caches 1000 such variations and draws one per reset, :data:`VARIATIONS` = 100 ar
 once per process (``np.random.default_rng(j)`` for variation j, all in one batched run of about
 a second, each settling phase lasting until every variation is still); each reset draws one
 and turns it about the vertical by an angle uniform in [-pi, pi). Pickers at the centre of the
-rope's bounding box, 0.1 m up, 4 cm apart along z. The two draws per reset are Philox4x32-10
-(``envs/_rng.py``) keyed by the seed (a vector env's copy k by seed + k) and counted by the
-episode: every copy that resets in one array pass.
+rope's bounding box, 0.1 m up, 4 cm either side of it along z (8 cm apart). The two draws per
+reset are Philox4x32-10 (``envs/_rng.py``) keyed by the seed (a vector env's copy k by seed + k)
+and counted by the episode: every copy that resets in one array pass.
 
 ## Episode end
 
