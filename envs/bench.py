@@ -116,6 +116,11 @@ def _vector_profile(env_id: str, n: int, steps: int, repeats: int) -> dict:
     venv = gym.make_vec(env_id, num_envs=n)
     acts = np.random.default_rng(0).uniform(-1, 1, (steps, *venv.action_space.shape)).astype(np.float32)
     venv.reset(seed=0)
+    single = gym.make(env_id)
+    single.reset(seed=0)
+    if not np.array_equal(single.step(acts[0, 0])[0], venv.step(acts[0])[0][0]):  # agreement before timing
+        raise RuntimeError(f"{env_id}: copy 0 of make_vec(num_envs={n}) differs from the single env")
+    single.close()
     sim = type(venv.unwrapped._sim)(n)  # the kernel alone: fresh copies, nothing of the env around them
     sim.reset_copies(np.arange(n), uniforms(np.arange(n, dtype=np.uint64), np.zeros(n, np.uint64), sim.RESET_DRAWS))
     bare = type(sim.solver)(**sim.solver.options(), watchdog=False)

@@ -284,3 +284,31 @@ def test_finite_actions_outside_the_box_are_clipped_in_float64_first():
     clipped = run(np.array([[1, -1, 1], [0, 1, -1]], np.float32))
     assert np.array_equal(run(np.array([[1e300, -1e300, 7.0], [0.0, 2.0, -3.0]])), clipped)
     assert np.array_equal(run(np.array([[5, -2, 1], [0, 9, -1]], np.int64)), clipped)
+
+
+# ------------------------------------------------------------------ the per-N bench
+def test_env_bench_per_n_profile_keys_at_a_tiny_size(tmp_path):
+    """``--only-vec --quick``: every vector env of VEC_PROFILE at N = 1, 2 (copy 0 checked equal to a
+    single env before timing); the fraction is the ratio of the two rates it reports."""
+    import json
+
+    from envs import bench
+
+    assert bench.main(["--quick", "--only-vec", "--json", str(tmp_path / "v.json")]) == 0
+    summary = json.loads((tmp_path / "v.json").read_text())["summary"]
+    assert set(bench.VEC_PROFILE) == set(ROPE_CLOTH)
+    for env_id in ROPE_CLOTH:
+        k = bench.key(env_id)
+        for n in bench.QUICK_SIZES:
+            vec, kernel = summary[f"{k}_vec_steps_per_s_n{n}"], summary[f"{k}_kernel_steps_per_s_n{n}"]
+            assert vec > 0 and kernel > 0
+            assert summary[f"{k}_vec_kernel_fraction_n{n}"] == pytest.approx(vec / kernel, rel=1e-12)
+    assert summary["loadavg_1min"] >= 0
+
+
+def test_median_times_runs_the_candidates_in_turn():
+    from tianim.bench.common import median_times
+
+    calls = []
+    out = median_times({"a": lambda: calls.append("a"), "b": lambda: calls.append("b")}, repeats=3, warmup=1)
+    assert calls == ["a", "b"] * 4 and set(out) == {"a", "b"} and min(out.values()) >= 0
