@@ -18,9 +18,12 @@ every task shares:
   the step's info arrays whose ``_key`` masks are restricted to the copies that
   ended, masked by ``info["_final_info"]``; the step's info also stays at the top
   level), which the Stable-Baselines3 adapter uses;
-* action checks: float32, shape ``(num_envs, *single_action_shape)``; NaN or
-  infinite actions raise ``ValueError`` (nothing is stepped); finite actions
-  outside [-1, 1] are clipped.
+* action checks (:func:`check_action`, one NumPy pass over the whole batch, before anything
+  changes): shape ``(num_envs, *single_action_shape)``, real numbers (else ``TypeError``); NaN
+  or infinite actions raise ``ValueError`` naming the first bad entry (nothing is stepped);
+  finite actions outside [-1, 1] are clipped, then made float32;
+* resets of every copy that ends in one array pass (:class:`SimVectorEnv` with a sim class that
+  declares ``RESET_DRAWS``: Philox draws per copy, ``envs/_rng.py``).
 
 Subclasses implement ``_reset_copies(idx)``, ``_advance(actions, reset_mask)``
 and ``_observe_copies(idx)``; see their docstrings.
