@@ -14,13 +14,15 @@ Measures, with pre-generated actions and medians over ``--repeats``:
 * per SoftGym task (:data:`SOFTGYM_IDS`) ``<id>_steps_per_s`` (one ``gym.make`` env),
   ``<id>_vec_steps_per_s`` (``gym.make_vec`` with ``--softgym-envs`` copies, env-steps/s) and
   ``<id>_vec_speedup`` (their ratio), with ``<id>`` the id in lower case without the namespace,
-  ``-`` as ``_`` (``clothfold_v1``). Copy 0 of the batch is checked equal to the single env
-  (same seed, same actions) before timing; the two are timed in turn (:func:`median_times`),
-  so a burst of load on a shared machine slows both alike;
+  ``-`` as ``_`` (``clothfold_v1``). The single envs run the seeds and action streams of copies
+  0 .. 3 of the batch (a copy's cost depends on its state), each checked equal to its copy before
+  timing; single and batch are timed in turn (:func:`median_times`), so a burst of load on a shared
+  machine slows both alike;
 * per vector env of :data:`VEC_PROFILE` and per N of its sizes (``--quick``: N = 1, 2):
   ``<k>_vec_steps_per_s_n<N>`` (``gym.make_vec``, env-steps/s, autoresets included),
   ``<k>_kernel_steps_per_s_n<N>`` (the physics launches of one env step alone, as the env makes
-  them but without the watchdog, no actions, on N fresh copies: the rate the env is bound by) and
+  them but without the watchdog and without actions, from copies of the env's current states: the
+  rate the env is bound by) and
   ``<k>_vec_kernel_fraction_n<N>`` (their ratio: the share of the env's time in the kernels), with
   ``<k>`` as above (``ropeswing_v0``), timed in turn. ``loadavg_1min`` records the machine's load.
 
@@ -79,22 +81,32 @@ def key(env_id: str) -> str:
     return env_id.split("/")[-1].lower().replace("-", "_")
 
 
+#: Single envs timed per SoftGym task: the seeds and action streams of copies 0 .. SINGLE_COPIES - 1.
+SINGLE_COPIES = 4
+
+
 def _softgym_rates(env_id: str, num_envs: int, steps: int, repeats: int) -> dict:
-    single, venv = gym.make(env_id), gym.make_vec(env_id, num_envs=num_envs)
+    """Single-env and ``make_vec`` env-steps/s of a SoftGym task, timed in turn. The single envs run the
+    seeds and action streams of copies 0 .. m - 1 of the batch (m = min(num_envs, SINGLE_COPIES)): a
+    copy's cost depends on its state (ClothFold-v1's self-collision rebuilds), so both sides do like work."""
+    m = min(num_envs, SINGLE_COPIES)
+    singles, venv = [gym.make(env_id) for _ in range(m)], gym.make_vec(env_id, num_envs=num_envs)
     acts = np.random.default_rng(0).uniform(-1, 1, (steps, num_envs, 8)).astype(np.float32)
-    single.reset(seed=0)
+    for k, single in enumerate(singles):
+        single.reset(seed=k)
     venv.reset(seed=0)
-    for a in acts[:2]:  # agreement before timing: copy 0 of the batch is the single env
-        obs, *_ = single.step(a[0])
+    for a in acts[:2]:  # agreement before timing: copy k of the batch is the single env seeded k
         vobs, *_ = venv.step(a)
-        if not np.array_equal(obs, vobs[0]):
-            raise RuntimeError(f"{env_id}: copy 0 of make_vec differs from the single env")
+        for k, single in enumerate(singles):
+            if not np.array_equal(single.step(a[k])[0], vobs[k]):
+                raise RuntimeError(f"{env_id}: copy {k} of make_vec differs from the single env seeded {k}")
     k = key(env_id)
-    t = median_times({"single": lambda: [single.step(a[0]) for a in acts], "vec": lambda: [venv.step(a) for a in acts]},
-                     repeats=repeats, warmup=0)
-    out = {f"{k}_steps_per_s": steps / t["single"], f"{k}_vec_steps_per_s": steps * num_envs / t["vec"]}
+    t = median_times({"single": lambda: [single.step(a[j]) for j, single in enumerate(singles) for a in acts],
+                      "vec": lambda: [venv.step(a) for a in acts]}, repeats=repeats, warmup=0)
+    out = {f"{k}_steps_per_s": steps * m / t["single"], f"{k}_vec_steps_per_s": steps * num_envs / t["vec"]}
     out[f"{k}_vec_speedup"] = out[f"{k}_vec_steps_per_s"] / out[f"{k}_steps_per_s"]
-    single.close()
+    for single in singles:
+        single.close()
     venv.close()
     return out
 
@@ -121,11 +133,14 @@ def _vector_profile(env_id: str, n: int, steps: int, repeats: int) -> dict:
     if not np.array_equal(single.step(acts[0, 0])[0], venv.step(acts[0])[0][0]):  # agreement before timing
         raise RuntimeError(f"{env_id}: copy 0 of make_vec(num_envs={n}) differs from the single env")
     single.close()
-    sim = type(venv.unwrapped._sim)(n)  # the kernel alone: fresh copies, nothing of the env around them
+    own = venv.unwrapped._sim
+    sim = type(own)(n)  # the kernel alone: copies of the env's states, nothing of the env around them
     sim.reset_copies(np.arange(n), uniforms(np.arange(n, dtype=np.uint64), np.zeros(n, np.uint64), sim.RESET_DRAWS))
     bare = type(sim.solver)(**sim.solver.options(), watchdog=False)
 
     def kernel():
+        for name in ("x", "v", "pinned", "t"):  # from where the env is (self-collision work depends on it)
+            getattr(sim.state, name)[...] = getattr(own.state, name)
         for _ in range(steps):
             sim.physics(bare)
 
