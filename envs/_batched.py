@@ -70,8 +70,9 @@ def check_action(action, shape: tuple, name: str = "action") -> np.ndarray:
     if a.dtype.kind == "f" and not np.isfinite(a).all():
         bad = tuple(int(i) for i in np.argwhere(~np.isfinite(a))[0])
         where = "".join(f"[{i}]" for i in bad)
+        count = int((~np.isfinite(a)).sum())
         raise ValueError(f"{name}{where} = {fmt(a[bad])}: the action contains NaN or inf "
-                         f"({int((~np.isfinite(a)).sum())} entries); {remedy}. Nothing was stepped.")
+                         f"({count} {'entry' if count == 1 else 'entries'}); {remedy}. Nothing was stepped.")
     if a.dtype.kind != "f":
         a = a.astype(np.float64)
     return np.clip(a, -1.0, 1.0).astype(np.float32, copy=False)
