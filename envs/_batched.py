@@ -18,9 +18,12 @@ every task shares:
   the step's info arrays whose ``_key`` masks are restricted to the copies that
   ended, masked by ``info["_final_info"]``; the step's info also stays at the top
   level), which the Stable-Baselines3 adapter uses;
-* action checks: float32, shape ``(num_envs, *single_action_shape)``; NaN or
-  infinite actions raise ``ValueError`` (nothing is stepped); finite actions
-  outside [-1, 1] are clipped.
+* action checks (:func:`check_action`, one NumPy pass over the whole batch, before anything
+  changes): shape ``(num_envs, *single_action_shape)``, real numbers (else ``TypeError``); NaN
+  or infinite actions raise ``ValueError`` naming the first bad entry (nothing is stepped);
+  finite actions outside [-1, 1] are clipped, then made float32;
+* resets of every copy that ends in one array pass (:class:`SimVectorEnv` with a sim class that
+  declares ``RESET_DRAWS``: Philox draws per copy, ``envs/_rng.py``).
 
 Subclasses implement ``_reset_copies(idx)``, ``_advance(actions, reset_mask)``
 and ``_observe_copies(idx)``; see their docstrings.
@@ -36,8 +39,10 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from tianim._checks import fmt
+
 from ._render import no_render_mode
-from ._rng import seed_key
+from ._rng import seed_key, uniforms
 
 
 def episode_key(seed, rng: np.random.Generator) -> int:
@@ -46,15 +51,31 @@ def episode_key(seed, rng: np.random.Generator) -> int:
     return seed_key(seed) if seed is not None else int(rng.integers(1 << 64, dtype=np.uint64))
 
 
-def check_action(action, shape: tuple) -> np.ndarray:
-    """``action`` as a float32 array of ``shape`` clipped to [-1, 1]; ValueError if it is
-    malformed or not finite (the caller then changes nothing)."""
-    a = np.asarray(action, dtype=np.float32)
+def check_action(action, shape: tuple, name: str = "action") -> np.ndarray:
+    """``action`` as a float32 array of ``shape`` clipped to [-1, 1], in one NumPy pass over the
+    whole batch; TypeError if it is not numeric, ValueError if its shape is wrong or an entry is
+    NaN or infinite (the message names the first bad entry; the caller then changes nothing).
+    Finiteness is checked before the float32 conversion, so a float64 1e300 is clipped, not refused."""
+    remedy = f"give finite numbers in [-1, 1], an array of shape {shape}"
+    if isinstance(action, (str, bytes)):
+        raise TypeError(f"{name}={fmt(action)} is not numeric; {remedy}")
+    try:
+        a = np.asarray(action)
+    except (TypeError, ValueError) as exc:  # ragged nested sequences
+        raise ValueError(f"{name} is not an array of shape {shape} ({exc}); {remedy}") from exc
+    if a.dtype.kind not in "fiu":
+        raise TypeError(f"{name} has dtype {a.dtype} ({fmt(action)}), not a real number type; {remedy}")
     if a.shape != shape:
-        raise ValueError(f"action has shape {a.shape}; expected {shape}")
-    if not np.isfinite(a).all():
-        raise ValueError(f"action contains NaN or inf: {a!r}; give finite values in [-1, 1]")
-    return np.clip(a, -1.0, 1.0)
+        raise ValueError(f"{name} has shape {a.shape}; expected {shape}: {remedy}")
+    if a.dtype.kind == "f" and not np.isfinite(a).all():
+        bad = tuple(int(i) for i in np.argwhere(~np.isfinite(a))[0])
+        where = "".join(f"[{i}]" for i in bad)
+        count = int((~np.isfinite(a)).sum())
+        raise ValueError(f"{name}{where} = {fmt(a[bad])}: the action contains NaN or inf "
+                         f"({count} {'entry' if count == 1 else 'entries'}); {remedy}. Nothing was stepped.")
+    if a.dtype.kind != "f":
+        a = a.astype(np.float64)
+    return np.clip(a, -1.0, 1.0).astype(np.float32, copy=False)
 
 
 class BatchedEnv(VectorEnv):
@@ -126,7 +147,7 @@ class BatchedEnv(VectorEnv):
     def step(self, actions):
         if self._needs_reset:
             raise RuntimeError("call reset() before step()")
-        a = check_action(actions, self.action_space.shape)
+        a = check_action(actions, self.action_space.shape, "actions")
         info: dict[str, Any] = {}
         if self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP:
             reset_mask = self._done.copy()
@@ -184,11 +205,19 @@ class SimEnv(gym.Env):
     """A single environment over a task simulation of batch size 1.
 
     ``sim_class`` (set by subclasses) is built as ``sim_class(batch)`` and provides
-    ``spaces()`` (static: single action and observation spaces), ``reset(k, rng)``,
+    ``spaces()`` (static: single action and observation spaces), the reset (below),
     ``step(actions (B, A)) -> reward (B,)``, ``observe() -> obs (B, O)``,
     ``save(mask)``/``restore(mask, saved)`` (fresh state of some copies) and ``frame(k)``.
     Single env and batch run the very same code, so copy k matches a single env bit
-    for bit."""
+    for bit.
+
+    The reset: a sim class with ``RESET_DRAWS = m`` (an int) provides
+    ``reset_copies(idx (R,) int, u (R, m) float64)``, the starts of copies ``idx`` from ``m``
+    uniforms in [0, 1) each, in one array pass. ``u`` is Philox4x32-10 (``envs/_rng.py``) keyed by
+    the copy's seed and counted by its episode number, so copy k of a batch seeded ``s`` and a single
+    env seeded ``s + k`` draw the same numbers whatever the batch. A sim class without it
+    (``RESET_DRAWS = None``) provides ``reset(k, rng)`` and is reset copy by copy from the copy's
+    ``np.random.Generator``."""
 
     metadata = {"render_modes": ["rgb_array"]}
     sim_class = None
@@ -197,12 +226,22 @@ class SimEnv(gym.Env):
         self.render_mode = _check_render_mode(render_mode)
         self.action_space, self.observation_space = self.sim_class.spaces()
         self._sim = None
+        self._key = None   # Philox key of this env's episodes (its seed) and the episode number
+        self._episode = 0
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
         if self._sim is None:
             self._sim = self.sim_class(1)
-        self._sim.reset(0, self.np_random)
+        draws = getattr(self.sim_class, "RESET_DRAWS", None)
+        if draws is None:
+            self._sim.reset(0, self.np_random)
+        else:
+            if seed is not None or self._key is None:
+                self._key, self._episode = episode_key(seed, self.np_random), 0
+            u = uniforms(np.array([self._key], np.uint64), np.array([self._episode], np.uint64), draws)
+            self._episode += 1
+            self._sim.reset_copies(np.zeros(1, np.int64), u)
         return self._sim.observe()[0], {}
 
     def step(self, action):
@@ -242,8 +281,14 @@ class SimVectorEnv(BatchedEnv):
         self._sim = self.sim_class(self.num_envs)
 
     def _reset_copies(self, idx):
-        for k in idx.tolist():
-            self._sim.reset(k, self._rngs[k])
+        draws = getattr(self.sim_class, "RESET_DRAWS", None)
+        if draws is None:  # a sim that draws from np.random.Generator: copy by copy
+            for k in idx.tolist():
+                self._sim.reset(k, self._rngs[k])
+            return
+        u = uniforms(self._keys[idx], self._episodes[idx], draws)  # every copy in one array pass
+        self._episodes[idx] += np.uint64(1)
+        self._sim.reset_copies(np.asarray(idx, np.int64), u)
 
     def _advance(self, actions, reset_mask):
         # The physics steps every copy in one launch: copies reset before this step keep

@@ -147,6 +147,30 @@ def endpoint_distance(x: np.ndarray) -> np.ndarray:
     return _norm(x[:, 0] - x[:, -1])
 
 
+def turned(base: np.ndarray, angle: np.ndarray) -> np.ndarray:
+    """Positions ``base`` (R, N, 3) or (N, 3) turned about the vertical (y) axis through the origin by
+    ``angle`` (R,) [rad], float64 (R, N, 3): SoftGym's ``rotate_particles``, x' = c x - s z, z' = s x + c z."""
+    base = np.asarray(base, np.float64)
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    out = np.empty((len(angle),) + base.shape[-2:])
+    out[..., 0] = c * base[..., 0] - s * base[..., 2]
+    out[..., 1] = base[..., 1]
+    out[..., 2] = s * base[..., 0] + c * base[..., 2]
+    return out
+
+
+def box_centres(x: np.ndarray, height: float) -> np.ndarray:
+    """SoftGym's ``_get_center_point`` at ``height``: the (x, z) centre of each copy's bounding box of
+    positions ``x`` (R, N, 3), as (R, 3) float64 ``(cx, height, cz)``."""
+    lo, hi = x.min(axis=1).astype(np.float64), x.max(axis=1).astype(np.float64)
+    return np.stack([0.5 * (lo[:, 0] + hi[:, 0]), np.full(len(x), float(height)), 0.5 * (lo[:, 2] + hi[:, 2])], axis=1)
+
+
+def draw_variation(u: np.ndarray, count: int) -> np.ndarray:
+    """A variation index in ``0 .. count - 1`` per copy from uniforms ``u`` (R,) in [0, 1) (int64)."""
+    return np.minimum((np.asarray(u) * count).astype(np.int64), count - 1)
+
+
 def normalized(p, p0, p_opt) -> np.ndarray:
     """SoftGym's ``normalized_performance = (p - p0) / (p_opt - p0)``."""
     return (np.asarray(p, np.float64) - p0) / (np.asarray(p_opt, np.float64) - p0)
@@ -172,51 +196,60 @@ class Pickers:
         self.high = np.zeros((batch, 3), np.float32)
         self.held = np.full((batch, count), -1, np.int64)
 
-    def reset(self, k: int, center) -> None:
-        """SoftGym's ``Picker.reset(center)`` for copy k: box re-centred, pickers on a circle of radius
-        ``sqrt(count - 1) * 2 radius`` around ``center``, holding nothing."""
-        c = np.asarray(center, np.float64)
-        low, high = self.box[0].copy(), self.box[1].copy()
+    def reset(self, idx: np.ndarray, centers: np.ndarray) -> None:
+        """SoftGym's ``Picker.reset(center)`` for copies ``idx`` (R,) at ``centers`` (R, 3) [m], in one
+        pass: box re-centred in x and z, pickers on a circle of radius ``sqrt(count - 1) * 2 radius``
+        around the centre, holding nothing."""
+        c = np.asarray(centers, np.float64).reshape(-1, 3)
+        low = np.repeat(self.box[0][None], c.shape[0], axis=0)
+        high = np.repeat(self.box[1][None], c.shape[0], axis=0)
         for i in (0, 2):
-            shift = c[i] - (high[i] + low[i]) / 2.0
-            low[i] += shift
-            high[i] += shift
-        self.low[k] = low + self.radius
-        self.high[k] = high - self.radius
+            shift = c[:, i] - (high[:, i] + low[:, i]) / 2.0
+            low[:, i] += shift
+            high[:, i] += shift
+        self.low[idx] = low + self.radius
+        self.high[idx] = high - self.radius
         r = np.sqrt(self.count - 1) * self.radius * 2.0
         ang = 2.0 * np.pi * np.arange(self.count) / self.count
-        self.pos[k] = np.stack([c[0] + np.sin(ang) * r, np.full(self.count, c[1]), c[2] + np.cos(ang) * r], axis=1)
-        self.held[k] = -1
+        pos = np.empty((c.shape[0], self.count, 3))
+        pos[..., 0] = c[:, 0, None] + np.sin(ang) * r
+        pos[..., 1] = c[:, 1, None]
+        pos[..., 2] = c[:, 2, None] + np.cos(ang) * r
+        self.pos[idx] = pos
+        self.held[idx] = -1
 
     def act(self, state, action: np.ndarray) -> None:
         """One repeat of SoftGym's ``Picker.step`` on every copy: release, move (clipped to the box),
         pick, and carry the held particle by the picker's displacement (it becomes a pin: infinite
         mass, at rest, as FleX's inverse mass 0). ``action`` (B, count, 4) float32 in [-1, 1]."""
-        x, rows = state.x, np.arange(state.batch)
+        x, held = state.x, self.held
         pick = action[:, :, 3] > 0
-        for p in range(self.count):  # SoftGym releases for every picker first
-            drop = ~pick[:, p] & (self.held[:, p] >= 0)
-            state.pinned[rows[drop], self.held[drop, p]] = False
-            self.held[drop, p] = -1
-        for p in range(self.count):
-            old = self.pos[:, p].copy()
-            new = np.clip(old + action[:, p, :3] * np.float32(PICKER_STEP), self.low, self.high)
-            take = np.flatnonzero(pick[:, p] & (self.held[:, p] < 0))
-            if take.size:
-                d = _norm(x[take].astype(np.float64) - old[take, None, :].astype(np.float64))  # (T, N)
-                d[d > self.reach] = np.inf
-                for q in range(self.count):  # a particle another picker holds is not free
-                    other = self.held[take, q]
-                    d[np.flatnonzero(other >= 0), other[other >= 0]] = np.inf
-                near = np.argmin(d, axis=1)
-                ok = np.isfinite(d[np.arange(take.size), near])
-                self.held[take[ok], p] = near[ok]
-            on = np.flatnonzero(self.held[:, p] >= 0)
-            i = self.held[on, p]
-            x[on, i] = x[on, i] + (new[on] - old[on])
-            state.v[on, i] = 0.0
-            state.pinned[on, i] = True
-            self.pos[:, p] = new
+        drop = ~pick & (held >= 0)  # SoftGym releases for every picker first
+        if drop.any():
+            rows, cols = np.nonzero(drop)
+            state.pinned[rows, held[rows, cols]] = False
+            held[drop] = -1
+        new = np.clip(self.pos + action[:, :, :3] * np.float32(PICKER_STEP), self.low[:, None], self.high[:, None])
+        # Picker by picker (a particle another picker holds is not free, also one just picked), on the
+        # positions before this repeat's carries: a carry moves only held particles, never free ones.
+        take = pick & (held < 0)
+        for p in np.flatnonzero(take.any(axis=0)).tolist():
+            t = np.flatnonzero(take[:, p])
+            d = _norm(x[t].astype(np.float64) - self.pos[t, p, None, :].astype(np.float64))  # (T, N)
+            d[d > self.reach] = np.inf
+            others = held[t]
+            rows, cols = np.nonzero(others >= 0)
+            d[rows, others[rows, cols]] = np.inf
+            near = np.argmin(d, axis=1)
+            ok = np.isfinite(d[np.arange(t.size), near])
+            held[t[ok], p] = near[ok]
+        rows, cols = np.nonzero(held >= 0)  # every held particle follows its picker (pickers hold distinct ones)
+        if rows.size:
+            i = held[rows, cols]
+            x[rows, i] = x[rows, i] + (new[rows, cols] - self.pos[rows, cols])
+            state.v[rows, i] = 0.0
+            state.pinned[rows, i] = True
+        self.pos[...] = new
 
 
 # ----------------------------------------------------------------------------------------- task simulation
@@ -226,10 +259,11 @@ class PickerSim:
     Class attributes: ``MODEL`` (a function returning the shared model), ``SUBSTEPS`` and
     ``ITERATIONS`` (XPBD per frame), ``SOLVER_OPTIONS`` (further :class:`tianim.physics.XPBD`
     options: self-collision, strain limit), ``PICKER`` (keyword arguments of :class:`Pickers`),
-    ``KEYPOINTS`` (particle indices observed), ``REWARD_KEY`` (the metric that is the reward).
-    Hooks: ``_start(k, rng)`` writes copy k's start (cloth, pickers, reset metrics);
-    ``_metrics() -> dict of (B,) float64`` (must contain ``performance`` and
-    ``normalized_performance``).
+    ``KEYPOINTS`` (particle indices observed), ``REWARD_KEY`` (the metric that is the reward),
+    ``RESET_DRAWS`` (uniforms per reset, :class:`envs._batched.SimEnv`).
+    Hooks: ``_start(idx (R,), u (R, RESET_DRAWS))`` writes the starts of copies ``idx`` in one
+    array pass (cloth, pickers, reset metrics); ``_metrics() -> dict of (B,) float64`` (must
+    contain ``performance`` and ``normalized_performance``).
     """
 
     MODEL = None
@@ -239,6 +273,7 @@ class PickerSim:
     PICKER: dict = {}
     KEYPOINTS = np.zeros(0, np.int64)
     REWARD_KEY = "performance"
+    RESET_DRAWS = 0
 
     def __init__(self, batch: int):
         self.model = type(self).MODEL()
@@ -251,26 +286,36 @@ class PickerSim:
                               **self.SOLVER_OPTIONS)
         self.diverged = np.zeros(batch, bool)
         self.metrics: dict = {}
+        self._obs = np.empty((batch, 3 * (len(self.KEYPOINTS) + self.pickers.count)), np.float32)
 
     # hooks ---------------------------------------------------------------------------------------
-    def _start(self, k: int, rng: np.random.Generator) -> None:  # pragma: no cover - overridden
+    def _start(self, idx: np.ndarray, u: np.ndarray) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
 
     def _metrics(self) -> dict:  # pragma: no cover - overridden
         raise NotImplementedError
 
     # the SimEnv protocol --------------------------------------------------------------------------
-    def reset(self, k: int, rng: np.random.Generator) -> None:
+    def reset_copies(self, idx: np.ndarray, u: np.ndarray) -> None:
+        """Start copies ``idx`` (R,) from uniforms ``u`` (R, RESET_DRAWS), all in one array pass."""
         s = self.state
-        s.v[k] = 0.0
-        s.t[k] = 0.0
-        s.pinned[k] = False
-        self._start(k, rng)
-        self.solver.watchdog.forget(s, k)
+        s.v[idx] = 0.0
+        s.t[idx] = 0.0
+        s.pinned[idx] = False
+        self._start(idx, u)
+        self.solver.watchdog.forget(s, idx)
 
-    def frame_step(self) -> np.ndarray:
-        """One frame (``FRAME_DT``) of physics on every copy; the copies that diverged (B,) bool."""
-        return self.solver.step(self.model, self.state, FRAME_DT / self.SUBSTEPS, self.SUBSTEPS).diverged
+    def frame_step(self, solver=None) -> np.ndarray:
+        """One frame (``FRAME_DT``) of physics on every copy with ``solver`` (default the env's own);
+        the copies that diverged (B,) bool."""
+        solver = self.solver if solver is None else solver
+        return solver.step(self.model, self.state, FRAME_DT / self.SUBSTEPS, self.SUBSTEPS).diverged
+
+    def physics(self, solver):
+        """The physics of one env step on every copy without picker actions: ``ACTION_REPEAT`` frames
+        of ``solver`` (one without watchdog gives the benchmark's kernel-only rate)."""
+        for _ in range(ACTION_REPEAT):
+            self.frame_step(solver)
 
     def step(self, actions: np.ndarray) -> np.ndarray:
         """Apply the picker actions (B, 4 count) ``ACTION_REPEAT`` times, one frame after each; return
@@ -299,8 +344,9 @@ class PickerSim:
 
     def observe(self) -> np.ndarray:
         """SoftGym's ``key_point`` observation: keypoint positions, then picker positions (B, 3 (K + count))."""
-        b = self.state.batch
-        obs = np.concatenate([self.state.x[:, self.KEYPOINTS].reshape(b, -1), self.pickers.pos.reshape(b, -1)], axis=1)
+        b, obs, k = self.state.batch, self._obs, 3 * len(self.KEYPOINTS)
+        obs[:, :k] = self.state.x[:, self.KEYPOINTS].reshape(b, -1)
+        obs[:, k:] = self.pickers.pos.reshape(b, -1)
         return np.clip(obs, -OBS_BOUND, OBS_BOUND)
 
     def save(self, mask):

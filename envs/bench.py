@@ -14,8 +14,17 @@ Measures, with pre-generated actions and medians over ``--repeats``:
 * per SoftGym task (:data:`SOFTGYM_IDS`) ``<id>_steps_per_s`` (one ``gym.make`` env),
   ``<id>_vec_steps_per_s`` (``gym.make_vec`` with ``--softgym-envs`` copies, env-steps/s) and
   ``<id>_vec_speedup`` (their ratio), with ``<id>`` the id in lower case without the namespace,
-  ``-`` as ``_`` (``clothfold_v1``). Copy 0 of the batch is checked equal to the single env
-  (same seed, same actions) before timing.
+  ``-`` as ``_`` (``clothfold_v1``). The single envs run the seeds and action streams of copies
+  0 .. 3 of the batch (a copy's cost depends on its state), each checked equal to its copy before
+  timing; single and batch are timed in turn (:func:`median_times`), so a burst of load on a shared
+  machine slows both alike;
+* per vector env of :data:`VEC_PROFILE` and per N of its sizes (``--quick``: N = 1, 2):
+  ``<k>_vec_steps_per_s_n<N>`` (``gym.make_vec``, env-steps/s, autoresets included),
+  ``<k>_kernel_steps_per_s_n<N>`` (the physics launches of one env step alone, as the env makes
+  them but without the watchdog and without actions, from copies of the env's current states: the
+  rate the env is bound by) and
+  ``<k>_vec_kernel_fraction_n<N>`` (their ratio: the share of the env's time in the kernels), with
+  ``<k>`` as above (``ropeswing_v0``), timed in turn. ``loadavg_1min`` records the machine's load.
 
 It lives with the environments (it was ``tianim bench envs``): it drives them through
 Gymnasium, and the ``tianim`` library never imports gymnasium or ``envs``
@@ -25,13 +34,16 @@ Gymnasium, and the ``tianim`` library never imports gymnasium or ``envs``
 
 from __future__ import annotations
 
+import os
 import sys
 
 import gymnasium as gym
 import numpy as np
 
 import envs  # noqa: F401  (registers the environments)
-from tianim.bench.common import median_time, parser, print_table, write_json
+from tianim.bench.common import median_time, median_times, parser, print_table, write_json
+
+from ._rng import uniforms
 
 
 def _single_rate(env, steps: int, repeats: int, seed: int = 0) -> float:
@@ -69,24 +81,90 @@ def key(env_id: str) -> str:
     return env_id.split("/")[-1].lower().replace("-", "_")
 
 
+#: Single envs timed per SoftGym task: the seeds and action streams of copies 0 .. SINGLE_COPIES - 1.
+SINGLE_COPIES = 4
+
+
 def _softgym_rates(env_id: str, num_envs: int, steps: int, repeats: int) -> dict:
-    single, venv = gym.make(env_id), gym.make_vec(env_id, num_envs=num_envs)
+    """Single-env and ``make_vec`` env-steps/s of a SoftGym task, timed in turn. The single envs run the
+    seeds and action streams of copies 0 .. m - 1 of the batch (m = min(num_envs, SINGLE_COPIES)): a
+    copy's cost depends on its state (ClothFold-v1's self-collision rebuilds), so both sides do like work."""
+    m = min(num_envs, SINGLE_COPIES)
+    singles, venv = [gym.make(env_id) for _ in range(m)], gym.make_vec(env_id, num_envs=num_envs)
     acts = np.random.default_rng(0).uniform(-1, 1, (steps, num_envs, 8)).astype(np.float32)
-    single.reset(seed=0)
+    for k, single in enumerate(singles):
+        single.reset(seed=k)
     venv.reset(seed=0)
-    for a in acts[:2]:  # agreement before timing: copy 0 of the batch is the single env
-        obs, *_ = single.step(a[0])
+    for a in acts[:2]:  # agreement before timing: copy k of the batch is the single env seeded k
         vobs, *_ = venv.step(a)
-        if not np.array_equal(obs, vobs[0]):
-            raise RuntimeError(f"{env_id}: copy 0 of make_vec differs from the single env")
+        for k, single in enumerate(singles):
+            if not np.array_equal(single.step(a[k])[0], vobs[k]):
+                raise RuntimeError(f"{env_id}: copy {k} of make_vec differs from the single env seeded {k}")
     k = key(env_id)
-    out = {f"{k}_steps_per_s": steps / median_time(lambda: [single.step(a[0]) for a in acts], repeats=repeats, warmup=0),
-           f"{k}_vec_steps_per_s": steps * num_envs / median_time(lambda: [venv.step(a) for a in acts], repeats=repeats,
-                                                                  warmup=0)}
+    t = median_times({"single": lambda: [single.step(a[j]) for j, single in enumerate(singles) for a in acts],
+                      "vec": lambda: [venv.step(a) for a in acts]}, repeats=repeats, warmup=0)
+    out = {f"{k}_steps_per_s": steps * m / t["single"], f"{k}_vec_steps_per_s": steps * num_envs / t["vec"]}
     out[f"{k}_vec_speedup"] = out[f"{k}_vec_steps_per_s"] / out[f"{k}_steps_per_s"]
-    single.close()
+    for single in singles:
+        single.close()
     venv.close()
     return out
+
+
+#: Vector envs profiled per N: the sizes N and the env steps timed per repeat.
+VEC_PROFILE = {
+    "tianim/RopeSwing-v0": ((1, 16, 64, 256), 100),
+    "tianim/ClothFold-v0": ((1, 16, 64, 256), 20),
+    "tianim/RopeFlatten-v0": ((1, 16, 64, 256), 10),
+    "tianim/ClothFold-v1": ((1, 4, 16), 2),
+    "tianim/ClothFlatten-v0": ((1, 4, 16), 2),
+}
+QUICK_SIZES = (1, 2)
+
+
+def _vector_profile(env_id: str, n: int, steps: int, repeats: int) -> dict:
+    """``<k>_vec_steps_per_s_n<N>``, ``<k>_kernel_steps_per_s_n<N>`` and ``<k>_vec_kernel_fraction_n<N>``
+    of one vector env at N = ``n`` (module docstring)."""
+    venv = gym.make_vec(env_id, num_envs=n)
+    acts = np.random.default_rng(0).uniform(-1, 1, (steps, *venv.action_space.shape)).astype(np.float32)
+    venv.reset(seed=0)
+    single = gym.make(env_id)
+    single.reset(seed=0)
+    if not np.array_equal(single.step(acts[0, 0])[0], venv.step(acts[0])[0][0]):  # agreement before timing
+        raise RuntimeError(f"{env_id}: copy 0 of make_vec(num_envs={n}) differs from the single env")
+    single.close()
+    own = venv.unwrapped._sim
+    sim = type(own)(n)  # the kernel alone: copies of the env's states, nothing of the env around them
+    sim.reset_copies(np.arange(n), uniforms(np.arange(n, dtype=np.uint64), np.zeros(n, np.uint64), sim.RESET_DRAWS))
+    bare = type(sim.solver)(**sim.solver.options(), watchdog=False)
+
+    def kernel():
+        for name in ("x", "v", "pinned", "t"):  # from where the env is (self-collision work depends on it)
+            getattr(sim.state, name)[...] = getattr(own.state, name)
+        for _ in range(steps):
+            sim.physics(bare)
+
+    t = median_times({"vec": lambda: [venv.step(a) for a in acts], "kernel": kernel}, repeats=repeats, warmup=1)
+    venv.close()
+    k, tail = key(env_id), f"_n{n}"
+    return {f"{k}_vec_steps_per_s{tail}": steps * n / t["vec"], f"{k}_kernel_steps_per_s{tail}": steps * n / t["kernel"],
+            f"{k}_vec_kernel_fraction{tail}": t["kernel"] / t["vec"]}
+
+
+def vector_profiles(env_ids, quick: bool, repeats: int, rows: list) -> dict:
+    """The envs ``env_ids`` of :data:`VEC_PROFILE` at each of their N (``quick``: N = 1, 2 and 2 steps):
+    summary keys; appends the table rows to ``rows``."""
+    summary = {}
+    for env_id in env_ids:
+        sizes, steps = VEC_PROFILE[env_id]
+        for n in QUICK_SIZES if quick else sizes:
+            out = _vector_profile(env_id, n, 2 if quick else steps, repeats)
+            summary.update(out)
+            k, name = key(env_id), env_id.split("/")[-1]
+            rows.append({"benchmark": f"{name} make_vec N={n}", "steps_per_s": out[f"{k}_vec_steps_per_s_n{n}"],
+                         "kernel_steps_per_s": out[f"{k}_kernel_steps_per_s_n{n}"],
+                         "kernel_fraction": out[f"{k}_vec_kernel_fraction_n{n}"]})
+    return summary
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -95,11 +173,21 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--num-envs", type=int, default=4096, help="copies for the batched ArmReach (default 4096)")
     p.add_argument("--softgym-envs", type=int, default=16, help="copies for the batched SoftGym tasks (default 16)")
     p.add_argument("--only-softgym", action="store_true", help="measure only the SoftGym tasks")
+    p.add_argument("--only-vec", action="store_true", help="measure only the per-N vector profiles (VEC_PROFILE)")
+    p.add_argument("--vec-repeats", type=int, default=3, help="timed repeats of each per-N profile (default 3)")
     args = p.parse_args(argv)
     quick = args.quick
     repeats = 2 if quick else args.repeats
     single_steps = 2000 if quick else 20000
     rows, summary = [], {}
+    summary["loadavg_1min"] = os.getloadavg()[0]
+    vec_rows: list = []
+    profiled = [i for i in VEC_PROFILE if i in gym.registry and (i in SOFTGYM_IDS or not args.only_softgym)]
+    summary.update(vector_profiles(profiled, quick, 1 if quick else args.vec_repeats, vec_rows))
+    if args.only_vec:
+        print_table(vec_rows)
+        write_json(args.json, summary, rows=vec_rows)
+        return 0
 
     for env_id in SOFTGYM_IDS:
         nv = 2 if quick else args.softgym_envs
@@ -110,7 +198,8 @@ def main(argv: list[str] | None = None) -> int:
         rows.append({"benchmark": f"{env_id.split('/')[-1]} make_vec N={nv}", "steps_per_s": rates[f"{k}_vec_steps_per_s"]})
     if args.only_softgym:
         print_table(rows)
-        write_json(args.json, summary, rows=rows)
+        print_table(vec_rows)
+        write_json(args.json, summary, rows=rows + vec_rows)
         return 0
 
     env = gym.make("tianim/ArmReach-v0")
@@ -171,9 +260,10 @@ def main(argv: list[str] | None = None) -> int:
         rows.append({"benchmark": "MuJoCo Reacher-v5 single (gym.make)",
                      "steps_per_s": summary["mujoco_reacher_steps_per_s"]})
     print_table(rows)
+    print_table(vec_rows)
     if summary["ratio_vs_mujoco"] is not None:
         print(f"ratio_vs_mujoco (ArmReach single / Reacher-v5): {summary['ratio_vs_mujoco']:.2f}")
-    write_json(args.json, summary, rows=rows)
+    write_json(args.json, summary, rows=rows + vec_rows)
     return 0
 
 

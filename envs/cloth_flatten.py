@@ -47,7 +47,10 @@ SoftGym caches 1000 such variations and draws one per reset; here :data:`VARIATI
 are generated once per process (fixed seeds 0..7, one batched run, a few seconds) and each
 reset draws one of them and turns it about the vertical by an angle uniform in
 [-pi, pi) (so that the starts differ also in how they lie on the coverage grid). Pickers at
-the centre of the cloth's bounding box, 0.2 m up, 0.1 m apart along z, holding nothing.
+the centre of the cloth's bounding box, 0.2 m up, 0.1 m either side of it along z (0.2 m
+apart: SoftGym's circle of radius 2 x picker radius), holding nothing. The two draws per reset
+are Philox4x32-10 (``envs/_rng.py``) keyed by the seed (a vector env's copy k by seed + k) and
+counted by the episode: every copy that resets in one array pass.
 
 ## Episode end
 
@@ -140,6 +143,7 @@ class ClothFlattenSim(sg.PickerSim):
     PICKER = sg.CLOTH_PICKER
     KEYPOINTS = KEYPOINTS
     A_MAX = None
+    RESET_DRAWS = 2
 
     def __init__(self, batch: int):
         super().__init__(batch)
@@ -147,18 +151,13 @@ class ClothFlattenSim(sg.PickerSim):
         if ClothFlattenSim.A_MAX is None:
             ClothFlattenSim.A_MAX = flat_area()
 
-    def _start(self, k, rng):
-        j = int(rng.integers(VARIATIONS))
-        angle = rng.uniform(-np.pi, np.pi)
-        base = start_variations()[j].astype(np.float64)
-        c, s = np.cos(angle), np.sin(angle)
-        x = base.copy()
-        x[:, 0] = c * base[:, 0] - s * base[:, 2]
-        x[:, 2] = s * base[:, 0] + c * base[:, 2]
-        self.state.x[k] = x
-        lo, hi = self.state.x[k].min(axis=0).astype(np.float64), self.state.x[k].max(axis=0).astype(np.float64)
-        self.pickers.reset(k, (0.5 * (lo[0] + hi[0]), 0.2, 0.5 * (lo[2] + hi[2])))  # SoftGym's _get_center_point
-        self.a0[k] = sg.covered_area(self.state.x[k:k + 1], sg.CLOTH_SPACING)[0]
+    def _start(self, idx, u):
+        j = sg.draw_variation(u[:, 0], VARIATIONS)
+        angle = -np.pi + 2.0 * np.pi * u[:, 1]  # uniform in [-pi, pi)
+        x = self.state.x
+        x[idx] = sg.turned(start_variations()[j], angle)
+        self.pickers.reset(idx, sg.box_centres(x[idx], 0.2))  # SoftGym's _get_center_point
+        self.a0[idx] = sg.covered_area(x[idx], sg.CLOTH_SPACING)
 
     def _metrics(self):
         area = sg.covered_area(self.state.x, sg.CLOTH_SPACING)

@@ -38,7 +38,8 @@ started. A perfect fold scores about 0 per step; the flat cloth about -0.17.
 
 Cloth flat on the table, centred at (ox, 0, oz) with ox, oz uniform in
 [-0.03, 0.03] m; pickers at height 0.1 m above uniform (x, z) in [-0.15, 0.15] m,
-holding nothing. All from ``np_random``.
+holding nothing. Drawn by Philox4x32-10 (``envs/_rng.py``) keyed by the seed (a vector env's
+copy k by seed + k) and counted by the episode: every copy that resets in one array pass.
 
 ## Episode end
 
@@ -100,13 +101,19 @@ def make_model() -> tp.Model:
                     colliders=[tp.Ground(height=0.0, restitution=0.0, friction=FRICTION)])
 
 
-def sample_start(rng: np.random.Generator) -> np.ndarray:
-    """``[ox, oz, p0x, p0z, p1x, p1z]`` drawn with one call (single env and copies alike)."""
-    return rng.uniform([-0.03, -0.03, -0.15, -0.15, -0.15, -0.15], [0.03, 0.03, 0.15, 0.15, 0.15, 0.15])
+START_LOW = np.array([-0.03, -0.03, -0.15, -0.15, -0.15, -0.15])   # ox, oz, p0x, p0z, p1x, p1z [m]
+START_HIGH = -START_LOW
+
+
+def sample_starts(u: np.ndarray) -> np.ndarray:
+    """``[ox, oz, p0x, p0z, p1x, p1z]`` per copy (R, 6) float64 from uniforms ``u`` (R, 6) in [0, 1)."""
+    return START_LOW + (START_HIGH - START_LOW) * u
 
 
 class ClothFoldSim:
     """B copies of the task on batched state: the code both env classes run."""
+
+    RESET_DRAWS = 6
 
     def __init__(self, batch: int):
         self.model = make_model()
@@ -117,18 +124,24 @@ class ClothFoldSim:
         # a diverged copy is rolled back and reported, not raised: its episode ends, the others go on
         self.solver = tp.SymplecticEuler(watchdog=tp.Watchdog(on_divergence="rollback"))
         self.diverged = np.zeros(batch, bool)
+        self._obs = np.empty((batch, OBS_DIM), np.float32)
 
-    def reset(self, k: int, rng: np.random.Generator) -> None:
-        ox, oz, p0x, p0z, p1x, p1z = sample_start(rng).tolist()
+    def reset_copies(self, idx: np.ndarray, u: np.ndarray) -> None:
+        """Start copies ``idx`` (R,) from uniforms ``u`` (R, 6) (the module docstring), in one pass."""
+        d = sample_starts(u)
         s = self.state
-        s.x[k] = self.model.positions + np.array([ox, 0.0, oz])
-        s.v[k] = 0.0
-        s.t[k] = 0.0
-        s.pinned[k] = False
-        self.start[k] = s.x[k]
-        self.pickers[k] = ((p0x, 0.1, p0z), (p1x, 0.1, p1z))
-        self.held[k] = -1
-        self.solver.watchdog.forget(s, k)
+        shift = np.zeros((idx.size, 1, 3))
+        shift[:, 0, 0], shift[:, 0, 2] = d[:, 0], d[:, 1]
+        s.x[idx] = self.model.positions + shift
+        s.v[idx] = 0.0
+        s.t[idx] = 0.0
+        s.pinned[idx] = False
+        self.start[idx] = s.x[idx]
+        pickers = np.full((idx.size, 2, 3), 0.1)
+        pickers[:, :, 0], pickers[:, :, 2] = d[:, 2::2], d[:, 3::2]
+        self.pickers[idx] = pickers
+        self.held[idx] = -1
+        self.solver.watchdog.forget(s, idx)
 
     def step(self, actions: np.ndarray) -> np.ndarray:
         """Apply picker actions (B, 8), advance the cloth; return the reward (B,) float64."""
@@ -159,12 +172,17 @@ class ClothFoldSim:
             s.x[on, held[on]] = old[on, p]
             s.v[on, held[on]] = (new[on, p] - old[on, p]) / np.float32(DT)
         self.pickers[:] = new
-        self.diverged = self.solver.step(self.model, s, DT / SUBSTEPS, SUBSTEPS).diverged
+        self.diverged = self.physics(self.solver).diverged
         if self.diverged.any():  # the watchdog rolled the cloth back: put the pickers back too
             bad = np.flatnonzero(self.diverged)
             self.pickers[bad], self.held[bad] = old[bad], held_before[bad]
             s.pinned[bad] = pinned_before[bad]
         return self.reward()
+
+    def physics(self, solver):
+        """The physics of one env step on every copy: SUBSTEPS steps of ``solver`` (the env's own, or
+        one without watchdog for the benchmark's kernel-only rate); its StepStats."""
+        return solver.step(self.model, self.state, DT / SUBSTEPS, SUBSTEPS)
 
     def _guard_stretch(self, new: np.ndarray) -> None:
         """Two pickers holding particles i and j cannot pull them further apart than
@@ -211,9 +229,11 @@ class ClothFoldSim:
         return cloth_frame(self.state.x[k], NX, self.pickers[k], self.held[k] >= 0)
 
     def observe(self) -> np.ndarray:
-        b = self.state.batch
-        obs = np.concatenate([self.pickers.reshape(b, 6), (self.held >= 0).astype(np.float32),
-                              self.state.x[:, KEYPOINTS].reshape(b, -1)], axis=1)
+        """The observations (B, 44) float32 (the module docstring), built in a buffer kept between calls."""
+        b, obs = self.state.batch, self._obs
+        obs[:, 0:6] = self.pickers.reshape(b, 6)
+        np.greater_equal(self.held, 0, out=obs[:, 6:8], casting="unsafe")
+        obs[:, 8:] = self.state.x[:, KEYPOINTS].reshape(b, -1)
         return np.clip(obs, -1.0, 1.0)
 
 

@@ -54,8 +54,10 @@ scores p0 = -0.2 m; a perfect fold 0 (normalized 1).
 
 SoftGym's ``generate_env_variation``: the flat cloth centred at the origin and turned about
 the vertical by an angle uniform in [-pi/4, pi/4]; pickers at the middle of corners 0 and
-64 x 63 (the cloth's column-0 edge), 0.1 m up, 0.1 m apart along z (SoftGym's
-``_get_centered_picker_pos``), holding nothing. From ``np_random``.
+64 x 63 (the cloth's column-0 edge), 0.1 m up, 0.1 m either side of it along z, 0.2 m
+apart (SoftGym's ``_get_centered_picker_pos``), holding nothing. Drawn by Philox4x32-10 (``envs/_rng.py``) keyed
+by the seed (a vector env's copy k by seed + k) and counted by the episode, every copy that
+resets in one array pass.
 
 ## Episode end
 
@@ -110,25 +112,25 @@ class ClothFoldV1Sim(sg.PickerSim):
     SOLVER_OPTIONS = sg.CLOTH_SOLVER
     PICKER = sg.CLOTH_PICKER
     KEYPOINTS = KEYPOINTS
+    RESET_DRAWS = 1
 
     def __init__(self, batch: int):
         super().__init__(batch)
         self.b0 = np.zeros((batch, len(GROUP_B), 3), np.float32)
         self.p0 = np.zeros(batch)
 
-    def _start(self, k, rng):
-        angle = (rng.random() - 0.5) * np.pi / 2  # SoftGym: (np.random.random() - 0.5) * pi / 2
-        flat = self.model.positions.astype(np.float64)
-        c, s = np.cos(angle), np.sin(angle)
-        x = flat.copy()
-        x[:, 0] = c * flat[:, 0] - s * flat[:, 2]  # SoftGym's rotate_particles, about the centre (0, 0)
-        x[:, 2] = s * flat[:, 0] + c * flat[:, 2]
-        self.state.x[k] = x
-        self.b0[k] = self.state.x[k, GROUP_B]
-        middle = self.state.x[k, KEYPOINTS[:2]].astype(np.float64).mean(axis=0)
-        self.pickers.reset(k, (middle[0], 0.1, middle[2]))
-        group, fixation = sg.fold_metrics(self.state.x[k:k + 1], GROUP_A, GROUP_B, self.b0[k:k + 1])
-        self.p0[k] = -group[0] - FIXATION_WEIGHT * fixation[0]
+    def _start(self, idx, u):
+        angle = (u[:, 0] - 0.5) * np.pi / 2  # SoftGym: (np.random.random() - 0.5) * pi / 2
+        x = self.state.x
+        x[idx] = sg.turned(self.model.positions, angle)  # SoftGym's rotate_particles, about the centre (0, 0)
+        start = x[idx]
+        self.b0[idx] = start[:, GROUP_B]
+        corners = start[:, KEYPOINTS[:2]].astype(np.float64)
+        middle = 0.5 * (corners[:, 0] + corners[:, 1])
+        middle[:, 1] = 0.1
+        self.pickers.reset(idx, middle)
+        group, fixation = sg.fold_metrics(start, GROUP_A, GROUP_B, self.b0[idx])
+        self.p0[idx] = -group - FIXATION_WEIGHT * fixation
 
     def _metrics(self):
         group, fixation = sg.fold_metrics(self.state.x, GROUP_A, GROUP_B, self.b0)

@@ -53,7 +53,9 @@ caches 1000 such variations and draws one per reset, :data:`VARIATIONS` = 100 ar
 once per process (``np.random.default_rng(j)`` for variation j, all in one batched run of about
 a second, each settling phase lasting until every variation is still); each reset draws one
 and turns it about the vertical by an angle uniform in [-pi, pi). Pickers at the centre of the
-rope's bounding box, 0.1 m up, 4 cm apart along z. Draws from ``np_random``.
+rope's bounding box, 0.1 m up, 4 cm either side of it along z (8 cm apart). The two draws per
+reset are Philox4x32-10 (``envs/_rng.py``) keyed by the seed (a vector env's copy k by seed + k)
+and counted by the episode: every copy that resets in one array pass.
 
 ## Episode end
 
@@ -176,18 +178,14 @@ class RopeFlattenSim(sg.PickerSim):
     SOLVER_OPTIONS = ROPE_SOLVER
     PICKER = PICKER
     KEYPOINTS = KEYPOINTS
+    RESET_DRAWS = 2
 
-    def _start(self, k, rng):
-        j = int(rng.integers(VARIATIONS))
-        angle = rng.uniform(-np.pi, np.pi)
-        base = start_variations()[j].astype(np.float64)
-        c, s = np.cos(angle), np.sin(angle)
-        x = base.copy()
-        x[:, 0] = c * base[:, 0] - s * base[:, 2]
-        x[:, 2] = s * base[:, 0] + c * base[:, 2]
-        self.state.x[k] = x
-        lo, hi = self.state.x[k].min(axis=0).astype(np.float64), self.state.x[k].max(axis=0).astype(np.float64)
-        self.pickers.reset(k, (0.5 * (lo[0] + hi[0]), 0.1, 0.5 * (lo[2] + hi[2])))
+    def _start(self, idx, u):
+        j = sg.draw_variation(u[:, 0], VARIATIONS)
+        angle = -np.pi + 2.0 * np.pi * u[:, 1]  # uniform in [-pi, pi)
+        x = self.state.x
+        x[idx] = sg.turned(start_variations()[j], angle)
+        self.pickers.reset(idx, sg.box_centres(x[idx], 0.1))  # SoftGym's _get_center_point
 
     def _metrics(self):
         d = sg.endpoint_distance(self.state.x)

@@ -37,7 +37,8 @@ NaN or infinite actions raise ``ValueError``.
 Pin at (x0, 1, z0) with x0, z0 uniform in [-0.2, 0.2] m, rope hanging straight
 down at rest; target at (tx, 1 + dy - 0.8, tz) with tx, tz uniform in
 [-0.3, 0.3] m and dy uniform in [-0.2, 0.2] m (reachable by the end under the
-pin). All from ``np_random``.
+pin). Drawn by Philox4x32-10 (``envs/_rng.py``) keyed by the seed (a vector env's copy k
+by seed + k) and counted by the episode: every copy that resets in one array pass.
 
 ## Episode end
 
@@ -88,30 +89,40 @@ def make_model() -> tp.Model:
                    direction=(0.0, -1.0, 0.0), origin=(0.0, 1.0, 0.0))
 
 
-def sample_start(rng: np.random.Generator) -> np.ndarray:
-    """``[x0, z0, tx, dy, tz]`` drawn with one call (single env and copies draw alike)."""
-    return rng.uniform([-0.2, -0.2, -0.3, -0.2, -0.3], [0.2, 0.2, 0.3, 0.2, 0.3])
+START_LOW = np.array([-0.2, -0.2, -0.3, -0.2, -0.3])   # x0, z0, tx, dy, tz [m]
+START_HIGH = -START_LOW
+
+
+def sample_starts(u: np.ndarray) -> np.ndarray:
+    """``[x0, z0, tx, dy, tz]`` per copy (R, 5) float64 from uniforms ``u`` (R, 5) in [0, 1)."""
+    return START_LOW + (START_HIGH - START_LOW) * u
 
 
 class RopeSwingSim:
     """B copies of the task on batched state: the code both env classes run."""
 
+    RESET_DRAWS = 5
+
     def __init__(self, batch: int):
         self.model = make_model()
         self.state = self.model.state(batch=batch, dtype=np.float32)
         self.target = np.zeros((batch, 3), np.float32)
+        self._obs = np.empty((batch, OBS_HIGH.size), np.float32)
         # a diverged copy is rolled back and reported, not raised: its episode ends, the others go on
         self.solver = tp.SymplecticEuler(watchdog=tp.Watchdog(on_divergence="rollback"))
         self.diverged = np.zeros(batch, bool)
 
-    def reset(self, k: int, rng: np.random.Generator) -> None:
-        x0, z0, tx, dy, tz = sample_start(rng).tolist()
+    def reset_copies(self, idx: np.ndarray, u: np.ndarray) -> None:
+        """Start copies ``idx`` (R,) from uniforms ``u`` (R, 5) (the module docstring), in one pass."""
+        d = sample_starts(u)
         s = self.state
-        s.x[k] = self.model.positions + np.array([x0, 0.0, z0])
-        s.v[k] = 0.0
-        s.t[k] = 0.0
-        self.target[k] = (tx, 1.0 + dy - LENGTH, tz)
-        self.solver.watchdog.forget(s, k)
+        shift = np.zeros((idx.size, 1, 3))
+        shift[:, 0, 0], shift[:, 0, 2] = d[:, 0], d[:, 1]
+        s.x[idx] = self.model.positions + shift
+        s.v[idx] = 0.0
+        s.t[idx] = 0.0
+        self.target[idx] = np.stack([d[:, 2], 1.0 + d[:, 3] - LENGTH, d[:, 4]], axis=1)
+        self.solver.watchdog.forget(s, idx)
 
     def step(self, actions: np.ndarray) -> np.ndarray:
         """Move the pins with velocities ``actions * PIN_SPEED`` (cut at the box); return the
@@ -121,7 +132,7 @@ class RopeSwingSim:
         v = actions * np.float32(PIN_SPEED)
         goal = np.clip(pin + v * np.float32(DT), PIN_LOW, PIN_HIGH)
         s.v[:, 0, :] = (goal - pin) / np.float32(DT)
-        self.diverged = self.solver.step(self.model, s, DT / SUBSTEPS, SUBSTEPS).diverged
+        self.diverged = self.physics(self.solver).diverged
         end, vend = s.x[:, -1, :].astype(np.float64), s.v[:, -1, :].astype(np.float64)
         d = end - self.target
         dist = np.sqrt(d[:, 0] * d[:, 0] + d[:, 1] * d[:, 1] + d[:, 2] * d[:, 2])
@@ -129,6 +140,11 @@ class RopeSwingSim:
         a = actions.astype(np.float64)
         effort = a[:, 0] * a[:, 0] + a[:, 1] * a[:, 1] + a[:, 2] * a[:, 2]
         return -dist - 0.1 * sway - 0.01 * effort
+
+    def physics(self, solver):
+        """The physics of one env step on every copy: SUBSTEPS steps of ``solver`` (the env's own, or
+        one without watchdog for the benchmark's kernel-only rate); its StepStats."""
+        return solver.step(self.model, self.state, DT / SUBSTEPS, SUBSTEPS)
 
     @staticmethod
     def spaces():
@@ -147,10 +163,14 @@ class RopeSwingSim:
         return rope_frame(self.state.x[k], (PIN_LOW, PIN_HIGH), self.target[k])
 
     def observe(self) -> np.ndarray:
-        s = self.state
+        """The observations (B, 30) float32 (the module docstring), built in a buffer kept between calls."""
+        s, obs = self.state, self._obs
         b = s.batch
-        obs = np.concatenate([s.x[:, 0], s.v[:, 0], s.x[:, SAMPLES].reshape(b, -1), s.v[:, SAMPLES].reshape(b, -1),
-                              self.target, s.x[:, -1] - self.target], axis=1)
+        obs[:, 0:3], obs[:, 3:6] = s.x[:, 0], s.v[:, 0]
+        obs[:, 6:15] = s.x[:, SAMPLES].reshape(b, 9)
+        obs[:, 15:24] = s.v[:, SAMPLES].reshape(b, 9)
+        obs[:, 24:27] = self.target
+        np.subtract(s.x[:, -1], self.target, out=obs[:, 27:30])
         return np.clip(obs, -OBS_HIGH, OBS_HIGH)
 
 

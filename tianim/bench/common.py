@@ -31,6 +31,22 @@ def median_time(fn: Callable[[], object], repeats: int = 5, warmup: int = 1, min
     return statistics.median(samples)
 
 
+def median_times(fns: dict, repeats: int = 5, warmup: int = 1) -> dict:
+    """Median wall time [s] of each ``fns[name]()`` over ``repeats`` rounds after ``warmup`` rounds,
+    the functions run in turn within each round: a burst of load from other processes on a shared
+    machine then slows every candidate alike instead of the one that happened to be timed in it."""
+    for _ in range(warmup):
+        for fn in fns.values():
+            fn()
+    samples: dict = {name: [] for name in fns}
+    for _ in range(repeats):
+        for name, fn in fns.items():
+            t0 = time.perf_counter()
+            fn()
+            samples[name].append(time.perf_counter() - t0)
+    return {name: statistics.median(v) for name, v in samples.items()}
+
+
 def parser(name: str, description: str) -> argparse.ArgumentParser:
     """An argument parser with the options every benchmark shares."""
     p = argparse.ArgumentParser(prog=f"tianim bench {name}", description=description)
