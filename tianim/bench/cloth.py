@@ -11,6 +11,11 @@ tianim before anything is timed, then timed in the same process:
 * ``numpy_simple``: :class:`tianim.physics.reference.NumpyModel` (array-of-structures,
   temporaries per operation), the correctness reference of the tests.
 
+tianim runs as a user would call it (``tp.step``, layout ``"auto"``, watchdog on: the ``"lanes"``
+layout of :mod:`tianim.physics.lanes` from 32x32 up); ``substep_layout_substeps_per_s`` is the same
+call with ``layout="substep"`` (the one-particle-per-thread kernel it replaced). The candidates are
+timed in turn within each round (medians over rounds), so load from other processes slows them alike.
+
 ``bandwidth_fraction``: the bytes a substep must move at least (read and write x and v,
 ``4 D`` values per particle) per second, over the copy bandwidth of a large NumPy copy
 measured in the same run.
@@ -35,8 +40,8 @@ import numpy as np
 import tianim.physics as tp
 from tianim.bench import _warp_cloth
 from tianim.bench._numpy_cloth import FastNumpyCloth
-from tianim.bench._physics import check_agreement, perturbed_state, time_numpy, time_tianim
-from tianim.bench.common import median_time, parser, print_table, write_json
+from tianim.bench._physics import check_agreement, perturbed_state, time_numpy
+from tianim.bench.common import median_time, median_times, parser, print_table, write_json
 
 
 def copy_bandwidth(megabytes: int = 256, repeats: int = 5) -> float:
@@ -146,26 +151,34 @@ def run(sizes=(128, 256, 512), repeats=5, numpy_max=256) -> dict:
         if err > 1e-4:
             raise RuntimeError(f"tianim and the NumPy reference disagree by {err:.3g} m on a 16x16 cloth")
         state = perturbed_state(model)
-        k = max(4, int(2e6 // model.n_particles))  # substeps per timed call
-        t_ti = time_tianim(model, state, dt, k, repeats)
+        k = max(8, int(2e6 // model.n_particles))  # substeps per timed call
+        kr = max(2, k // 4)  # the references take longer per substep
+        sub_state = perturbed_state(model)
+        fast = FastNumpyCloth(model, state.x[0], state.v[0], state.pinned[0])
+        fns = {
+            "tianim": lambda: tp.step(model, state, dt, substeps=k),  # layout "auto" (lanes here), watchdog on
+            "tianim_substep": lambda: tp.step(model, sub_state, dt, substeps=k, layout="substep"),
+            "numpy": lambda: fast.step(dt, kr),
+        }
+        if warp_err is not None:
+            wc = _warp_cloth.WarpCloth(model, state.x[0], state.v[0], state.pinned[0])
+            fns["warp"] = lambda: wc.step(dt, kr)
+        # in turn within each round: load from other processes slows every candidate alike
+        t = median_times(fns, repeats=repeats)
         row = {
             "size": f"{n}x{n}",
             "particles": model.n_particles,
             "springs": model.n_springs,
-            "substeps_per_s": k / t_ti,
-            "spring_updates_per_s": k / t_ti * model.n_springs,
+            "layout": tp.choose_layout(model, 1, "symplectic_euler", k),
+            "substeps_per_s": k / t["tianim"],
+            "spring_updates_per_s": k / t["tianim"] * model.n_springs,
+            "substep_layout_substeps_per_s": k / t["tianim_substep"],
         }
         row["bandwidth_fraction"] = row["substeps_per_s"] * model.n_particles * 4 * model.dim * 4 / bandwidth
-        fast = FastNumpyCloth(model, state.x[0], state.v[0], state.pinned[0])
-        kf = max(2, k // 4)
-        t_fast = median_time(lambda: fast.step(dt, kf), repeats=repeats)
-        row["numpy_substeps_per_s"] = kf / t_fast
+        row["numpy_substeps_per_s"] = kr / t["numpy"]
         row["speedup_vs_numpy"] = row["substeps_per_s"] / row["numpy_substeps_per_s"]
         if warp_err is not None:
-            wc = _warp_cloth.WarpCloth(model, state.x[0], state.v[0], state.pinned[0])
-            kw = max(2, k // 4)
-            t_warp = median_time(lambda: wc.step(dt, kw), repeats=repeats)
-            row["warp_substeps_per_s"] = kw / t_warp
+            row["warp_substeps_per_s"] = kr / t["warp"]
             row["speedup_vs_warp"] = row["substeps_per_s"] / row["warp_substeps_per_s"]
         if n <= numpy_max:
             kn = max(2, k // 8)
@@ -182,12 +195,13 @@ def main(argv) -> int:
     args = p.parse_args(argv)
     sizes = (64, 128) if args.quick else (32, 64, 128, 256, 512)
     res = run(sizes=sizes, repeats=2 if args.quick else args.repeats)
-    print_table(res["rows"], ["size", "particles", "substeps_per_s", "numpy_substeps_per_s", "speedup_vs_numpy",
+    print_table(res["rows"], ["size", "particles", "layout", "substeps_per_s", "substep_layout_substeps_per_s", "numpy_substeps_per_s", "speedup_vs_numpy",
                               "warp_substeps_per_s", "speedup_vs_warp", "numpy_simple_substeps_per_s",
                               "speedup_vs_numpy_simple", "bandwidth_fraction"])
     main_row = next(r for r in res["rows"] if r["size"] == "128x128")
     summary = {k: main_row.get(k) for k in ("substeps_per_s", "numpy_substeps_per_s", "speedup_vs_numpy",
                                             "numpy_simple_substeps_per_s", "bandwidth_fraction", "spring_updates_per_s")}
+    summary["substep_layout_substeps_per_s"] = main_row["substep_layout_substeps_per_s"]
     summary["warp_substeps_per_s"] = main_row.get("warp_substeps_per_s")
     summary["speedup_vs_warp"] = main_row.get("speedup_vs_warp")
     if res["warp_agreement_max_abs_m"] is None:
