@@ -50,6 +50,14 @@ def lanes_for(dtype) -> int:
     return LANES[np.dtype(dtype).name]
 
 
+def vectorised() -> bool:
+    """Whether the Taichi package in use vectorises this layout: taichi does; quadrants 1.3.3 emits scalar
+    code for it, where it measured 0.6-1.1x the substep layout (64x64-128x128), so ``"auto"`` skips it."""
+    from tianim import _ti
+
+    return _ti.package_name() == "taichi"
+
+
 def supports(model, dtype) -> bool:
     """Whether ``model`` can run in this layout: a cloth grid with at least 2 rows per band."""
     g = model.grid
