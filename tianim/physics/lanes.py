@@ -190,7 +190,11 @@ def lane_kernels(real_name, dim, colliders, spring_damping, medium_damping):
         return f
 
     @ti.func
-    def add_spring(S: ti.template(), prm: ti.template(), f0, f1, f2, xi: ti.template(), vi: ti.template(), xs: ti.template(), o, dc, dr, base, r, c, nx, ny, H):
+    def add_spring(S: ti.template(), prm: ti.template(), f0, f1, f2, xi: ti.template(), vi: ti.template(),
+                   xs: ti.template(), o, dc, dr, base, r, c, nx, ny, H):
+        """(f0, f1, f2) plus the force of stencil offset o = (dc, dr) on the lanes of pack (r, c) (positions
+        xi, velocities vi, buffer xs): kernels.pair_force lane by lane, nothing where the neighbour is off
+        the grid."""
         zero = lane_vec(0)
         lane_row = ti.Vector([lane * H for lane in range(L)])
         cc = c + dc
@@ -245,7 +249,6 @@ def lane_kernels(real_name, dim, colliders, spring_damping, medium_damping):
             f1 -= prm[dim] * vi[1]
             if ti.static(dim == 3):
                 f2 -= prm[dim] * vi[2]
-        lane_row = ti.Vector([lane * H for lane in range(L)])
         # The stencil in GRID_STENCIL order, as kernels.accel sums it. A runtime loop: unrolled (offsets as
         # constants) it ran about 1.2x faster but took 30-100 s to compile.
         for o in range(_N_OFF):
