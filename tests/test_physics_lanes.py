@@ -31,9 +31,17 @@ SCENES = {
 }
 
 
+@pytest.fixture(params=["serial", "parallel"])
+def lanes_mode(request, monkeypatch):
+    """Both paths of the layout: one thread for the whole call, or parallel loops with barriers."""
+    if request.param == "parallel":
+        monkeypatch.setattr(lanes, "SERIAL_MAX_PARTICLES", 0)
+    return request.param
+
+
 @pytest.mark.parametrize("scene", sorted(SCENES))
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
-def test_lanes_equal_the_substep_layout_bit_for_bit(scene, dtype):
+def test_lanes_equal_the_substep_layout_bit_for_bit(scene, dtype, lanes_mode):
     model = SCENES[scene]()
     for batch, substeps in ((1, 37), (3, 16), (2, 1), (1, 2)):
         a, b = loaded(model, batch, 4, dtype), loaded(model, batch, 4, dtype)
@@ -80,7 +88,7 @@ def test_lanes_refused_where_it_cannot_run():
     assert np.array_equal(s.x, before)
 
 
-def test_pool_growth_keeps_results():
+def test_pool_growth_keeps_results(lanes_mode):
     model = tp.cloth(16, 16)
     old = lanes.MIN_CAPACITY
     try:
@@ -108,6 +116,8 @@ def test_second_scene_and_batch_compile_nothing_new():
 
 _THREAD_SCRIPT = textwrap.dedent("""
     import hashlib, numpy as np, tianim.physics as tp
+    from tianim.physics import lanes
+    lanes.SERIAL_MAX_PARTICLES = 0  # the parallel path (the serial one runs on one thread anyway)
     model = tp.cloth(40, 40, damping=(0.05, 0.02, 0.01), colliders=[tp.Sphere((0, 0.6, 0), 0.25)], pins="none")
     state = model.state(batch=2)
     state.x[1] += 0.01

@@ -23,8 +23,12 @@ state of a call in a pool of L-lane vector fields:
   results are bit-identical to the other layouts (tested), for any thread count and batch.
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
-the pool (:data:`SUBSTEPS_PER_LAUNCH` per launch, one parallel loop per substep, the spring loop a
-runtime loop so that compiling stays short), and unpacks. The pool grows by doubling (one compile
+the pool, and unpacks. Up to :data:`SERIAL_MAX_PARTICLES` (batch x padded grid) one thread runs every
+substep of the call in one launch; above it, :data:`SUBSTEPS_PER_LAUNCH` substeps per launch, one
+parallel loop each. On the 2-vCPU machines this project targets, Taichi's workers sleep between
+parallel loops and take a few hundred microseconds to wake, so a substep of a 256x256 cloth (about
+1 ms on one thread) still runs faster on one thread than split over two with a barrier after it.
+The spring loop is a runtime loop so that compiling stays short. The pool grows by doubling (one compile
 of the kernels per growth); the kernels take sizes as arguments, so a second scene or another batch
 size compiles nothing new.
 """
@@ -39,6 +43,9 @@ from tianim.physics.model import GRID_STENCIL
 LANES = {"float32": 8, "float64": 4}
 #: Substeps per launch of the main kernel (even: the ping-pong ends in the first buffer).
 SUBSTEPS_PER_LAUNCH = 8  # 16 ran ~2% faster at 128x128 but compiled 17 s cold (0.9 s per unrolled substep)
+#: Largest batch x padded grid [particles] that runs on one thread, all substeps in one launch: below it the
+#: second thread's wake-ups at each substep's barrier cost more than it computes (measured, see the note).
+SERIAL_MAX_PARTICLES = 1 << 17  # 2 vCPUs: 1 thread 1.37x / 1.17x the 2-thread path at 128^2 / 256^2, 0.9x at 512^2
 #: Smallest pool, in packs (grown by doubling).
 MIN_CAPACITY = 1 << 12
 
@@ -285,6 +292,23 @@ def lane_kernels(real_name, dim, colliders, spring_damping, medium_damping):
         return run
 
     runs = {n: make_run(n) for n in (1, 2, SUBSTEPS_PER_LAUNCH)}
+
+    @ti.kernel
+    def run_serial(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: t.real2_arr,
+                   packs: ti.i32, npk: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real, nsub: ti.i32):
+        # One thread, every substep of the call in one launch: no barriers, no worker wake-ups, and the
+        # substep loop is a runtime loop (3 substep bodies to compile, not 8).
+        ti.loop_config(serialize=True)
+        for _pair in range(nsub // 2):
+            for k in range(packs):
+                substep(S, M, prm, off, coll, 0, k, npk, nx, ny, H, dt)
+            for k in range(packs):
+                substep(S, M, prm, off, coll, 1, k, npk, nx, ny, H, dt)
+        if nsub % 2 == 1:
+            for k in range(packs):
+                substep(S, M, prm, off, coll, 0, k, npk, nx, ny, H, dt)
+
+    runs["serial"] = run_serial
     return pack, runs, unpack
 
 
@@ -305,6 +329,10 @@ def launch_lanes(model, state, dt: float, substeps: int, data) -> None:
     pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], g.nx, H)
     dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
     args = (S, M, prm, off, data["coll"], packs, npk, g.nx, g.ny, H, dt)
+    if packs * L <= SERIAL_MAX_PARTICLES:
+        runs["serial"](*args, substeps)
+        unpack(S, substeps % 2, state.x, state.v, g.nx, H)
+        return
     for _ in range(substeps // SUBSTEPS_PER_LAUNCH):
         runs[SUBSTEPS_PER_LAUNCH](*args)
     rest = substeps % SUBSTEPS_PER_LAUNCH
