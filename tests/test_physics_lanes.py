@@ -69,7 +69,8 @@ def test_auto_chooses_lanes_for_large_grids_under_symplectic_euler():
     assert tp.choose_layout(big, 1, "rk4", 16) == "substep"
     assert tp.choose_layout(rope, 1, "symplectic_euler", 16) == "substep"
     assert tp.choose_layout(tp.cloth(8, 8), 1, "symplectic_euler", 16) == "serial"
-    assert lanes.supports(tp.cloth(3, 9), np.float32) and not lanes.supports(tp.cloth(30, 8), np.float32)
+    assert lanes.supports(tp.cloth(3, 5), np.float32) and not lanes.supports(tp.cloth(30, 4), np.float32)
+    assert lanes.supports(tp.cloth(3, 3), np.float64) and not lanes.supports(tp.cloth(30, 2), np.float64)
 
 
 def test_lanes_refused_where_it_cannot_run():
@@ -80,10 +81,10 @@ def test_lanes_refused_where_it_cannot_run():
     s = cloth.state()
     with pytest.raises(ValueError, match="layout='lanes' runs symplectic_euler"):
         tp.step(cloth, s, 1e-4, substeps=4, method="rk4", layout="lanes")
-    short = tp.cloth(40, 8)  # 8 rows: one row per band, the bend springs would reach two bands away
+    short = tp.cloth(40, 4)  # 4 rows in 4 lanes: one row per band, the bend springs would reach two bands away
     s = short.state()
     before = s.x.copy()
-    with pytest.raises(ValueError, match="at least 9 rows"):
+    with pytest.raises(ValueError, match="at least 5 rows"):
         tp.step(short, s, 1e-4, substeps=4, layout="lanes")
     assert np.array_equal(s.x, before)
 
@@ -93,13 +94,13 @@ def test_pool_growth_keeps_results(lanes_mode):
     old = lanes.MIN_CAPACITY
     try:
         lanes._POOLS.clear()
-        lanes.MIN_CAPACITY = 8  # 16x16 in 8 lanes: 32 packs a copy; a batch of 5 grows the pool twice
+        lanes.MIN_CAPACITY = 8  # 16x16 in 4 lanes: 64 packs a copy (pool 8 -> 64); a batch of 5: 320 (-> 512)
         for batch in (1, 5):
             a, b = loaded(model, batch, 9), loaded(model, batch, 9)
             tp.step(model, a, 2e-4, substeps=8, layout="substep", check=False)
             tp.step(model, b, 2e-4, substeps=8, layout="lanes", check=False)
             assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
-        assert lanes._POOLS[("float32", 3)].capacity == 256
+        assert lanes._POOLS[("float32", 3)].capacity == 512
     finally:
         lanes.MIN_CAPACITY = old
         lanes._POOLS.clear()

@@ -8,9 +8,8 @@ Measured on the optimised LLVM IR (``ti.init(print_kernel_llvm_ir_optimized=True
 ``y[i] = a * x[i] + sqrt(y[i])`` with 8-lane vectors: taichi 1.7.4 emits ``<4 x float>`` loads,
 ``sqrt.v4f32`` and ``fdiv <4 x float>`` for ``ti.Vector.field`` storage, and scalar code for the same
 body on ``ti.types.ndarray`` arguments or on scalar fields; quadrants 1.3.3 emits scalar code in all
-three forms. Both target generic x86-64 (SSE2), so a vector holds 4 float32 (2 float64) and an
-8-lane vector is two of them (more independent work per instruction). So this layout keeps the
-state of a call in a pool of L-lane vector fields:
+three forms. Both target generic x86-64 (SSE2), so a register holds 4 float32 (2 float64), and this
+layout keeps the state of a call in a pool of vector fields of that many lanes (L):
 
 * the ``ny`` rows of each copy are cut into ``L`` bands of ``H = ceil(ny / L)`` rows (the last band
   padded); lane ``l`` of pack ``(r, c)`` holds particle ``(l H + r, c)``;
@@ -39,13 +38,14 @@ from tianim.physics.contact import contact_response
 from tianim.physics.kernel_types import cached_variants, kernel_types
 from tianim.physics.model import GRID_STENCIL
 
-#: Particles per vector, by float type (two SSE registers each).
-LANES = {"float32": 8, "float64": 4}
+#: Particles per vector, by float type: one SSE register (8 lanes in two registers ran 0.8-0.95x as fast at
+#: 128x128, float32, and compiled twice as long: 16 xmm registers do not hold 3 components of 2-register vectors).
+LANES = {"float32": 4, "float64": 2}
 #: Substeps per launch of the main kernel (even: the ping-pong ends in the first buffer).
 SUBSTEPS_PER_LAUNCH = 8  # 16 ran ~2% faster at 128x128 but compiled 17 s cold (0.9 s per unrolled substep)
 #: Largest batch x padded grid [particles] that runs on one thread, all substeps in one launch: below it the
 #: second thread's wake-ups at each substep's barrier cost more than it computes (measured, see the note).
-SERIAL_MAX_PARTICLES = 1 << 17  # 2 vCPUs: 1 thread 1.37x / 1.17x the 2-thread path at 128^2 / 256^2, 0.9x at 512^2
+SERIAL_MAX_PARTICLES = 1 << 17  # measured on 2 vCPUs: 1 thread 1.2-1.4x the 2-thread path at 128^2 and 256^2, 0.9x at 512^2
 #: Smallest pool, in packs (grown by doubling).
 MIN_CAPACITY = 1 << 12
 
