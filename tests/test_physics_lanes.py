@@ -63,8 +63,7 @@ def test_lanes_agree_with_the_numpy_reference():
 
 def test_auto_chooses_lanes_for_large_grids_under_symplectic_euler():
     big, rope = tp.cloth(32, 32), tp.rope(2000)
-    # quadrants compiles the lanes kernel to scalar code (no faster than "substep"): auto keeps "substep" there
-    assert tp.choose_layout(big, 1, "symplectic_euler", 16) == ("lanes" if lanes.vectorised() else "substep")
+    assert tp.choose_layout(big, 1, "symplectic_euler", 16) == "lanes"
     assert tp.choose_layout(big, 1, "symplectic_euler", 1) == "substep"  # packing would cost more than it saves
     assert tp.choose_layout(big, 1, "rk4", 16) == "substep"
     assert tp.choose_layout(rope, 1, "symplectic_euler", 16) == "substep"

@@ -8,7 +8,8 @@ Measured on the optimised LLVM IR (``ti.init(print_kernel_llvm_ir_optimized=True
 ``y[i] = a * x[i] + sqrt(y[i])`` with 8-lane vectors: taichi 1.7.4 emits ``<4 x float>`` loads,
 ``sqrt.v4f32`` and ``fdiv <4 x float>`` for ``ti.Vector.field`` storage, and scalar code for the same
 body on ``ti.types.ndarray`` arguments or on scalar fields; quadrants 1.3.3 emits scalar code in all
-three forms. Both target generic x86-64 (SSE2), so a register holds 4 float32 (2 float64), and this
+three forms (there this layout still ran 1.1-1.4x the substep layout, 64x64-128x128, against 2.3-4.2x
+on taichi). Both target generic x86-64 (SSE2), so a register holds 4 float32 (2 float64), and this
 layout keeps the state of a call in a pool of vector fields of that many lanes (L):
 
 * the ``ny`` rows of each copy are cut into ``L`` bands of ``H = ceil(ny / L)`` rows (the last band
@@ -55,14 +56,6 @@ _N_OFF = len(GRID_STENCIL)
 def lanes_for(dtype) -> int:
     """Particles per vector for the state's float type."""
     return LANES[np.dtype(dtype).name]
-
-
-def vectorised() -> bool:
-    """Whether the Taichi package in use vectorises this layout: taichi does; quadrants 1.3.3 emits scalar
-    code for it, where it measured 0.6-1.1x the substep layout (64x64-128x128), so ``"auto"`` skips it."""
-    from tianim import _ti
-
-    return _ti.package_name() == "taichi"
 
 
 def supports(model, dtype) -> bool:

@@ -309,13 +309,11 @@ def choose_layout(model, batch: int, method: str = "symplectic_euler", substeps:
     ``"frame"``: parallel over copies); large scenes parallelise over particles
     (``"substep"``), and large cloth grids under symplectic Euler pack several particles per
     SIMD vector (``"lanes"``, when a call runs at least 4 substeps: it packs and unpacks the
-    state around them; on the taichi package only, see :func:`tianim.physics.lanes.vectorised`).
-    All layouts give bit-identical results.
+    state around them). All layouts give bit-identical results.
     """
     n = model.n_particles
     if n >= 1024 or (batch >= 1024 and n >= 16):
-        if (n >= 1024 and method == "symplectic_euler" and substeps >= 4 and lanes.supports(model, dtype)
-                and lanes.vectorised()):
+        if n >= 1024 and method == "symplectic_euler" and substeps >= 4 and lanes.supports(model, dtype):
             return "lanes"
         return "substep"
     return "serial" if batch == 1 or n * batch <= 256 else "frame"
