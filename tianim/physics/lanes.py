@@ -26,8 +26,9 @@ A call packs the state (one parallel loop), runs its substeps ping-ponging betwe
 the pool, and unpacks. Up to :data:`SERIAL_MAX_PARTICLES` (batch x padded grid) one thread runs every
 substep of the call in one launch; above it, :data:`SUBSTEPS_PER_LAUNCH` substeps per launch, one
 parallel loop each. On the 2-vCPU machines this project targets, Taichi's workers sleep between
-parallel loops and take a few hundred microseconds to wake, so a substep of a 256x256 cloth (about
-1 ms on one thread) still runs faster on one thread than split over two with a barrier after it.
+parallel loops and take a few hundred microseconds to wake, so a substep of a 128x128 cloth (about
+0.3 ms on one thread) runs faster on one thread than split over two with a barrier after it; from
+256x256 on, two threads win.
 The spring loop is a runtime loop so that compiling stays short. The pool grows by doubling (one compile
 of the kernels per growth); the kernels take sizes as arguments, so a second scene or another batch
 size compiles nothing new.
@@ -46,7 +47,7 @@ LANES = {"float32": 4, "float64": 2}
 SUBSTEPS_PER_LAUNCH = 8  # 16 ran ~2% faster at 128x128 but compiled 17 s cold (0.9 s per unrolled substep)
 #: Largest batch x padded grid [particles] that runs on one thread, all substeps in one launch: below it the
 #: second thread's wake-ups at each substep's barrier cost more than it computes (measured, see the note).
-SERIAL_MAX_PARTICLES = 1 << 17  # measured on 2 vCPUs: 1 thread 1.2-1.4x the 2-thread path at 128^2 and 256^2, 0.9x at 512^2
+SERIAL_MAX_PARTICLES = 1 << 15  # measured on 2 vCPUs, 4 lanes: 1 thread 1.25-1.3x the 2-thread path at 128^2, 0.8-0.9x at 256^2
 #: Smallest pool, in packs (grown by doubling).
 MIN_CAPACITY = 1 << 12
 
