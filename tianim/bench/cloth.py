@@ -195,8 +195,8 @@ def main(argv) -> int:
     args = p.parse_args(argv)
     sizes = (64, 128) if args.quick else (32, 64, 128, 256, 512)
     res = run(sizes=sizes, repeats=2 if args.quick else args.repeats)
-    print_table(res["rows"], ["size", "particles", "layout", "substeps_per_s", "substep_layout_substeps_per_s", "numpy_substeps_per_s", "speedup_vs_numpy",
-                              "warp_substeps_per_s", "speedup_vs_warp", "numpy_simple_substeps_per_s",
+    print_table(res["rows"], ["size", "particles", "layout", "substeps_per_s", "substep_layout_substeps_per_s",
+                              "numpy_substeps_per_s", "speedup_vs_numpy", "warp_substeps_per_s", "speedup_vs_warp", "numpy_simple_substeps_per_s",
                               "speedup_vs_numpy_simple", "bandwidth_fraction"])
     main_row = next(r for r in res["rows"] if r["size"] == "128x128")
     summary = {k: main_row.get(k) for k in ("substeps_per_s", "numpy_substeps_per_s", "speedup_vs_numpy",
