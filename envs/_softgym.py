@@ -171,6 +171,13 @@ def draw_variation(u: np.ndarray, count: int) -> np.ndarray:
     return np.minimum((np.asarray(u) * count).astype(np.int64), count - 1)
 
 
+def turned_variation(u: np.ndarray, variations: np.ndarray) -> np.ndarray:
+    """One start per copy from its 2 uniforms ``u`` (R, 2): variation ``u[:, 0]`` of ``variations``
+    (V, N, 3), turned about the vertical by an angle uniform in [-pi, pi) from ``u[:, 1]`` (R, N, 3)."""
+    j = draw_variation(u[:, 0], len(variations))
+    return turned(variations[j], -np.pi + 2.0 * np.pi * u[:, 1])
+
+
 def normalized(p, p0, p_opt) -> np.ndarray:
     """SoftGym's ``normalized_performance = (p - p0) / (p_opt - p0)``."""
     return (np.asarray(p, np.float64) - p0) / (np.asarray(p_opt, np.float64) - p0)

@@ -152,10 +152,8 @@ class ClothFlattenSim(sg.PickerSim):
             ClothFlattenSim.A_MAX = flat_area()
 
     def _start(self, idx, u):
-        j = sg.draw_variation(u[:, 0], VARIATIONS)
-        angle = -np.pi + 2.0 * np.pi * u[:, 1]  # uniform in [-pi, pi)
         x = self.state.x
-        x[idx] = sg.turned(start_variations()[j], angle)
+        x[idx] = sg.turned_variation(u, start_variations())
         self.pickers.reset(idx, sg.box_centres(x[idx], 0.2))  # SoftGym's _get_center_point
         self.a0[idx] = sg.covered_area(x[idx], sg.CLOTH_SPACING)
 

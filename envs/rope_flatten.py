@@ -181,10 +181,8 @@ class RopeFlattenSim(sg.PickerSim):
     RESET_DRAWS = 2
 
     def _start(self, idx, u):
-        j = sg.draw_variation(u[:, 0], VARIATIONS)
-        angle = -np.pi + 2.0 * np.pi * u[:, 1]  # uniform in [-pi, pi)
         x = self.state.x
-        x[idx] = sg.turned(start_variations()[j], angle)
+        x[idx] = sg.turned_variation(u, start_variations())
         self.pickers.reset(idx, sg.box_centres(x[idx], 0.1))  # SoftGym's _get_center_point
 
     def _metrics(self):
