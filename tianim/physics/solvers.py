@@ -31,7 +31,6 @@ have zero acceleration; colliders act after each substep.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -43,6 +42,7 @@ from tianim.physics.selfcollision import SelfCollision, as_self_collision
 from tianim.physics.selfcollision import check_model as check_sc_model
 from tianim.physics.strain import StrainLimit, as_strain_limit
 from tianim.physics.watchdog import DivergenceError, Watchdog
+from tianim.stepping import StepStats
 
 #: Loop layouts of the explicit kernels (all give bit-identical results; "lanes": symplectic Euler on grids only).
 LAYOUTS = ("auto", "serial", "frame", "substep", "lanes")
@@ -51,32 +51,6 @@ XPBD_LAYOUTS = ("auto", "per_copy", "parallel")
 
 #: The watchdog that ``watchdog=True`` means: one per process, so that it remembers every state it watches.
 DEFAULT_WATCHDOG = Watchdog()
-
-
-@dataclass
-class StepStats:
-    """What one :meth:`Solver.step` call did.
-
-    Attributes
-    ----------
-    method : str
-    dt : float               substep [s]
-    substeps : int
-    diverged : ndarray, (B,) bool
-        Copies the watchdog rolled back (only with ``Watchdog(on_divergence="rollback")``;
-        otherwise a divergence raises).
-    reason : str or None     why they diverged
-    iterations : dict of str -> ndarray (B,) int
-        Iteration counts of iterative solvers (``{"newton", "cg"}`` for backward Euler, summed over
-        the substeps); empty for the others.
-    """
-
-    method: str
-    dt: float
-    substeps: int
-    diverged: np.ndarray
-    reason: str | None = None
-    iterations: dict = field(default_factory=dict)
 
 
 def _as_watchdog(watchdog):

@@ -16,11 +16,12 @@ from __future__ import annotations
 import numpy as np
 
 from tianim._checks import as_float_array, as_index_array, check_positive_int, fmt
+from tianim.stepping import StateArrays
 
 _DTYPES = (np.dtype(np.float32), np.dtype(np.float64))
 
 
-class State:
+class State(StateArrays):
     """Positions, velocities, time and pins of B copies of a model.
 
     Parameters
@@ -139,39 +140,9 @@ class State:
         self.pinned[sel] = True
 
     # ------------------------------------------------------------------ snapshots
-    def snapshot(self) -> dict:
-        """An exact copy of everything that changes: ``{"x", "v", "t", "pinned"}``."""
-        return {"x": self.x.copy(), "v": self.v.copy(), "t": self.t.copy(), "pinned": self.pinned.copy()}
-
-    def restore(self, snap: dict) -> None:
-        """Restore a :meth:`snapshot` exactly (bit for bit), in place."""
-        for key, ref in (("x", self.x), ("v", self.v), ("t", self.t), ("pinned", self.pinned)):
-            if key not in snap:
-                raise ValueError(f"snapshot is missing {key!r}; pass a dict returned by State.snapshot()")
-            a = np.asarray(snap[key])
-            if a.shape != ref.shape or a.dtype != ref.dtype:
-                raise ValueError(
-                    f"snapshot[{key!r}] has shape {a.shape} dtype {a.dtype}; this state needs {ref.shape} {ref.dtype}"
-                )
-        for key in ("x", "v", "t", "pinned"):
-            getattr(self, key)[...] = snap[key]
-
-    def copy(self) -> "State":
-        """An independent copy of this state (same model)."""
-        other = State.__new__(State)
-        other.model, other.dtype = self.model, self.dtype
-        other.x, other.v, other.t, other.pinned = self.x.copy(), self.v.copy(), self.t.copy(), self.pinned.copy()
-        other._shape = self._shape
-        return other
-
-    def save(self, path) -> None:
-        """Write the state to an ``.npz`` file (exact)."""
-        np.savez(path, **self.snapshot())
-
-    def load(self, path) -> None:
-        """Read a state written by :meth:`save` into this state (shapes must match)."""
-        with np.load(path) as data:
-            self.restore({k: data[k] for k in ("x", "v", "t", "pinned")})
+    #: What changes (``snapshot()``, ``restore()``, ``copy()``, ``save()``, ``load()`` come from
+    #: :class:`tianim.stepping.StateArrays`): the snapshot is ``{"x", "v", "t", "pinned"}``.
+    ARRAYS = ("x", "v", "t", "pinned")
 
 
 def _broadcast(name: str, value, shape) -> np.ndarray:
