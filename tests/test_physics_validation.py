@@ -133,3 +133,25 @@ def test_model_is_read_only():
         model.mass[0] = 5.0
     with pytest.raises(ValueError):
         model.springs[0, 0] = 3
+
+
+@pytest.mark.parametrize("change, exc, match", [
+    (dict(nx=5), ValueError, "grid is 5 x 4 but the model has 16 particles"),
+    (dict(stiffness=(1.0,) * 11), ValueError, "grid.stiffness"),
+    (dict(rest_length=(0.0,) * 12), ValueError, "grid.rest_length"),
+    (dict(damping=(-1.0,) * 12), ValueError, "grid.damping"),
+])
+def test_model_grid_must_fit_the_particles(change, exc, match):
+    import dataclasses
+
+    from tianim.physics.model import Model
+
+    good = tp.cloth(4, 4)
+    grid = dataclasses.replace(good.grid, **change)
+    args = dict(positions=good.positions, mass=good.mass, springs=good.springs, stiffness=good.stiffness,
+                rest_length=good.rest_length, damping=good.damping)
+    Model(**args, grid=good.grid)  # the builder's own grid is accepted
+    with pytest.raises(exc, match=match):
+        Model(**args, grid=grid)
+    with pytest.raises(TypeError, match="GridTopology"):
+        Model(**args, grid=(4, 4))

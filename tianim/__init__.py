@@ -1,11 +1,19 @@
 """tianim: computer animation on Taichi kernels.
 
-Subpackages
------------
-tianim.physics     particle and mass-spring models, states, integrators (Taichi kernels)
+Subpackages and modules (docs/architecture.md gives the layer order that tests/test_layering.py checks)
+-------------------------------------------------------------------------------------------------------
+tianim.physics     particle and mass-spring models, states, solvers, planner, watchdog (Taichi kernels)
+tianim.particles   particle systems: emitters, lifetimes, forces, colliders, DEM, sub-emitters
+tianim.crowds      boids, Vicsek, ORCA and social-force pedestrians; crowd metrics
+tianim.spatial     the one neighbour grid (particles, crowds, cloth self-collision)
+tianim.kinematics  joint chains and trees, forward/inverse kinematics, forward/inverse dynamics, the arm
 tianim.keyframe    Catmull-Rom keyframe tracks, arc length, easing (NumPy)
-tianim.kinematics  joint chains, forward/inverse kinematics, inverse dynamics
-tianim.render      offscreen rendering and export; tianim.timeline samples q(t) per frame
+tianim.mocap       BVH and C3D, markers, gap filling, filtering, solving, retargeting (NumPy)
+tianim.render      offscreen rendering (Canvas2D, Scene3D) and export to PNG/GIF/MP4
+tianim.timeline    samples q(t) per frame: ``for t in frames: render(q(t))``
+tianim.stepping    the one Model/State/Solver contract (StepStats, state snapshots, per-copy random streams)
+tianim.gallery     the demos behind ``tianim demo NAME``
+tianim.bench       the benchmarks behind ``tianim bench NAME``
 
 Taichi is initialised lazily on first need (see :mod:`tianim.runtime`).
 """

@@ -145,6 +145,25 @@ class GridTopology:
     damping: tuple  # (12,) [N s/m]
 
 
+def _check_grid(grid, n: int) -> None:
+    """``grid`` is None or a GridTopology of exactly ``n`` particles with 12 valid per-offset values."""
+    if grid is None:
+        return
+    if not isinstance(grid, GridTopology):
+        raise TypeError(f"grid={fmt(grid)} must be None or a tianim.physics.model.GridTopology; "
+                        "build grid cloth with tp.cloth(...)")
+    if not (isinstance(grid.nx, (int, np.integer)) and isinstance(grid.ny, (int, np.integer))
+            and grid.nx >= 1 and grid.ny >= 1 and grid.nx * grid.ny == n):
+        raise ValueError(f"grid is {grid.nx} x {grid.ny} but the model has {n} particles; "
+                         f"give a grid with nx * ny = {n} (particle index = row * nx + col)")
+    for name, lo, strict in (("stiffness", 0.0, False), ("rest_length", 0.0, True), ("damping", 0.0, False)):
+        vals = np.asarray(getattr(grid, name), dtype=float)
+        if vals.shape != (len(GRID_STENCIL),) or not np.all(np.isfinite(vals)) or \
+                np.any(vals <= lo if strict else vals < lo):
+            raise ValueError(f"grid.{name}={fmt(getattr(grid, name))} must be {len(GRID_STENCIL)} finite values "
+                             f"(one per stencil offset), each {'>' if strict else '>='} {lo:g}")
+
+
 # --------------------------------------------------------------------------- the model
 class Model:
     """A validated, read-only particle / mass-spring scene.
@@ -290,6 +309,8 @@ class Model:
             faces = as_index_array("faces", faces, n, ndim=2)
             if faces.shape[1] != 3:
                 raise ValueError(f"faces has shape {faces.shape}; give shape (F, 3) of triangles")
+
+        _check_grid(grid, n)
 
         self.name = str(name)
         self.dim = int(dim)
