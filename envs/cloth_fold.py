@@ -55,6 +55,14 @@ table through the layer under it (the reward measures positions, which this does
 not change). Springs stay within a 25% stretch bound under any picker motion
 (tested): the structural stiffness is chosen for it, and two pickers cannot pull
 their particles more than 5% beyond their rest distance apart. Single env and batch run the same code (``ClothFoldSim``).
+
+## Version History
+
+* v1: SoftGym's ClothFold re-created (64 x 64 particles 6.25 mm apart, XPBD with self-collision,
+  SoftGym's pickers, action repeat 8, rewards and normalized performance; ``envs/cloth_fold_v1.py``).
+* v0: the first, SoftGym-style task (10 x 10 particles, symplectic Euler, 2 cm picker moves, its own
+  reward); kept unchanged for reproducibility (``envs/cloth_fold.py``;
+  ``tests/golden/ClothFold-v0.npz`` pins its rollouts).
 """
 
 from __future__ import annotations

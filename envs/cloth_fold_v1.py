@@ -86,6 +86,14 @@ apart: the folded half rests on the other. Single env and batch run the same cod
   solver option is not used in version 1).
 * The pickers are not collision spheres (in FleX they also push the cloth); the start is not
   settled by simulation (the flat cloth is already at rest); observations have finite bounds.
+
+## Version History
+
+* v1: SoftGym's ClothFold re-created (64 x 64 particles 6.25 mm apart, XPBD with self-collision,
+  SoftGym's pickers, action repeat 8, rewards and normalized performance; ``envs/cloth_fold_v1.py``).
+* v0: the first, SoftGym-style task (10 x 10 particles, symplectic Euler, 2 cm picker moves, its own
+  reward); kept unchanged for reproducibility (``envs/cloth_fold.py``;
+  ``tests/golden/ClothFold-v0.npz`` pins its rollouts).
 """
 
 from __future__ import annotations
