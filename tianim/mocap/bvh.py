@@ -3,7 +3,8 @@
 A BVH file is a HIERARCHY of joints (``ROOT``/``JOINT name { OFFSET x y z  CHANNELS n ...  ... }``,
 ``End Site { OFFSET x y z }``) and a MOTION block (``Frames: N``, ``Frame Time: dt``, then N lines of
 one value per channel). Any channel order, any rotation order per joint (intrinsic Euler angles in
-CHANNELS order, degrees), position channels on any joint and end sites are read; the result is a
+CHANNELS order, degrees), position channels on any joint (they replace the joint's OFFSET, the convention
+of Blender, bvhio and pybvh; ``positions="add"`` reads the additive variant) and end sites are read; the result is a
 :class:`~tianim.mocap.skeleton.Skeleton` (the library's joint tree) and a motion array (F, C).
 
 Speed: the MOTION block is parsed in one ``np.loadtxt`` call (NumPy's C reader, which checks that every
@@ -25,7 +26,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from tianim._checks import check_finite_scalar, check_int, fmt
+from tianim._checks import check_choice, check_finite_scalar, check_int, fmt
 from tianim.mocap.skeleton import CHANNELS, Skeleton
 
 #: Deepest joint nesting accepted (real skeletons nest < 30 deep).
@@ -53,16 +54,28 @@ class Clip(NamedTuple):
         return 1.0 / self.frame_time
 
 
-def read_bvh(path, scale: float = 1.0) -> Clip:
-    """Read a BVH file. ``scale``: metres per file unit (0.01 for a file in centimetres)."""
+#: How position channels combine with a joint's OFFSET when a file is read (see :func:`read_bvh`).
+POSITION_MODES = ("replace", "add")
+
+
+def read_bvh(path, scale: float = 1.0, positions: str = "replace") -> Clip:
+    """Read a BVH file. ``scale``: metres per file unit (0.01 for a file in centimetres).
+
+    ``positions``: how a joint's position channels combine with its OFFSET. ``"replace"`` (default, the
+    convention of Blender, bvhio and pybvh; see :mod:`tianim.mocap.skeleton`): the channel values are the
+    joint's translation from its parent. ``"add"``: the translation is OFFSET + channels (some hand-written
+    files); the reader then adds the OFFSET into the motion's position columns, so the returned
+    :class:`Clip` follows the one convention of :class:`Skeleton` and writes back as a "replace" file.
+    """
     if not isinstance(path, (str, os.PathLike)):
         raise TypeError(f"path={fmt(path)} must be a file path (str or os.PathLike)")
+    check_choice("positions", positions, POSITION_MODES)
     with open(path, "rb") as fh:
         data = fh.read()
-    return parse_bvh(data, scale=scale, source=os.fspath(path))
+    return parse_bvh(data, scale=scale, source=os.fspath(path), positions=positions)
 
 
-def parse_bvh(text, scale: float = 1.0, source: str = "<string>") -> Clip:
+def parse_bvh(text, scale: float = 1.0, source: str = "<string>", positions: str = "replace") -> Clip:
     """Parse BVH ``text`` (str or bytes); see :func:`read_bvh`."""
     if isinstance(text, str):
         data = text.encode("utf-8")
@@ -71,6 +84,7 @@ def parse_bvh(text, scale: float = 1.0, source: str = "<string>") -> Clip:
     else:
         raise TypeError(f"text={fmt(text)} must be the BVH file's contents as str or bytes")
     scale = check_finite_scalar("scale", scale, lo=0.0, lo_open=True)
+    positions = check_choice("positions", positions, POSITION_MODES)
     m = _MOTION.search(data)
     if not data.strip():
         raise BvhError(f"{source}: line 1: the file is empty; a BVH file starts with HIERARCHY")
@@ -88,6 +102,8 @@ def parse_bvh(text, scale: float = 1.0, source: str = "<string>") -> Clip:
     if scale != 1.0:
         motion[:, ~rot] *= scale
     sk = Skeleton(names, parents, np.array(offsets).reshape(-1, 3) * scale, channels, ends)
+    if positions == "add" and (~rot).any():  # OFFSET + channels: fold the offset into the channels
+        motion[:, ~rot] += sk.offsets[sk.channel_joint[~rot], sk.channel_axis[~rot]]
     return Clip(sk, motion, frame_time)
 
 

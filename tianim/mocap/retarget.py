@@ -191,7 +191,7 @@ def retarget(source: Skeleton, motion, target: Skeleton, fps: float, feet=("Left
     for d, axis in enumerate("XYZ"):
         c = f"{axis}position"
         if c in target.channels[0]:
-            out[:, target.channel_index(0, c)] = root_world[:, d] - target.offsets[0, d]
+            out[:, target.channel_index(0, c)] = root_world[:, d]  # channels replace the offset
     # 3. foot contacts: the source's, planted on the target by leg IK
     foot_src = Ps[:, ss]
     contacts = detect_contacts(foot_src, fps, height_tol, speed_tol, ground)

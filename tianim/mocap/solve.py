@@ -107,19 +107,15 @@ def segment_fit(skeleton: Skeleton, markers: np.ndarray, joints: np.ndarray, loc
             R, t = kabsch(loc, x, w)
             ok = (w.sum(1) >= 3) & np.isfinite(R).all(axis=(1, 2))
             for d, axis in enumerate("XYZ"):
-                if f"{axis}position" in chans:
-                    k = c0 + chans.index(f"{axis}position")
-                    motion[ok, k] = t[ok, d] - skeleton.offsets[j, d]
-            pos_now = skeleton.offsets[j] + np.stack([motion[:, c0 + chans.index(f"{a}position")]
-                                                      if f"{a}position" in chans else np.zeros(F) for a in "XYZ"], 1)
-            Rp, pivot = np.broadcast_to(np.eye(3), (F, 3, 3)), pos_now
+                if f"{axis}position" in chans:  # position channels replace the offset (skeleton.py)
+                    motion[ok, c0 + chans.index(f"{axis}position")] = t[ok, d]
+            Rp, pivot = np.broadcast_to(np.eye(3), (F, 3, 3)), skeleton.translations(motion)[:, j]
         else:
             Rp = Rg[par]
-            pivot = pg[par] + Rp @ skeleton.offsets[j]
-            if any(c.endswith("position") for c in chans):  # a sliding joint: its translation from fallback
-                tr = np.stack([motion[:, c0 + chans.index(f"{a}position")] if f"{a}position" in chans
-                               else np.zeros(F) for a in "XYZ"], 1)
-                pivot = pivot + (Rp @ tr[..., None])[..., 0]
+            # a sliding joint's translation comes from fallback (its position channels replace the offset)
+            tr = skeleton.translations(motion)[:, j] if any(c.endswith("position") for c in chans) \
+                else np.broadcast_to(skeleton.offsets[j], (F, 3))
+            pivot = pg[par] + (Rp @ tr[..., None])[..., 0]
             idx = np.flatnonzero(mine)
             w = np.concatenate([np.ones((F, 1)), seen[:, idx].astype(float)], axis=1)
             ok = w.sum(1) >= 3
