@@ -144,3 +144,38 @@ def test_markers_solve_back_on_a_six_channel_rig():
     got = sk.fk(res.motion)[0]
     assert np.max(res.rms) < 1e-6
     np.testing.assert_allclose(got, sk.fk(m)[0], atol=1e-5)
+
+
+# ------------------------------------------------------------------------------ text variants
+BOM_FILE = ("HIERARCHY\nROOT r\n{\n  OFFSET 0 0 0\n  CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation "
+            "Yrotation\n  JOINT c\n  {\n    OFFSET 0 1 0\n    CHANNELS 3 Zrotation Xrotation Yrotation\n    End Site\n"
+            "    {\n      OFFSET 0 1 0\n    }\n  }\n}\nMOTION\nFrames: 2\nFrame Time: 0.5\n"
+            "1 2 3 10 20 30 40 50 60\n4 5 6 -10 -20 -30 -40 -50 -60\n")
+
+
+@pytest.mark.parametrize("variant", ["bom", "cr", "bom-cr", "bom-crlf", "bom-str"])
+def test_byte_order_mark_and_cr_only_line_endings_read_the_same(variant, tmp_path):
+    ref = parse_bvh(BOM_FILE)
+    text = BOM_FILE.replace("\n", "\r") if "cr" in variant and "crlf" not in variant else BOM_FILE
+    if "crlf" in variant:
+        text = BOM_FILE.replace("\n", "\r\n")
+    if variant == "bom-str":
+        clip = parse_bvh("\ufeff" + text)
+    else:
+        data = (b"\xef\xbb\xbf" if "bom" in variant else b"") + text.encode("utf-8")
+        path = tmp_path / "v.bvh"
+        path.write_bytes(data)
+        clip = read_bvh(path)
+    assert clip.skeleton == ref.skeleton
+    np.testing.assert_array_equal(clip.motion, ref.motion)
+    assert clip.frame_time == ref.frame_time
+
+
+def test_cr_only_errors_still_name_the_line():
+    lf = BOM_FILE.replace("4 5 6 -10", "4 5 x -10")  # the second frame, line 20 of the file
+    for bad in (lf, lf.replace("\n", "\r")):
+        with pytest.raises(BvhError, match=r"line 20: 'x' is not a number"):
+            parse_bvh(b"\xef\xbb\xbf" + bad.encode())
+    bad = BOM_FILE.replace("OFFSET 0 1 0\n    CHANNELS", "OFFSET 0 one 0\n    CHANNELS").replace("\n", "\r")
+    with pytest.raises(BvhError, match=r"line 8: OFFSET value 'one' is not a number"):
+        parse_bvh(bad)

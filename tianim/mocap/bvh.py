@@ -2,7 +2,7 @@
 
 A BVH file is a HIERARCHY of joints (``ROOT``/``JOINT name { OFFSET x y z  CHANNELS n ...  ... }``,
 ``End Site { OFFSET x y z }``) and a MOTION block (``Frames: N``, ``Frame Time: dt``, then N lines of
-one value per channel). Any channel order, any rotation order per joint (intrinsic Euler angles in
+one value per channel). A UTF-8 byte-order mark and LF, CRLF or CR-only line ends are read. Any channel order, any rotation order per joint (intrinsic Euler angles in
 CHANNELS order, degrees), position channels on any joint (they replace the joint's OFFSET, the convention
 of Blender, bvhio and pybvh; ``positions="add"`` reads the additive variant) and end sites are read; the result is a
 :class:`~tianim.mocap.skeleton.Skeleton` (the library's joint tree) and a motion array (F, C).
@@ -78,13 +78,14 @@ def read_bvh(path, scale: float = 1.0, positions: str = "replace") -> Clip:
 def parse_bvh(text, scale: float = 1.0, source: str = "<string>", positions: str = "replace") -> Clip:
     """Parse BVH ``text`` (str or bytes); see :func:`read_bvh`."""
     if isinstance(text, str):
-        data = text.encode("utf-8")
+        data = text.encode("utf-8")  # a leading U+FEFF becomes the UTF-8 byte-order mark, dropped below
     elif isinstance(text, (bytes, bytearray, memoryview)):
         data = bytes(text)
     else:
         raise TypeError(f"text={fmt(text)} must be the BVH file's contents as str or bytes")
     scale = check_finite_scalar("scale", scale, lo=0.0, lo_open=True)
     positions = check_choice("positions", positions, POSITION_MODES)
+    data = _normalise_text(data)
     m = _MOTION.search(data)
     if not data.strip():
         raise BvhError(f"{source}: line 1: the file is empty; a BVH file starts with HIERARCHY")
@@ -105,6 +106,16 @@ def parse_bvh(text, scale: float = 1.0, source: str = "<string>", positions: str
     if positions == "add" and (~rot).any():  # OFFSET + channels: fold the offset into the channels
         motion[:, ~rot] += sk.offsets[sk.channel_joint[~rot], sk.channel_axis[~rot]]
     return Clip(sk, motion, frame_time)
+
+
+def _normalise_text(data: bytes) -> bytes:
+    """``data`` without a leading UTF-8 byte-order mark and with CR-only line ends (old Mac files) as
+    ``\n`` (other readers accept both); CRLF files are left as they are (the parsers take them)."""
+    if data.startswith(b"\xef\xbb\xbf"):
+        data = data[3:]
+    if b"\r" in data and data.count(b"\r") != data.count(b"\r\n"):  # some CR is not part of a CRLF
+        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    return data
 
 
 # ---------------------------------------------------------------------------- hierarchy
