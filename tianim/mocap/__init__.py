@@ -7,6 +7,8 @@ Marker side (C3D files need the ``mocap`` extra):
 * :func:`fill_gaps` - linear, cubic, quintic (Woltring), rigid-body (Kabsch) and PCA fills, with a report
 * :func:`butterworth` (zero-lag, dual-pass corrected), :func:`residual_cutoff` (Winter), :func:`savgol`
 * :func:`resample` - between 24, 25, 29.97, 30, 60, 120 Hz or any positive rates
+* :func:`filter_motion`, :func:`resample_motion` - the same on a skeleton's motion, Euler angles unwrapped
+  across +-180 degrees first (:func:`unwrap_rotations`, :func:`wrap_rotations`)
 
 Skeleton side:
 
@@ -22,6 +24,7 @@ Skeleton side:
 
 from tianim.mocap.bvh import BvhError, Clip, format_bvh, parse_bvh, read_bvh, write_bvh
 from tianim.mocap.c3d import read_c3d, write_c3d
+from tianim.mocap.curves import filter_motion, resample_motion, unwrap_rotations, wrap_rotations
 from tianim.mocap.filters import butterworth, residual_cutoff, savgol
 from tianim.mocap.gaps import Gap, UnfillableGap, fill_gaps, find_gaps
 from tianim.mocap.markers import Markers
@@ -44,7 +47,8 @@ from tianim.mocap.virtual import (
 __all__ = [
     # marker side
     "NTSC", "Gap", "Markers", "UnfillableGap", "butterworth", "fill_gaps", "find_gaps", "read_c3d",
-    "resample", "residual_cutoff", "savgol", "write_c3d",
+    "resample", "residual_cutoff", "savgol", "write_c3d", "filter_motion", "resample_motion", "unwrap_rotations",
+    "wrap_rotations",
     # skeleton side
     "BvhError", "CHANNELS", "Clip", "RetargetResult", "Skeleton", "SolveResult", "attach_markers",
     "detect_contacts", "euler_from_matrix", "format_bvh", "gait_angles", "humanoid", "kabsch", "marker_set",
