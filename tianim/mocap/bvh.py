@@ -332,21 +332,22 @@ def _parse_motion(data: bytes, start: int, line: int, C: int, src: str):
 def _fast_values(data: bytes, end: int, n_frames: int, C: int):
     """The (n_frames, C) values of a well-formed MOTION body in one ``np.loadtxt`` call, or None.
 
-    NumPy's C reader on text (on bytes it decodes chunk by chunk: twice as slow) with single spaces
-    between values (what writers write); it checks that every row has as many values as the first, and
-    the shape must be exactly (n_frames, C). Blank lines inside the data, any reader error or another
-    shape give None, and the caller's line-by-line diagnosis takes over.
+    NumPy's C reader straight on the bytes (numpy 2 reads a bytes stream as fast as decoded text, so
+    the 5 MB decode is skipped) with single spaces between values (what writers write); it checks that
+    every row has as many values as the first, and the shape must be exactly (n_frames, C). A blank line
+    inside the data (more line breaks than frames: one ``count``, no scan for blank lines), any reader
+    error or another shape give None, and the caller's line-by-line diagnosis takes over.
     """
     if n_frames == 0 or end >= len(data):
         return None
-    text = data[end + 1:].decode("latin-1")  # the frame lines (data[end] ends the Frame Time line)
-    inner = text.strip()
-    if "\n\n" in inner or "\n\r\n" in inner:
+    body = memoryview(data)[end + 1:]  # the frame lines (data[end] ends the Frame Time line)
+    inner = data[end + 1:].strip()
+    if inner.count(b"\n") != n_frames - 1:  # blank lines inside (or a frame count that disagrees)
         return None
     try:
         with warnings.catch_warnings():  # "input contained no data": the diagnosis names the line
             warnings.simplefilter("ignore")
-            values = np.loadtxt(io.StringIO(text), dtype=np.float64, comments=None, ndmin=2, delimiter=" ")
+            values = np.loadtxt(io.BytesIO(body), dtype=np.float64, comments=None, ndmin=2, delimiter=" ")
     except ValueError:
         return None
     return values if values.shape == (n_frames, C) else None
