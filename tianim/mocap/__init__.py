@@ -19,7 +19,9 @@ Skeleton side:
   motion (no sample data ships)
 * :func:`marker_set`, :func:`virtual_markers`, :func:`attach_markers` - markers rigidly attached to segments
 * :func:`solve_markers` - joint angles from markers (batched Levenberg-Marquardt on the tree)
-* :func:`retarget` - onto other bone lengths and rest poses, foot contacts planted by leg IK
+* :func:`retarget` - onto other bone lengths and rest poses (joint names mapped), foot contacts planted by leg IK
+* :func:`joint_quaternions`, :func:`slerp`, :func:`resample_rotations` - rotations as quaternions, resampling
+  by slerp (no wraps, no Euler branch switches)
 """
 
 from tianim.mocap.bvh import BvhError, Clip, format_bvh, parse_bvh, read_bvh, write_bvh
@@ -32,7 +34,15 @@ from tianim.mocap.resample import NTSC, resample
 from tianim.mocap.retarget import RetargetResult, detect_contacts, retarget
 from tianim.mocap.skeleton import CHANNELS, Skeleton
 from tianim.mocap.rigid import kabsch
-from tianim.mocap.solve import SolveResult, euler_from_matrix, solve_markers
+from tianim.mocap.rotations import (
+    euler_from_matrix,
+    joint_quaternions,
+    quat_from_matrix,
+    quat_to_matrix,
+    resample_rotations,
+    slerp,
+)
+from tianim.mocap.solve import SolveResult, solve_markers
 from tianim.mocap.virtual import (
     attach_markers,
     gait_angles,
@@ -53,5 +63,5 @@ __all__ = [
     "BvhError", "CHANNELS", "Clip", "RetargetResult", "Skeleton", "SolveResult", "attach_markers",
     "detect_contacts", "euler_from_matrix", "format_bvh", "gait_angles", "humanoid", "kabsch", "marker_set",
     "parse_bvh", "random_motion", "random_skeleton", "read_bvh", "retarget", "solve_markers", "virtual_markers",
-    "walk", "write_bvh",
+    "walk", "write_bvh", "joint_quaternions", "quat_from_matrix", "quat_to_matrix", "resample_rotations", "slerp",
 ]

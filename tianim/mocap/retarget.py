@@ -31,7 +31,8 @@ import numpy as np
 from tianim._checks import check_finite_scalar, check_int, fmt
 from tianim.mocap.skeleton import ROTATION_CHANNELS, Skeleton
 from tianim.mocap.rigid import kabsch
-from tianim.mocap.solve import _levenberg_marquardt, euler_from_matrix
+from tianim.mocap.rotations import euler_from_matrix
+from tianim.mocap.solve import _levenberg_marquardt
 
 
 class RetargetResult(NamedTuple):
