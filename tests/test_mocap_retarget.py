@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tianim.mocap import walk
+from tianim.mocap import Skeleton, walk
 from tianim.mocap.retarget import detect_contacts, leg_length, retarget
 
 
@@ -136,3 +136,29 @@ def test_retarget_bad_arguments_name_the_argument(source):
     for change, exc, words in cases:
         with pytest.raises(exc, match=words):
             retarget(**{**base, **change})
+
+
+def test_retarget_between_rigs_whose_joint_names_differ(source):
+    """A source rig named like Mixamo's: with a name map the result is the same-name retarget's, bit for bit."""
+    sk, m = source
+    renamed = Skeleton([f"mixamorig:{n}" for n in sk.names], sk.parents, sk.offsets, sk.channels, sk.end_sites)
+    tg = t_pose_target(sk)
+    ref = retarget(sk, m, tg, 60.0)
+    got = retarget(renamed, m, tg, 60.0, joint_map={n: f"mixamorig:{n}" for n in tg.names})
+    np.testing.assert_array_equal(got.motion, ref.motion)
+    np.testing.assert_array_equal(got.contacts, ref.contacts)
+    # a partial map: unmapped target joints follow their parent (here: the arms keep the chest's rotation)
+    legs = {n: f"mixamorig:{n}" for n in tg.names if "Leg" in n or "Foot" in n or "Toe" in n or n == "Hips"}
+    part = retarget(renamed, m, tg, 60.0, joint_map=legs)
+    feet = [tg.index("LeftFoot"), tg.index("RightFoot")]
+    np.testing.assert_allclose(tg.fk(part.motion)[0][:, feet], tg.fk(ref.motion)[0][:, feet], atol=1e-9)
+    with pytest.raises(ValueError, match="'Hips' to 'nope'"):
+        retarget(renamed, m, tg, 60.0, joint_map={"Hips": "nope"})
+    with pytest.raises(ValueError, match="'Nope', which is not a joint of the target"):
+        retarget(renamed, m, tg, 60.0, joint_map={"Nope": "mixamorig:Hips"})
+    with pytest.raises(TypeError, match="joint_map="):
+        retarget(renamed, m, tg, 60.0, joint_map=[("Hips", "mixamorig:Hips")])
+    with pytest.raises(ValueError, match="two target joints"):
+        retarget(renamed, m, tg, 60.0, joint_map={"Hips": "mixamorig:Hips", "Spine": "mixamorig:Hips"})
+    with pytest.raises(ValueError, match="add it to joint_map"):
+        retarget(renamed, m, tg, 60.0, joint_map={"Hips": "mixamorig:Hips"})

@@ -131,6 +131,24 @@ def foot_points(skeleton: Skeleton, foot: int) -> np.ndarray:
     return np.array(pts, dtype=np.int64)
 
 
+def _joint_map(joint_map, source: Skeleton, target: Skeleton) -> dict:
+    """``joint_map`` checked: a dict of target joint names to source joint names (or None: {})."""
+    if joint_map is None:
+        return {}
+    if not isinstance(joint_map, dict) or not all(isinstance(k, str) and isinstance(v, str)
+                                                  for k, v in joint_map.items()):
+        raise TypeError(f"joint_map={fmt(joint_map)} must be a dict {{target joint name: source joint name}}")
+    for k, v in joint_map.items():
+        if k not in target.names:
+            raise ValueError(f"joint_map maps {k!r}, which is not a joint of the target skeleton")
+        if v not in source.names:
+            raise ValueError(f"joint_map maps {k!r} to {v!r}, which is not a joint of the source skeleton")
+    if len(set(joint_map.values())) != len(joint_map):
+        dup = next(v for v in joint_map.values() if list(joint_map.values()).count(v) > 1)
+        raise ValueError(f"joint_map maps two target joints to the source joint {dup!r}; map each once")
+    return dict(joint_map)
+
+
 def _ease(contacts: np.ndarray, blend: int) -> np.ndarray:
     """Weights (F, K): 1 on contacts, easing (smoothstep) to 0 over ``blend`` frames either side."""
     F = len(contacts)
@@ -151,11 +169,14 @@ def _ease(contacts: np.ndarray, blend: int) -> np.ndarray:
 
 def retarget(source: Skeleton, motion, target: Skeleton, fps: float, feet=("LeftFoot", "RightFoot"),
              height_tol: float = 0.05, speed_tol: float = 0.5, blend: int = 4, ground: float = 0.0,
-             iterations: int = 30) -> RetargetResult:
+             iterations: int = 30, joint_map=None) -> RetargetResult:
     """Retarget ``motion`` (F, C_source) of ``source`` onto ``target`` (see the module docstring).
 
-    ``fps`` [Hz] sets foot speeds; ``feet``: foot joint names in both skeletons (their parent and
+    ``fps`` [Hz] sets foot speeds; ``feet``: foot joint names in the target (their parent and
     grandparent are the leg joints the IK moves); ``ground``: ground height [m] along +y.
+    ``joint_map``: ``{target joint name: source joint name}`` for rigs whose names differ (e.g.
+    ``{"LeftUpLeg": "mixamorig:LeftUpLeg", ...}``); target joints not in it are matched by their own name,
+    and target joints without a source joint follow their parent.
     """
     for name, sk in (("source", source), ("target", target)):
         if not isinstance(sk, Skeleton):
@@ -169,19 +190,24 @@ def retarget(source: Skeleton, motion, target: Skeleton, fps: float, feet=("Left
     iterations = check_int("iterations", iterations, 1, 10_000)
     if isinstance(feet, str) or not all(isinstance(f, str) for f in feet):
         raise TypeError(f"feet={fmt(feet)} must be a sequence of joint names, e.g. ('LeftFoot', 'RightFoot')")
+    names = _joint_map(joint_map, source, target)
     for f in feet:
-        for name, sk in (("source", source), ("target", target)):
-            if f not in sk.names:
-                raise ValueError(f"feet names {f!r}, which is not a joint of the {name} skeleton")
+        if f not in target.names:
+            raise ValueError(f"feet names {f!r}, which is not a joint of the target skeleton")
+        if names.get(f, f) not in source.names:
+            raise ValueError(f"feet names {f!r}, whose source joint {names.get(f, f)!r} is not a joint of the "
+                             "source skeleton; add it to joint_map")
     ts = [target.index(f) for f in feet]
     for f, j in zip(feet, ts):
         if target.parents[j] < 0 or target.parents[target.parents[j]] < 0:
             raise ValueError(f"feet joint {f!r} needs two leg joints above it (hip and knee) in the target")
     F = m.shape[0]
-    mapping = np.array([source.names.index(n) if n in source.names else -1 for n in target.names])
+    src_of = [names.get(n, n) for n in target.names]
+    mapping = np.array([source.names.index(n) if n in source.names else -1 for n in src_of])
     if mapping[0] != 0:
-        raise ValueError(f"the target's root {target.names[0]!r} must be the source's root {source.names[0]!r}")
-    ss = [source.index(f) for f in feet]
+        raise ValueError(f"the target's root {target.names[0]!r} must map to the source's root {source.names[0]!r} "
+                         "(name it so, or map it in joint_map)")
+    ss = [source.index(names.get(f, f)) for f in feet]
     scale = float(np.mean([leg_length(target, t) for t in ts]) / np.mean([leg_length(source, s) for s in ss]))
 
     # 1. rotations
