@@ -64,7 +64,7 @@ def test_labels2_continue_the_label_list(tmp_path):
 def test_blank_and_repeated_labels_are_made_unique_with_a_warning(tmp_path):
     path = tmp_path / "dup.c3d"
     _write(path, _points(M=4), labels=[["*1", "", "*1", "x"]])
-    with pytest.warns(UserWarning, match="2 blank or repeated point label"):
+    with pytest.warns(UserWarning, match="2 blank or repeated POINT:LABELS label"):
         m = read_c3d(path)
     assert m.labels == ("*1", "M001", "*1_2", "x")
 
@@ -153,3 +153,60 @@ def test_our_writer_reads_back_with_labels_and_units(tmp_path):
     back = read_c3d(tmp_path / "w.c3d")
     assert back.labels == m.labels and back.units == "cm" and back.rate == 50.0
     np.testing.assert_array_equal(back.positions, m.positions)
+
+
+# ------------------------------------------------------------------------------ analog channels and events
+def test_analog_channels_read_in_their_units(tmp_path):
+    """Force-plate-like channels at 3 samples per point frame, stored with ANALOG:SCALE and OFFSET:
+    read back as (raw - offset) x scale = the values written (float32)."""
+    from tianim.mocap.c3d import read_c3d_analog
+
+    F, per, A = 5, 3, 2
+    rng = np.random.default_rng(7)
+    vals = rng.normal(0, 100, (F * per, A)).astype(np.float32)  # newtons
+    path = tmp_path / "fp.c3d"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        w = c3d.Writer(point_rate=100.0, analog_rate=300.0, point_scale=-1.0)
+        pts = _points(F=F, M=3)  # (3 points, 5) and (2 channels, 3 samples): shapes the c3d writer accepts
+        w.add_frames([(pts[f], vals[f * per:(f + 1) * per].T.copy()) for f in range(F)])
+        w.set_point_labels(["a", "b", "c"])
+        w.set_analog_labels(["Fz1", "Fz1"])  # a repeated label, made unique
+        w.set_analog_scales([0.5, 2.0])
+        w.set_analog_offsets([10, -3])
+        w.analog_group.set_str("UNITS", "units", "N N ", 2, 2)
+        with open(path, "wb") as fh:
+            w.write(fh)
+    with pytest.warns(UserWarning, match="repeated ANALOG:LABELS"):
+        a = read_c3d_analog(path)
+    assert a.values.shape == (F * per, A) and a.rate == 300.0
+    assert a.labels == ("Fz1", "Fz1_2") and a.units == ("N", "N")
+    np.testing.assert_allclose(a.values, vals, rtol=2e-7, atol=1e-4)
+    with pytest.raises(ValueError, match="no analog channels"):
+        p2 = tmp_path / "none.c3d"
+        _write(p2, _points(), labels=[["a", "b", "c", "d"]])
+        read_c3d_analog(p2)
+
+
+def test_events_with_times_from_the_capture_start(tmp_path):
+    from tianim.mocap.c3d import read_c3d_events
+
+    path = tmp_path / "ev.c3d"
+    times = np.array([[0.0, 1.25], [1.0, 0.5], [0.0, 1.0]], np.float32)  # (minutes, seconds)
+
+    def events(w):
+        w.set_start_frame(101)  # the file starts 1 s into a 100 Hz capture
+        g = w.add_group(9, "EVENT", "events")
+        g.add("USED", "count", 2, "<h", 3)
+        g.add_str("LABELS", "labels", "".join(n.ljust(12) for n in ("Foot Strike", "Foot Off", "Foot Strike")), 12, 3)
+        g.add_str("CONTEXTS", "contexts", "".join(n.ljust(5) for n in ("Left", "Left", "Right")), 5, 3)
+        g.add("TIMES", "times", 4, "<f", times.tobytes(), 2, 3)  # C3D order: (minutes, seconds) per event
+
+    _write(path, _points(), labels=[["a", "b", "c", "d"]], extra=events)
+    ev = read_c3d_events(path)
+    assert [(e.label, e.context) for e in ev] == [("Foot Strike", "Right"), ("Foot Strike", "Left"), ("Foot Off", "Left")]
+    np.testing.assert_allclose([e.time for e in ev], [1.0, 1.25, 60.5], rtol=1e-7)
+    np.testing.assert_allclose([e.frame for e in ev], [0.0, 25.0, 5950.0], rtol=1e-6, atol=1e-4)
+    p2 = tmp_path / "noev.c3d"
+    _write(p2, _points(), labels=[["a", "b", "c", "d"]])
+    assert read_c3d_events(p2) == ()

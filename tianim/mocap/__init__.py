@@ -3,7 +3,8 @@
 Marker side (C3D files need the ``mocap`` extra):
 
 * :class:`Markers` - positions (frames, markers, 3), NaN drop-outs, labels, rate, units
-* :func:`read_c3d`, :func:`write_c3d` - C3D files through the ``c3d`` package (``pip install tianim[mocap]``)
+* :func:`read_c3d`, :func:`write_c3d` - C3D files through the ``c3d`` package (``pip install tianim[mocap]``);
+  :func:`read_c3d_analog` (force plates, EMG), :func:`read_c3d_events` (foot strikes ...)
 * :func:`fill_gaps` - linear, cubic, quintic (Woltring), rigid-body (Kabsch) and PCA fills, with a report
 * :func:`butterworth` (zero-lag, dual-pass corrected), :func:`residual_cutoff` (Winter), :func:`savgol`
 * :func:`resample` - between 24, 25, 29.97, 30, 60, 120 Hz or any positive rates
@@ -25,7 +26,7 @@ Skeleton side:
 """
 
 from tianim.mocap.bvh import BvhError, Clip, format_bvh, parse_bvh, read_bvh, write_bvh
-from tianim.mocap.c3d import read_c3d, write_c3d
+from tianim.mocap.c3d import Analog, Event, read_c3d, read_c3d_analog, read_c3d_events, write_c3d
 from tianim.mocap.curves import filter_motion, resample_motion, unwrap_rotations, wrap_rotations
 from tianim.mocap.filters import butterworth, residual_cutoff, savgol
 from tianim.mocap.gaps import Gap, UnfillableGap, fill_gaps, find_gaps
@@ -57,7 +58,7 @@ from tianim.mocap.virtual import (
 __all__ = [
     # marker side
     "NTSC", "Gap", "Markers", "UnfillableGap", "butterworth", "fill_gaps", "find_gaps", "read_c3d",
-    "resample", "residual_cutoff", "savgol", "write_c3d", "filter_motion", "resample_motion", "unwrap_rotations",
+    "resample", "residual_cutoff", "savgol", "write_c3d", "Analog", "Event", "read_c3d_analog", "read_c3d_events", "filter_motion", "resample_motion", "unwrap_rotations",
     "wrap_rotations",
     # skeleton side
     "BvhError", "CHANNELS", "Clip", "RetargetResult", "Skeleton", "SolveResult", "attach_markers",

@@ -19,13 +19,15 @@ a ``POINT:SCALE`` whose byte grid holds them).
 Files are written in the C3D float format (``POINT:SCALE`` < 0): positions are 32-bit floats,
 so a round trip is exact for float32-representable values and otherwise rounds to float32
 (a relative 6e-8: 0.03 micrometres at 500 mm); the rate is a float32 of the header too
-(29.97 Hz reads back as 29.970030 Hz). Analog channels are neither read nor written.
+(29.97 Hz reads back as 29.970030 Hz). Analog channels (:func:`read_c3d_analog`) and events
+(:func:`read_c3d_events`) are read, not written.
 """
 
 from __future__ import annotations
 
 import os
 import warnings
+from typing import NamedTuple
 
 import numpy as np
 
@@ -55,13 +57,19 @@ def _check_path(path) -> str:
 def _point_labels(reader, used: int, path: str) -> list:
     """The first ``used`` labels of POINT:LABELS, LABELS2, LABELS3 ... (blank ones named ``M###``,
     repeats made unique by a ``_2``, ``_3`` ... suffix, with a warning)."""
+    return _point_labels_from(reader, "POINT:LABELS", used, path)
+
+
+def _point_labels_from(reader, param_name: str, used: int, path: str) -> list:
+    """The first ``used`` labels of parameter ``name`` and its continuations ``name2``, ``name3`` ...
+    (blank ones named ``M###``, repeats made unique by a ``_2``, ``_3`` ... suffix, with a warning)."""
     labels = []
     for k in range(1, 100):
-        param = reader.get("POINT:LABELS" if k == 1 else f"POINT:LABELS{k}")
+        param = reader.get(param_name if k == 1 else f"{param_name}{k}")
         if param is None or len(labels) >= used:
             break
         arr = param.string_array if param.dimensions else np.array([])
-        labels.extend(str(v).strip() for v in np.asarray(arr).ravel())
+        labels.extend(str(v).replace("\x00", "").strip() for v in np.asarray(arr).ravel())
     labels = labels[:used] + [""] * max(0, used - len(labels))
     fixed, seen, changed = [], set(), []
     for i, name in enumerate(labels):
@@ -75,7 +83,7 @@ def _point_labels(reader, used: int, path: str) -> list:
         seen.add(new)
         fixed.append(new)
     if changed:
-        warnings.warn(f"path={path!r}: {len(changed)} blank or repeated point label(s) renamed, e.g. "
+        warnings.warn(f"path={path!r}: {len(changed)} blank or repeated {param_name} label(s) renamed, e.g. "
                       f"{changed[0][0]!r} -> {changed[0][1]!r}", UserWarning, stacklevel=3)
     return fixed
 
@@ -148,6 +156,106 @@ def read_c3d(path, with_residuals: bool = False):
         return markers
     residuals = np.where(invalid, np.nan, pts[..., 3])
     return markers, residuals, np.where(invalid, 0, pts[..., 4]).astype(np.uint8)
+
+
+class Analog(NamedTuple):
+    """Analog channels of a C3D file: ``values`` (N, A) float64 (ANALOG:SCALE, GEN_SCALE and OFFSET applied:
+    volts, newtons ... as ``units`` say), ``labels`` (A,), ``rate`` [Hz] (a whole multiple of the point
+    rate), ``units`` (A,) (ANALOG:UNITS, "" where absent)."""
+
+    values: np.ndarray
+    labels: tuple
+    rate: float
+    units: tuple
+
+
+class Event(NamedTuple):
+    """A C3D event: ``time`` [s] from the capture's start (EVENT:TIMES, minutes x 60 + seconds, as stored),
+    ``label`` ("Foot Strike"), ``context`` ("Left", "Right", "General" or ""), and ``frame``: where it
+    falls in the frames :func:`read_c3d` returns (0-based, fractional: ``time x rate - (first frame - 1)``;
+    files that start later in a capture store times from the capture's start)."""
+
+    time: float
+    label: str
+    context: str
+    frame: float
+
+
+def _open(path):
+    """(handle, reader) of a C3D file, or a ValueError naming the file."""
+    path = _check_path(path)
+    if not os.path.isfile(path):
+        raise FileNotFoundError(f"path={path!r}: no such C3D file")
+    if os.path.getsize(path) < 512:
+        raise ValueError(f"path={path!r} is {os.path.getsize(path)} bytes; a C3D file has at least a 512-byte header")
+    lib = _lib()
+    handle = open(path, "rb")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        try:
+            return handle, lib.Reader(handle)
+        except Exception as exc:
+            handle.close()
+            raise ValueError(f"path={path!r} is not a readable C3D file: {type(exc).__name__}: {exc}") from exc
+
+
+def _strings(reader, name: str, n: int) -> list:
+    param = reader.get(name)
+    if param is None or not param.dimensions:
+        return [""] * n
+    vals = [str(v).replace("\x00", "").strip() for v in np.asarray(param.string_array).ravel()]
+    return (vals + [""] * n)[:n]
+
+
+def read_c3d_analog(path) -> Analog:
+    """The analog channels of a C3D file (force plates, EMG ...) as :class:`Analog`; a ValueError says so
+    when the file has none. Labels are made unique as for points; values in the channels' units."""
+    path = _check_path(path)
+    handle, reader = _open(path)
+    with handle:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                used, per, rate = int(reader.analog_used), int(reader.analog_per_frame), float(reader.analog_rate)
+            except Exception as exc:
+                raise ValueError(f"path={path!r} is not a readable C3D file: {type(exc).__name__}: {exc}") from exc
+        if used == 0 or per == 0:
+            raise ValueError(f"path={path!r} holds no analog channels (ANALOG:USED = {used})")
+        labels = _point_labels_from(reader, "ANALOG:LABELS", used, path)
+        units = tuple(_strings(reader, "ANALOG:UNITS", used))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            try:
+                frames = [a for _, _, a in reader.read_frames(copy=True)]
+            except Exception as exc:
+                raise ValueError(f"path={path!r} is not a readable C3D file: {type(exc).__name__}: {exc}") from exc
+    if not frames:
+        raise ValueError(f"path={path!r} holds no frames")
+    values = np.concatenate([np.asarray(a, dtype=np.float64).reshape(used, per).T for a in frames], axis=0)
+    return Analog(values, tuple(labels), rate, units)
+
+
+def read_c3d_events(path) -> tuple:
+    """The events of a C3D file (EVENT group: LABELS, CONTEXTS, TIMES) as :class:`Event` s in time order;
+    () when the file has none."""
+    path = _check_path(path)
+    handle, reader = _open(path)
+    with handle:
+        used_p = reader.get("EVENT:USED")
+        times_p = reader.get("EVENT:TIMES")
+        if used_p is None or times_p is None:
+            return ()
+        n = int(used_p.int16_value)
+        if n <= 0:
+            return ()
+        times = np.asarray(times_p.float_array, dtype=np.float64).reshape(-1, 2)
+        if times.shape[0] < n:
+            raise ValueError(f"path={path!r}: EVENT:USED = {n} but EVENT:TIMES holds {times.shape[0]} times")
+        labels, contexts = _strings(reader, "EVENT:LABELS", n), _strings(reader, "EVENT:CONTEXTS", n)
+        rate, first = float(reader.point_rate), int(reader.first_frame)
+    t = 60.0 * times[:n, 0] + times[:n, 1]
+    events = [Event(float(t[k]), labels[k], contexts[k], float(t[k] * rate - (first - 1))) for k in range(n)]
+    return tuple(sorted(events, key=lambda e: e.time))
 
 
 def residual_grid(residuals) -> float:
@@ -227,4 +335,5 @@ def write_c3d(path, markers, residuals=None, cameras=None, residual_scale=None) 
             writer.write(handle)
 
 
-__all__ = ["MAX_LABEL", "read_c3d", "residual_grid", "write_c3d"]
+__all__ = ["MAX_LABEL", "Analog", "Event", "read_c3d", "read_c3d_analog", "read_c3d_events", "residual_grid",
+           "write_c3d"]
