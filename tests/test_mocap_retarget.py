@@ -162,3 +162,33 @@ def test_retarget_between_rigs_whose_joint_names_differ(source):
         retarget(renamed, m, tg, 60.0, joint_map={"Hips": "mixamorig:Hips", "Spine": "mixamorig:Hips"})
     with pytest.raises(ValueError, match="add it to joint_map"):
         retarget(renamed, m, tg, 60.0, joint_map={"Hips": "mixamorig:Hips"})
+
+
+def test_six_channel_rigs_keep_the_target_bones_and_scale_the_slides():
+    """Position channels replace the offset: a rig whose channels repeat its offsets retargets onto the
+    target's bones (not the source's, not zero), and a joint that slides in the source slides s times as far."""
+    sk, m = walk(60, 60.0)
+    six = Skeleton(sk.names, sk.parents, sk.offsets,
+                   [c if sk.end_sites[j] or j == 0 else ("Xposition", "Yposition", "Zposition") + c
+                    for j, c in enumerate(sk.channels)], sk.end_sites)
+    m6 = np.zeros((len(m), six.n_channels))
+    for j in range(six.n_joints):
+        for c in sk.channels[j]:
+            m6[:, six.channel_index(j, c)] = m[:, sk.channel_index(j, c)]
+        if j and not sk.end_sites[j]:
+            for d, a in enumerate("XYZ"):
+                m6[:, six.channel_index(j, f"{a}position")] = sk.offsets[j, d]
+    np.testing.assert_allclose(six.fk(m6)[0], sk.fk(m)[0], atol=1e-12)  # the same walk
+    tg = six.with_offsets(1.3 * six.offsets)
+    res = retarget(six, m6, tg, 60.0)
+    pos = tg.fk(res.motion)[0]
+    e = tg.edges()
+    np.testing.assert_allclose(np.linalg.norm(pos[:, e[:, 1]] - pos[:, e[:, 0]], axis=-1),
+                               np.broadcast_to(np.linalg.norm(tg.offsets[e[:, 1]], axis=1), (len(m), len(e))),
+                               atol=1e-12)
+    k = six.index("Spine")
+    slid = m6.copy()
+    slid[:, six.channel_index(k, "Yposition")] += 0.02 * np.sin(np.arange(len(m)) / 5.0)
+    res2 = retarget(six, slid, tg, 60.0)
+    grow = tg.translations(res2.motion)[:, k] - tg.offsets[k]
+    np.testing.assert_allclose(grow[:, 1], res2.scale * 0.02 * np.sin(np.arange(len(m)) / 5.0), atol=1e-12)

@@ -19,7 +19,10 @@
    its world rotation. Over ``blend`` frames either side of a contact the goal eases from the rotated
    pose to the planted one (smoothstep), so nothing pops.
 
-Target bone lengths are exact by construction: only rotations (and the root's position) are written.
+Target bone lengths are exact by construction: only rotations (and the root's position) are written; a
+target joint with position channels (which replace its offset) gets its own offset plus the source
+joint's slide from the source's offset, scaled, so a rig whose channels merely repeat its offsets keeps
+the target's bones.
 """
 
 from __future__ import annotations
@@ -235,11 +238,16 @@ def retarget(source: Skeleton, motion, target: Skeleton, fps: float, feet=("Left
             for c in rots:
                 if c in source.channels[sj]:
                     out[:, c0 + chans.index(c)] = m[:, source.channel_index(sj, c)]
-        # non-root position channels: the source's, scaled
-        if p >= 0 and sj >= 0:
-            for c in chans:
-                if c.endswith("position") and c in source.channels[sj]:
-                    out[:, c0 + chans.index(c)] = scale * m[:, source.channel_index(sj, c)]
+        # non-root position channels (they replace the offset): the target's rest offset plus the source's
+        # slide from its own offset, scaled and turned into the target parent's frame (G_t,p = G_s,p A_p)
+        if p >= 0:
+            tpos = [(c, "XYZ".index(c[0])) for c in chans if c.endswith("position")]
+            if tpos:
+                slide = np.zeros((F, 3))
+                if sj >= 0:
+                    slide = scale * (source.translations(m)[:, sj] - source.offsets[sj]) @ A[p]  # (A_p^T d)^T
+                for c, d in tpos:
+                    out[:, c0 + chans.index(c)] = target.offsets[j, d] + slide[:, d]
     # 2. the root's world position, scaled about the ground point below the origin
     base = np.array([0.0, ground, 0.0])
     root_world = base + scale * (Ps[:, 0] - base)

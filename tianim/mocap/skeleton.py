@@ -251,7 +251,8 @@ class Skeleton:
         return m
 
     def with_offsets(self, offsets) -> "Skeleton":
-        """The same hierarchy and channels with other offsets (J, 3) [m]."""
+        """The same hierarchy and channels with other offsets (J, 3) [m]. (A coordinate that has a position
+        channel takes its value from the motion, not the offset: there the offset is only the rest value.)"""
         return Skeleton(self.names, self.parents, offsets, self.channels, self.end_sites)
 
     def edges(self) -> np.ndarray:
