@@ -5,6 +5,7 @@ Marker side (C3D files need the ``mocap`` extra):
 * :class:`Markers` - positions (frames, markers, 3), NaN drop-outs, labels, rate, units
 * :func:`read_c3d`, :func:`write_c3d` - C3D files through the ``c3d`` package (``pip install tianim[mocap]``);
   :func:`read_c3d_analog` (force plates, EMG), :func:`read_c3d_events` (foot strikes ...)
+* :func:`label_markers` - unlabelled points labelled by tracking from one labelled frame
 * :func:`fill_gaps` - linear, cubic, quintic (Woltring), rigid-body (Kabsch) and PCA fills, with a report
 * :func:`butterworth` (zero-lag, dual-pass corrected), :func:`residual_cutoff` (Winter), :func:`savgol`
 * :func:`resample` - between 24, 25, 29.97, 30, 60, 120 Hz or any positive rates
@@ -30,6 +31,7 @@ from tianim.mocap.c3d import Analog, Event, read_c3d, read_c3d_analog, read_c3d_
 from tianim.mocap.curves import filter_motion, resample_motion, unwrap_rotations, wrap_rotations
 from tianim.mocap.filters import butterworth, residual_cutoff, savgol
 from tianim.mocap.gaps import Gap, UnfillableGap, fill_gaps, find_gaps
+from tianim.mocap.labelling import label_markers
 from tianim.mocap.markers import Markers
 from tianim.mocap.resample import NTSC, resample
 from tianim.mocap.retarget import RetargetResult, detect_contacts, retarget
@@ -57,7 +59,7 @@ from tianim.mocap.virtual import (
 
 __all__ = [
     # marker side
-    "NTSC", "Gap", "Markers", "UnfillableGap", "butterworth", "fill_gaps", "find_gaps", "read_c3d",
+    "NTSC", "Gap", "Markers", "UnfillableGap", "butterworth", "fill_gaps", "find_gaps", "label_markers", "read_c3d",
     "resample", "residual_cutoff", "savgol", "write_c3d", "Analog", "Event", "read_c3d_analog", "read_c3d_events", "filter_motion", "resample_motion", "unwrap_rotations",
     "wrap_rotations",
     # skeleton side

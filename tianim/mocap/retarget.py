@@ -33,7 +33,7 @@ import numpy as np
 
 from tianim._checks import check_finite_scalar, check_int, fmt
 from tianim.mocap.skeleton import ROTATION_CHANNELS, Skeleton
-from tianim.mocap.rigid import kabsch
+from tianim.mocap.rigid import kabsch, smallest_rotation
 from tianim.mocap.rotations import euler_from_matrix
 from tianim.mocap.solve import _levenberg_marquardt
 
@@ -44,18 +44,6 @@ class RetargetResult(NamedTuple):
     motion: np.ndarray
     contacts: np.ndarray
     scale: float
-
-
-def _smallest_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """The rotation by the smallest angle taking direction a onto direction b (Rodrigues)."""
-    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
-    v, c = np.cross(a, b), float(np.dot(a, b))
-    if c < -1.0 + 1e-12:  # opposite: half a turn about any axis normal to a
-        n = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
-        n /= np.linalg.norm(n)
-        return 2.0 * np.outer(n, n) - np.eye(3)
-    K = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
-    return np.eye(3) + K + K @ K / (1.0 + c)
 
 
 def rest_alignment(source: Skeleton, target: Skeleton, mapping: np.ndarray) -> np.ndarray:
@@ -72,7 +60,7 @@ def rest_alignment(source: Skeleton, target: Skeleton, mapping: np.ndarray) -> n
                 if np.linalg.norm(a) > 1e-12 and np.linalg.norm(b) > 1e-12:
                     pairs.append((a / np.linalg.norm(a), b / np.linalg.norm(b)))
         if len(pairs) == 1:
-            A[j] = _smallest_rotation(pairs[0][0], pairs[0][1])  # G_t d_tgt = G_s A d_tgt = G_s d_src
+            A[j] = smallest_rotation(pairs[0][0], pairs[0][1])  # G_t d_tgt = G_s A d_tgt = G_s d_src
         elif len(pairs) > 1:
             loc = np.array([p[0] for p in pairs])
             world = np.array([p[1] for p in pairs])
