@@ -15,7 +15,8 @@ from tianim.mocap.virtual import random_motion, random_skeleton
 
 def reference_fk(names, parents, offsets, channels, motion):
     """Independent FK: scipy intrinsic Euler (uppercase sequence in CHANNELS order) per joint, composed
-    parent to child; translation = offset + position channels (applied before the rotations)."""
+    parent to child; translation = offset with each coordinate that has a position channel replaced by the
+    channel (applied before the rotations): Blender's, bvhio's and pybvh's reading."""
     F = len(motion)
     J = len(names)
     pos = np.zeros((F, J, 3))
@@ -29,7 +30,7 @@ def reference_fk(names, parents, offsets, channels, motion):
         seq, ang = "", []
         for k, c in enumerate(chans):
             if c.lower().endswith("position"):
-                t[:, "xyz".index(c[0].lower())] += vals[:, k]
+                t[:, "xyz".index(c[0].lower())] = vals[:, k]
             else:
                 seq += c[0].upper()
                 ang.append(vals[:, k])

@@ -12,6 +12,7 @@ from scipy import signal
 from scipy.interpolate import CubicSpline
 
 from tianim.mocap.filters import (
+    ResidualWarning,
     butterworth,
     butterworth_sos,
     dual_pass_correction,
@@ -205,3 +206,47 @@ BAD = [
 def test_bad_input_names_the_argument(call, exc, match):
     with pytest.raises(exc, match=match):
         call()
+
+
+# ------------------------------------------------------------------------------ residual analysis across rates
+def _walk_at(fs, seed, seconds=10.0, fine=800.0):
+    """One gait-like motion (harmonics 1..6 Hz, 50 mm / k^2) plus one noise process, sampled at ``fs``.
+    The noise is white at 800 Hz low-passed at 25 Hz, as camera systems' noise fades at high frequencies
+    (its power falls tenfold from 15 to 90 Hz in a real 200 Hz walk); the same process at every rate."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(int(seconds * fine)) / fine
+    noise = butterworth(rng.normal(size=t.size), fine, 25.0)
+    phase = rng.uniform(0, 2 * np.pi, 6)
+    x = sum(50.0 / k ** 2 * np.sin(2 * np.pi * k * t + phase[k - 1]) for k in range(1, 7)) + noise / noise.std()
+    step = int(fine // fs)
+    return x[::step]
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_residual_analysis_gives_one_cutoff_at_50_100_and_200_hz(seed):
+    fc = {fs: residual_cutoff(_walk_at(fs, seed), fs) for fs in (50.0, 100.0, 200.0)}
+    assert all(5.0 < v < 7.0 for v in fc.values()), fc  # the signal's top harmonic is 6 Hz
+    assert max(fc.values()) - min(fc.values()) < 0.8, fc
+    # the band spread over 0.4 fs instead (the old default) fits the line where the noise has faded
+    spread = residual_cutoff(_walk_at(200.0, seed), 200.0, max_cutoff=1e9)
+    assert spread > 15.0, spread
+
+
+def test_residual_analysis_without_an_answer_is_nan_and_says_why():
+    rng = np.random.default_rng(1)
+    fs, n = 200.0, 2000
+    t = np.arange(n) / fs
+    x = np.stack([np.full(n, 3.0),                                   # constant
+                  rng.normal(size=n),                                 # noise only
+                  np.sin(2 * np.pi * 2 * t) + 1e-3 * rng.normal(size=n)], axis=1)  # a real answer
+    with pytest.warns(ResidualWarning, match=r"no answer for 2 of 3 channels.*constant.*noise only"):
+        fc = residual_cutoff(x, fs)
+    assert np.isnan(fc[0]) and np.isnan(fc[1]) and 2.0 < fc[2] < 20.0
+    # a signal reaching past the top trial cutoff: the residual never meets the intercept -> NaN, named
+    chirp = np.sin(2 * np.pi * (1.0 + 1.0 * t) * t) + 1e-3 * rng.normal(size=n)
+    with pytest.warns(ResidualWarning, match="cutoff is NaN"):
+        assert np.isnan(residual_cutoff(chirp, fs, cutoffs=np.arange(0.5, 8.01, 0.5)))
+    with pytest.raises(ValueError, match="no channels"):
+        residual_cutoff(np.zeros((100, 0)), fs)
+    with pytest.raises(ValueError, match="max_cutoff"):
+        residual_cutoff(x, fs, max_cutoff=0)

@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tianim.mocap import walk
+from tianim.mocap import Skeleton, walk
 from tianim.mocap.retarget import detect_contacts, leg_length, retarget
 
 
@@ -73,7 +73,12 @@ def test_planted_feet_are_on_the_ground_and_still_during_contacts(source):
     # (the source's contact height, scaled, within the detection's height tolerance) and as still as it
     np.testing.assert_allclose(pos[c], res.scale * src[c], atol=1e-6, rtol=0)
     ankle = src[..., 1][c].min()
-    assert np.all(pos[..., 1][c] - res.scale * ankle < res.scale * 0.02 + 1e-9)  # height_tol = 0.02 m
+    # a contact is a low, slow point of the foot (ankle, toe or toe tip): with the heel up it is the toe
+    ps = sk.fk(m)[0]
+    for k, side in enumerate(("Left", "Right")):
+        pts = [sk.index(f"{side}{n}") for n in ("Foot", "Toe", "Toe_End")]
+        lowest = (ps[:, pts, 1] - ps[:, pts, 1].min(axis=0)).min(axis=1)
+        assert np.all(lowest[c[:, k]] <= 0.05 + 1e-12)  # height_tol = 0.05 m
     for k in range(2):  # still: in each contact run the foot slides no more than the (scaled) source foot
         on = np.flatnonzero(c[:, k])
         for r in np.split(on, np.flatnonzero(np.diff(on) > 1) + 1):
@@ -131,3 +136,59 @@ def test_retarget_bad_arguments_name_the_argument(source):
     for change, exc, words in cases:
         with pytest.raises(exc, match=words):
             retarget(**{**base, **change})
+
+
+def test_retarget_between_rigs_whose_joint_names_differ(source):
+    """A source rig named like Mixamo's: with a name map the result is the same-name retarget's, bit for bit."""
+    sk, m = source
+    renamed = Skeleton([f"mixamorig:{n}" for n in sk.names], sk.parents, sk.offsets, sk.channels, sk.end_sites)
+    tg = t_pose_target(sk)
+    ref = retarget(sk, m, tg, 60.0)
+    got = retarget(renamed, m, tg, 60.0, joint_map={n: f"mixamorig:{n}" for n in tg.names})
+    np.testing.assert_array_equal(got.motion, ref.motion)
+    np.testing.assert_array_equal(got.contacts, ref.contacts)
+    # a partial map: unmapped target joints follow their parent (here: the arms keep the chest's rotation)
+    legs = {n: f"mixamorig:{n}" for n in tg.names if "Leg" in n or "Foot" in n or "Toe" in n or n == "Hips"}
+    part = retarget(renamed, m, tg, 60.0, joint_map=legs)
+    feet = [tg.index("LeftFoot"), tg.index("RightFoot")]
+    np.testing.assert_allclose(tg.fk(part.motion)[0][:, feet], tg.fk(ref.motion)[0][:, feet], atol=1e-9)
+    with pytest.raises(ValueError, match="'Hips' to 'nope'"):
+        retarget(renamed, m, tg, 60.0, joint_map={"Hips": "nope"})
+    with pytest.raises(ValueError, match="'Nope', which is not a joint of the target"):
+        retarget(renamed, m, tg, 60.0, joint_map={"Nope": "mixamorig:Hips"})
+    with pytest.raises(TypeError, match="joint_map="):
+        retarget(renamed, m, tg, 60.0, joint_map=[("Hips", "mixamorig:Hips")])
+    with pytest.raises(ValueError, match="two target joints"):
+        retarget(renamed, m, tg, 60.0, joint_map={"Hips": "mixamorig:Hips", "Spine": "mixamorig:Hips"})
+    with pytest.raises(ValueError, match="add it to joint_map"):
+        retarget(renamed, m, tg, 60.0, joint_map={"Hips": "mixamorig:Hips"})
+
+
+def test_six_channel_rigs_keep_the_target_bones_and_scale_the_slides():
+    """Position channels replace the offset: a rig whose channels repeat its offsets retargets onto the
+    target's bones (not the source's, not zero), and a joint that slides in the source slides s times as far."""
+    sk, m = walk(60, 60.0)
+    six = Skeleton(sk.names, sk.parents, sk.offsets,
+                   [c if sk.end_sites[j] or j == 0 else ("Xposition", "Yposition", "Zposition") + c
+                    for j, c in enumerate(sk.channels)], sk.end_sites)
+    m6 = np.zeros((len(m), six.n_channels))
+    for j in range(six.n_joints):
+        for c in sk.channels[j]:
+            m6[:, six.channel_index(j, c)] = m[:, sk.channel_index(j, c)]
+        if j and not sk.end_sites[j]:
+            for d, a in enumerate("XYZ"):
+                m6[:, six.channel_index(j, f"{a}position")] = sk.offsets[j, d]
+    np.testing.assert_allclose(six.fk(m6)[0], sk.fk(m)[0], atol=1e-12)  # the same walk
+    tg = six.with_offsets(1.3 * six.offsets)
+    res = retarget(six, m6, tg, 60.0)
+    pos = tg.fk(res.motion)[0]
+    e = tg.edges()
+    np.testing.assert_allclose(np.linalg.norm(pos[:, e[:, 1]] - pos[:, e[:, 0]], axis=-1),
+                               np.broadcast_to(np.linalg.norm(tg.offsets[e[:, 1]], axis=1), (len(m), len(e))),
+                               atol=1e-12)
+    k = six.index("Spine")
+    slid = m6.copy()
+    slid[:, six.channel_index(k, "Yposition")] += 0.02 * np.sin(np.arange(len(m)) / 5.0)
+    res2 = retarget(six, slid, tg, 60.0)
+    grow = tg.translations(res2.motion)[:, k] - tg.offsets[k]
+    np.testing.assert_allclose(grow[:, 1], res2.scale * 0.02 * np.sin(np.arange(len(m)) / 5.0), atol=1e-12)

@@ -32,6 +32,21 @@ straight line in ``fc``. That line, fitted over the noise-only cutoffs and extra
 ``fc = 0``, meets the axis at ``a``, an estimate of the noise RMS; the chosen cutoff is the
 lowest one at which ``R(fc) <= a``.
 
+*The band, in Hz, not in fractions of the rate.* The trial cutoffs run from 0.5 Hz to ``min(0.4 fs,
+max_cutoff)`` (default 20 Hz, the band Winter's worked examples of human movement analyse) and the line
+is fitted over the upper half of them, the same band whatever the rate. Spreading both over
+``0.4 fs`` instead fits the line, at 100-200 Hz, to 40-80 Hz where real marker noise has faded (camera
+systems' noise is not white: in a 200 Hz walk its power falls tenfold from 15 to 90 Hz), so ``a``
+comes out small and the cutoff high (18-20 Hz on real 100/200 Hz walks where 50 Hz gives 5-7 Hz). With
+the fixed band the same walk gives the same cutoff at 50, 100 and 200 Hz. (For noise that *is* white up
+to Nyquist the criterion - signal distortion equal to the noise passed - still rises with the rate, as
+the noise per hertz falls.)
+
+*No answer.* Winter's criterion has none for a channel when the residual stays above ``a`` up to the
+top trial cutoff, when it is already below ``a`` at the lowest one (noise only, or a signal reaching past
+the fitted band), when the fitted line meets the axis at ``a <= 0``, or for a constant channel. Those channels' cutoffs are NaN and a
+:class:`ResidualWarning` says which and why (never a silent top-of-range value).
+
 **Savitzky-Golay** (Savitzky and Golay, Anal. Chem. 36(8), 1964): a least-squares polynomial
 of degree ``polyorder`` fitted over a sliding odd window; the first and last half-windows are
 taken from the polynomial fitted to the first and last whole window (``scipy``'s ``mode="interp"``).
@@ -40,6 +55,7 @@ taken from the polynomial fitted to the first and last whole window (``scipy``'s
 from __future__ import annotations
 
 import math
+import warnings
 
 import numpy as np
 
@@ -246,25 +262,34 @@ def butterworth(x, fs, cutoff, order: int = 4, axis: int = 0, padlen: int | None
     return _from_2d(_filtfilt(sos, x2, pad), shape, ax)
 
 
+class ResidualWarning(UserWarning):
+    """Winter's residual criterion has no answer for some channels (their cutoff is NaN)."""
+
+
 def residual_cutoff(x, fs, cutoffs=None, order: int = 4, fit_from=None, axis: int = 0,
-                    return_curve: bool = False):
+                    return_curve: bool = False, max_cutoff: float = 20.0):
     """Winter's residual analysis: the cutoff (Hz) that removes noise but not signal.
 
     Parameters
     ----------
     x : samples (N, ...) along ``axis``; each channel (column) gets its own cutoff.
     fs : sampling rate in Hz.
-    cutoffs : increasing trial cutoffs in Hz (default 0.5 Hz steps from 0.5 Hz to 0.4 fs).
+    cutoffs : increasing trial cutoffs in Hz (default 0.5 Hz steps from 0.5 Hz to
+        ``min(0.4 fs, max_cutoff)``: the same band in Hz at every rate, see the module docstring).
     fit_from : lowest cutoff (Hz) of the noise-only tail the straight line is fitted to
         (default: the upper half of ``cutoffs``).
     return_curve : also return ``(cutoffs (C,), residuals (C, K), intercepts (K,))``.
+    max_cutoff : top of the default trial cutoffs in Hz (default 20; raise it for fast movements
+        such as impacts, whose signal reaches higher).
 
-    Returns the cutoff: a float for 1-D ``x``, else an array of shape ``x.shape`` without ``axis``.
+    Returns the cutoff: a float for 1-D ``x``, else an array of shape ``x.shape`` without ``axis``;
+    NaN (with a :class:`ResidualWarning`) for a channel where the criterion has no answer.
     """
     arr, ax = _signal("x", x, axis)
     fs = check_finite_scalar("fs", fs, lo=0.0, lo_open=True)
+    max_cutoff = check_finite_scalar("max_cutoff", max_cutoff, lo=0.0, lo_open=True)
     if cutoffs is None:
-        cut = np.arange(0.5, 0.4 * fs + 1e-9, 0.5)
+        cut = np.arange(0.5, min(0.4 * fs, max_cutoff) + 1e-9, 0.5)
     else:
         cut = numeric_array("cutoffs", cutoffs, "pass increasing cutoffs in Hz").ravel()
         if cut.size < 4 or not np.all(np.isfinite(cut)) or np.any(np.diff(cut) <= 0):
@@ -272,7 +297,8 @@ def residual_cutoff(x, fs, cutoffs=None, order: int = 4, fit_from=None, axis: in
         if cut[0] <= 0 or cut[-1] >= fs / 2:
             raise ValueError(f"cutoffs={fmt(cut)} must lie inside (0, fs/2 = {fs / 2!r}) Hz")
     if cut.size < 4:
-        raise ValueError(f"fs={fs!r} Hz leaves fewer than 4 default cutoffs; pass cutoffs explicitly")
+        raise ValueError(f"fs={fs!r} Hz and max_cutoff={max_cutoff!r} Hz leave fewer than 4 default cutoffs; "
+                         "pass cutoffs explicitly")
     if fit_from is None:
         lo = cut[cut.size // 2]
     else:
@@ -282,6 +308,8 @@ def residual_cutoff(x, fs, cutoffs=None, order: int = 4, fit_from=None, axis: in
     if not isinstance(return_curve, bool):
         raise TypeError(f"return_curve={fmt(return_curve)} must be True or False")
     x2, shape = _to_2d(arr, ax)
+    if x2.shape[1] == 0:
+        raise ValueError(f"x has shape {arr.shape}: no channels to analyse")
     sos = np.stack([butterworth_sos(fs, fc, order) for fc in cut], axis=2)  # (S, 6, C)
     pad = 3 * (2 * sos.shape[0] + 1)
     if x2.shape[0] <= pad:
@@ -295,15 +323,31 @@ def residual_cutoff(x, fs, cutoffs=None, order: int = 4, fit_from=None, axis: in
     A = np.stack([np.ones(tail.sum()), cut[tail]], axis=1)
     coef = np.linalg.lstsq(A, res[tail], rcond=None)[0]
     a = coef[0]
-    chosen = np.empty(x2.shape[1])
+    chosen = np.full(x2.shape[1], np.nan)
+    why = {}
+    scale = np.abs(x2).max(axis=0)
     for k in range(x2.shape[1]):
         below = np.nonzero(res[:, k] <= a[k])[0]
-        j = int(below[0]) if below.size else cut.size - 1
-        if 0 < j and res[j - 1, k] != res[j, k]:  # linear interpolation between the trial cutoffs
+        if res[0, k] <= 1e-9 * scale[k]:
+            why.setdefault("the channel is constant (its residual is rounding only)", []).append(k)
+        elif not a[k] > 0:
+            why.setdefault("the noise line meets the axis at a <= 0 (no noise estimate)", []).append(k)
+        elif below.size == 0:
+            why.setdefault(f"the residual stays above the noise intercept up to {cut[-1]:g} Hz", []).append(k)
+        elif below[0] == 0:
+            why.setdefault(f"the residual is below the noise intercept already at {cut[0]:g} Hz (the line fitted "
+                           "to the tail is no noise line: the channel is noise only, or its signal reaches past "
+                           "the fitted band)", []).append(k)
+        else:  # linear interpolation between the trial cutoffs that bracket the crossing
+            j = int(below[0])
             t = (res[j - 1, k] - a[k]) / (res[j - 1, k] - res[j, k])
             chosen[k] = cut[j - 1] + t * (cut[j] - cut[j - 1])
-        else:
-            chosen[k] = cut[j]
+    if why:
+        parts = "; ".join(f"{len(ks)} channel(s) (first {ks[0]}): {reason}" for reason, ks in why.items())
+        warnings.warn(f"residual_cutoff: Winter's criterion has no answer for {sum(map(len, why.values()))} of "
+                      f"{x2.shape[1]} channels, their cutoff is NaN: {parts}. Pass cutoffs reaching higher "
+                      "(max_cutoff=...), another fit_from, or choose the cutoff by hand", ResidualWarning,
+                      stacklevel=2)
     out_shape = shape[1:]
     fc = float(chosen[0]) if arr.ndim == 1 else chosen.reshape(out_shape)
     if return_curve:
@@ -357,5 +401,5 @@ def savgol(x, window, polyorder, deriv: int = 0, delta: float = 1.0, axis: int =
     return _from_2d(out, shape, ax)
 
 
-__all__ = ["butterworth", "butterworth_sos", "dual_pass_correction", "residual_cutoff", "savgol",
+__all__ = ["ResidualWarning", "butterworth", "butterworth_sos", "dual_pass_correction", "residual_cutoff", "savgol",
            "savgol_coefficients"]

@@ -1,4 +1,4 @@
-"""Rigid fits shared by gap filling (``gaps``) and marker solving (``solve``, ``retarget``)."""
+"""Rigid fits shared by gap filling (``gaps``), marker solving (``solve``, ``retarget``) and labelling."""
 
 from __future__ import annotations
 
@@ -23,3 +23,15 @@ def kabsch(local: np.ndarray, world: np.ndarray, weights: np.ndarray | None = No
     D[..., 2, 2] = np.where(d == 0, 1.0, d)
     R = np.swapaxes(Vt, -1, -2) @ D @ np.swapaxes(U, -1, -2)
     return R, cb - np.einsum("...ij,...j->...i", R, ca)
+
+
+def smallest_rotation(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation by the smallest angle taking direction a onto direction b (Rodrigues)."""
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    v, c = np.cross(a, b), float(np.dot(a, b))
+    if c < -1.0 + 1e-12:  # opposite: half a turn about any axis normal to a
+        n = np.cross(a, [1.0, 0.0, 0.0] if abs(a[0]) < 0.9 else [0.0, 1.0, 0.0])
+        n /= np.linalg.norm(n)
+        return 2.0 * np.outer(n, n) - np.eye(3)
+    K = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
+    return np.eye(3) + K + K @ K / (1.0 + c)

@@ -12,9 +12,20 @@ exponentials). Each skeleton joint becomes a *run* of tree joints:
   CHANNELS order (scipy's ``Rotation.from_euler("ZXY", ...)`` for ``Zrotation Xrotation Yrotation``);
 * a joint without channels (an end site, or a fixed joint) as one revolute tree joint held at 0.
 
-The first tree joint of the run carries the joint's offset; the frame of the last one is the skeleton
-joint's frame. So ``R_j = R_parent Rot(c1) Rot(c2) Rot(c3)`` and
-``p_j = p_parent + R_parent (offset_j + translation_j)``, the BVH convention.
+**Position channels replace the OFFSET** (on every joint, the root included): a joint's translation
+from its parent is ``t_j = offset_j`` with each coordinate that has a position channel taken from that
+channel instead, so ``R_j = R_parent Rot(c1) Rot(c2) Rot(c3)`` and ``p_j = p_parent + R_parent t_j``.
+This is the de-facto convention of the files and their readers: Blender's BVH importer (pose location
+``channels - rest_head_local``, so the bone's head lands at the channel values), bvhio (the channel
+overwrites that coordinate of the offset) and pybvh 0.9 (root position = the root's channels, the root
+OFFSET unused; pybvh refuses position channels on other joints). Datasets that put 6 channels on every
+joint repeat the OFFSET in the channels: adding the two would double every bone. The OFFSET is then the
+rest value (:meth:`Skeleton.rest_pose` puts it in the position channels). A file written for the other,
+additive reading can be read with ``read_bvh(..., positions="add")``.
+
+In the tree, the first joint of the run carries the offset with its position-channel coordinates zeroed
+(:attr:`Skeleton.fixed_offsets`) and the prismatic joints add the channel values; the frame of the last
+one is the skeleton joint's frame.
 
 Units: offsets and position channels in metres (a BVH file's units times the reader's ``scale``),
 rotation channels in degrees (as in BVH files); ``motion`` arrays are (F, C), one column per channel,
@@ -109,6 +120,13 @@ class Skeleton:
 
     # ------------------------------------------------------------------ the joint tree
     def _build_tree(self):
+        #: The constant part of each joint's translation (J, 3) [m]: the offset with the coordinates that
+        #: have a position channel zeroed (those come from the channels; see the module docstring).
+        self.fixed_offsets = self.offsets.copy()
+        for j, cl in enumerate(self.channels):
+            for c in cl:
+                if c in POSITION_CHANNELS:
+                    self.fixed_offsets[j, _AXIS[c]] = 0.0
         t_par, t_off, t_axes, t_kind, t_col = [], [], [], [], []
         last = np.empty(self.n_joints, dtype=np.int64)
         for j in range(self.n_joints):
@@ -120,7 +138,7 @@ class Skeleton:
             run = [(start + k, cl[k]) for k in order] or [(-1, "Xrotation")]  # no channels: a fixed joint
             for r, (col, c) in enumerate(run):
                 t_par.append(parent)
-                t_off.append(self.offsets[j] if r == 0 else np.zeros(3))
+                t_off.append(self.fixed_offsets[j] if r == 0 else np.zeros(3))
                 t_axes.append(np.eye(3)[_AXIS[c]])
                 t_kind.append("prismatic" if c in POSITION_CHANNELS else "revolute")
                 t_col.append(col)
@@ -136,7 +154,12 @@ class Skeleton:
         self.channel_tree_joint[col[col >= 0]] = np.flatnonzero(col >= 0)
         #: Which channels are rotations (degrees; the others are positions, metres), (C,).
         self.rotation_channel = np.array([c in ROTATION_CHANNELS for cl in self.channels for c in cl], dtype=bool)
-        for arr in (self.tree_joint, self.channel_tree_joint, self.rotation_channel):
+        #: For every channel column c: its axis 0, 1, 2 (x, y, z), (C,).
+        self.channel_axis = np.array([_AXIS[c] for cl in self.channels for c in cl], dtype=np.int64)
+        #: For every channel column c: its joint, (C,).
+        self.channel_joint = np.repeat(np.arange(self.n_joints), np.diff(self.channel_start)).astype(np.int64)
+        for arr in (self.tree_joint, self.channel_tree_joint, self.rotation_channel, self.fixed_offsets,
+                    self.channel_axis, self.channel_joint):
             arr.setflags(write=False)
 
     def motion_array(self, motion, name: str = "motion") -> np.ndarray:
@@ -203,16 +226,33 @@ class Skeleton:
         """Indices of the direct children of ``joint``."""
         return np.flatnonzero(self.parents == joint)
 
-    def bone_lengths(self) -> np.ndarray:
-        """|offset| of every joint (J,) [m]: the length of the bone from its parent."""
-        return np.linalg.norm(self.offsets, axis=1)
+    def translations(self, motion) -> np.ndarray:
+        """Each joint's translation from its parent, in the parent's frame (F, J, 3) [m]: the offset, with
+        the coordinates that have a position channel replaced by the channel values (the BVH convention)."""
+        m = self.motion_array(motion)
+        t = np.repeat(self.offsets[None], m.shape[0], axis=0)
+        pos = ~self.rotation_channel
+        t[:, self.channel_joint[pos], self.channel_axis[pos]] = m[:, pos]
+        return t
+
+    def bone_lengths(self, motion=None) -> np.ndarray:
+        """The length of the bone from each joint's parent [m]: |offset| (J,), or with ``motion`` (F, C)
+        the length |translation| of every frame (F, J) (joints with position channels slide)."""
+        if motion is None:
+            return np.linalg.norm(self.offsets, axis=1)
+        return np.linalg.norm(self.translations(motion), axis=-1)
 
     def rest_pose(self) -> np.ndarray:
-        """The all-zero motion (1, C): every joint at its offset, no rotation."""
-        return np.zeros((1, self.n_channels))
+        """The rest motion (1, C): no rotation, every position channel at its offset coordinate, so every
+        joint sits at its offset."""
+        m = np.zeros((1, self.n_channels))
+        pos = ~self.rotation_channel
+        m[0, pos] = self.offsets[self.channel_joint[pos], self.channel_axis[pos]]
+        return m
 
     def with_offsets(self, offsets) -> "Skeleton":
-        """The same hierarchy and channels with other offsets (J, 3) [m]."""
+        """The same hierarchy and channels with other offsets (J, 3) [m]. (A coordinate that has a position
+        channel takes its value from the motion, not the offset: there the offset is only the rest value.)"""
         return Skeleton(self.names, self.parents, offsets, self.channels, self.end_sites)
 
     def edges(self) -> np.ndarray:

@@ -23,6 +23,7 @@ import numpy as np
 from tianim._checks import as_index_array, check_choice, check_finite_scalar, check_positive_int, float_array, numeric_array
 from tianim.mocap.skeleton import ROTATION_CHANNELS, Skeleton
 from tianim.mocap.rigid import kabsch
+from tianim.mocap.rotations import euler_from_matrix, euler_matrix  # noqa: F401 - euler_from_matrix re-exported
 
 
 class SolveResult(NamedTuple):
@@ -34,25 +35,6 @@ class SolveResult(NamedTuple):
     iterations: np.ndarray
 
 
-def euler_from_matrix(R, order: str) -> np.ndarray:
-    """Intrinsic Euler angles (..., 3) in degrees, ``R = Rot(order[0]) Rot(order[1]) Rot(order[2])``,
-    for a Tait-Bryan ``order`` of three distinct axes such as ``"ZXY"``. Middle angle in [-90, 90].
-
-    With axes (i, j, k) and e = +1 for a cyclic order (XYZ, YZX, ZXY), -1 otherwise:
-    ``R[i, k] = e sin b``, ``a = atan2(-e R[j, k], R[k, k])``, ``c = atan2(-e R[i, j], R[i, i])``.
-    """
-    order = str(order).upper()
-    if len(order) != 3 or set(order) != set("XYZ"):
-        raise ValueError(f"order={order!r} must be three distinct axes, e.g. 'ZXY'")
-    R = float_array("R", R, "of shape (..., 3, 3)")
-    i, j, k = ("XYZ".index(c) for c in order)
-    e = 1.0 if (j - i) % 3 == 1 else -1.0
-    b = np.arcsin(np.clip(e * R[..., i, k], -1.0, 1.0))
-    a = np.arctan2(-e * R[..., j, k], R[..., k, k])
-    c = np.arctan2(-e * R[..., i, j], R[..., i, i])
-    return np.rad2deg(np.stack([a, b, c], axis=-1))
-
-
 def _markers_array(markers, M):
     x = numeric_array("markers", markers, "pass marker positions (frames, markers, 3) in metres, NaN for drop-outs")
     if x.ndim != 3 or x.shape[1:] != (M, 3):
@@ -60,20 +42,6 @@ def _markers_array(markers, M):
     if np.any(np.isinf(x)):
         raise ValueError("markers contains inf; use NaN for a missing marker")
     return x
-
-
-def euler_matrix(order: str, angles: np.ndarray) -> np.ndarray:
-    """``Rot(order[0], a0) Rot(order[1], a1) ...`` (..., 3, 3) for angles (..., len(order)) in degrees."""
-    R = np.broadcast_to(np.eye(3), angles.shape[:-1] + (3, 3))
-    for k, axis in enumerate(order):
-        t = np.deg2rad(angles[..., k])
-        c, s_ = np.cos(t), np.sin(t)
-        i, j = [(1, 2), (2, 0), (0, 1)]["XYZ".index(axis)]
-        E = np.zeros(angles.shape[:-1] + (3, 3))
-        E[..., "XYZ".index(axis), "XYZ".index(axis)] = 1.0
-        E[..., i, i], E[..., j, j], E[..., i, j], E[..., j, i] = c, c, -s_, s_
-        R = R @ E
-    return R
 
 
 def segment_fit(skeleton: Skeleton, markers: np.ndarray, joints: np.ndarray, local: np.ndarray,
@@ -107,19 +75,15 @@ def segment_fit(skeleton: Skeleton, markers: np.ndarray, joints: np.ndarray, loc
             R, t = kabsch(loc, x, w)
             ok = (w.sum(1) >= 3) & np.isfinite(R).all(axis=(1, 2))
             for d, axis in enumerate("XYZ"):
-                if f"{axis}position" in chans:
-                    k = c0 + chans.index(f"{axis}position")
-                    motion[ok, k] = t[ok, d] - skeleton.offsets[j, d]
-            pos_now = skeleton.offsets[j] + np.stack([motion[:, c0 + chans.index(f"{a}position")]
-                                                      if f"{a}position" in chans else np.zeros(F) for a in "XYZ"], 1)
-            Rp, pivot = np.broadcast_to(np.eye(3), (F, 3, 3)), pos_now
+                if f"{axis}position" in chans:  # position channels replace the offset (skeleton.py)
+                    motion[ok, c0 + chans.index(f"{axis}position")] = t[ok, d]
+            Rp, pivot = np.broadcast_to(np.eye(3), (F, 3, 3)), skeleton.translations(motion)[:, j]
         else:
             Rp = Rg[par]
-            pivot = pg[par] + Rp @ skeleton.offsets[j]
-            if any(c.endswith("position") for c in chans):  # a sliding joint: its translation from fallback
-                tr = np.stack([motion[:, c0 + chans.index(f"{a}position")] if f"{a}position" in chans
-                               else np.zeros(F) for a in "XYZ"], 1)
-                pivot = pivot + (Rp @ tr[..., None])[..., 0]
+            # a sliding joint's translation comes from fallback (its position channels replace the offset)
+            tr = skeleton.translations(motion)[:, j] if any(c.endswith("position") for c in chans) \
+                else np.broadcast_to(skeleton.offsets[j], (F, 3))
+            pivot = pg[par] + (Rp @ tr[..., None])[..., 0]
             idx = np.flatnonzero(mine)
             w = np.concatenate([np.ones((F, 1)), seen[:, idx].astype(float)], axis=1)
             ok = w.sum(1) >= 3

@@ -141,7 +141,7 @@ def walk(n_frames: int = 120, fps: float = 60.0, skeleton: Skeleton | None = Non
     root = np.cumsum(step, axis=0)
     root[:, 1] = -height.min(axis=1)  # no point of either foot below the ground (double support at the switch)
     for k, ch in enumerate(("Xposition", "Yposition", "Zposition")):
-        motion[:, sk.channel_index(0, ch)] = root[:, k] - sk.offsets[0, k]
+        motion[:, sk.channel_index(0, ch)] = root[:, k]  # position channels replace the offset
     return sk, motion
 
 
