@@ -1,35 +1,44 @@
-"""A particle system: a fixed-capacity pool of B copies, emitters, forces, colliders and DEM contact.
+"""Particle systems on the one contract: a read-only :class:`ParticleModel`, a :class:`ParticleState`
+holding everything that changes for B copies, and a :class:`ParticleSolver` that steps them.
 
 Usage::
 
-    ps = ParticleSystem(capacity=10_000, emitters=[PointEmitter(rate=500, speed=(2, 3), cone=0.3)],
-                        forces=[Drag(linear=0.1)], colliders=[(Ground(restitution=0.5), "bounce")], seed=1)
+    model = ParticleModel(capacity=10_000, emitters=[PointEmitter(rate=500, speed=(2, 3), cone=0.3)],
+                          forces=[Drag(linear=0.1)], colliders=[(Ground(restitution=0.5), "bounce")])
+    state = ParticleState(model, batch=1, seed=1)
+    solver = ParticleSolver()
     for frame in range(240):
-        stats = ps.step(1 / 24, substeps=4)
-    ps.x[0][ps.alive[0] > 0]                      # live positions of copy 0 (capacity, D)
+        stats = solver.step(model, state, 1 / 96, substeps=4)   # a StepStats; stats.born, stats.died, ...
+    state.x[0][state.alive[0] > 0]                               # live positions of copy 0 (capacity, D)
+
+:class:`ParticleSystem` bundles the three (``ps.step(dt, substeps)``, ``ps.x``, ...) for scripts,
+the README and the gallery.
 
 The pool
 --------
-Arrays of shape (B, capacity[, D]) allocated once: ``x`` [m], ``v`` [m/s], ``age`` [s],
+Arrays of the state, of shape (B, capacity[, D]), allocated once: ``x`` [m], ``v`` [m/s], ``age`` [s],
 ``lifetime`` [s], ``alive`` (0 dead, 1 flying, 2 stuck), ``source`` (which emitter made the slot:
 k for ``emitters[k]``, ``len(emitters) + k`` for ``sub_emitters[k]``, -1 placed by hand) and
 ``event`` (what happened to the slot in the last launch, :mod:`tianim.particles._kernels`).
-Births and deaths change values only: nothing is reallocated or recompiled. Births of a step go, in emitter order and birth-time order,
-into the free slots of lowest index (the exclusive prefix sum of the free flags, ``np.flatnonzero``):
-a deterministic reuse order. If a step births more than there are free slots, the extra births are
-dropped and counted: ``overflow`` (B,) accumulates them and a ``RuntimeWarning`` names the count.
+Births and deaths change values only: nothing is reallocated or recompiled. Births of a step go, in
+emitter order and birth-time order, into the free slots of lowest index (the exclusive prefix sum of
+the free flags, ``np.flatnonzero``): a deterministic reuse order. If a step births more than there
+are free slots, the extra births are dropped and counted: ``state.overflow`` (B,) accumulates them
+and a ``RuntimeWarning`` names the count.
 
-Each copy b draws from its own generator ``np.random.default_rng(seeds[b])`` (``seed=s`` gives
-``seeds = (s, s + 1, ...)``), so copy b of a batch is bit-identical to a single system seeded
-with ``seeds[b]``, for any thread count.
+Each copy b draws from its own PCG64 stream kept in ``state.rng[b]``
+(:func:`tianim.stepping.rng_states`), exactly the stream of ``np.random.default_rng(seeds[b])``
+(``seed=s`` gives ``seeds = (s, s + 1, ...)``), so copy b of a batch is bit-identical to a single
+system seeded with ``seeds[b]``, for any thread count, and a snapshot or copy of the state repeats
+the same draws.
 
 A step (t0, t1]
 ---------------
-1. ``substeps`` symplectic-Euler steps of h = dt (the substep; the step covers ``substeps * dt``) (``v += h a``, ``x += h v``) with
-   a = gravity + forces (+ DEM contact), then the colliders, each in a mode: ``"bounce"``
-   (restitution and Coulomb friction, as :mod:`tianim.physics.contact`), ``"stick"`` (the particle stops
-   there for the rest of its life) or ``"kill"``. A particle dies when its age reaches its lifetime
-   (to within one substep).
+1. ``substeps`` symplectic-Euler steps of h = dt (the substep; the step covers ``substeps * dt``)
+   (``v += h a``, ``x += h v``) with a = gravity + forces (+ DEM contact), then the colliders, each
+   in a mode: ``"bounce"`` (restitution and Coulomb friction, as :mod:`tianim.physics.contact`),
+   ``"stick"`` (the particle stops there for the rest of its life) or ``"kill"``. A particle dies
+   when its age reaches its lifetime (to within one substep).
 2. With ``granular=Granular(...)``: soft-sphere contact between particles through a
    :class:`tianim.spatial.NeighbourGrid` rebuilt every substep (one substep per launch); the
    colliders then touch the particles' surfaces (contact at distance ``radius`` from the centre,
@@ -49,11 +58,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tianim._checks import as_float_array, check_choice, check_finite_scalar, check_int, fmt
+from tianim._checks import as_float_array, check_choice, check_finite_scalar, check_int, fmt, real_dtype
 from tianim.particles.emitters import Emitter
 from tianim.particles.forces import force_table
+from tianim.stepping import StateArrays, StepStats, draw, rng_states
 
 MODES = ("bounce", "stick", "kill")
+#: The counters of :class:`~tianim.stepping.StepStats` ``counts`` a particle step fills, per copy (B,):
+#: births (sub-emitter children included), deaths by age, kills and sticks by colliders, births
+#: dropped for lack of room, DEM rows over max_neighbours, bounces off colliders (one per particle and
+#: launch at most), children placed by sub-emitters.
+COUNTS = ("born", "died", "killed", "stuck", "dropped", "contact_overflow", "bounced", "spawned")
 
 
 @dataclass(frozen=True)
@@ -100,22 +115,6 @@ class Granular:
         return self
 
 
-@dataclass
-class ParticleStats:
-    """What one :meth:`ParticleSystem.step` did, per copy (B,): births placed, deaths by age,
-    kills and sticks by colliders, births dropped for lack of room, DEM rows over max_neighbours,
-    bounces, and the sub-emitters' children."""
-
-    born: np.ndarray
-    died: np.ndarray
-    killed: np.ndarray
-    stuck: np.ndarray
-    dropped: np.ndarray
-    contact_overflow: np.ndarray
-    bounced: np.ndarray | None = None  #: bounce events off colliders (one per particle and launch at most)
-    spawned: np.ndarray | None = None  #: children placed by sub-emitters (included in ``born``)
-
-
 def _colliders(colliders, dim, gravity):
     from tianim.physics.model import Ground, Sphere, _collider_table
 
@@ -135,22 +134,41 @@ def _colliders(colliders, dim, gravity):
     return table, np.array(modes, dtype=np.int32)
 
 
-class ParticleSystem:
-    """B copies of a particle system with a fixed ``capacity`` (see the module docstring)."""
+def _frozen(a: np.ndarray) -> np.ndarray:
+    a = np.array(a)
+    a.flags.writeable = False
+    return a
 
-    def __init__(self, capacity, emitters=(), forces=(), colliders=(), gravity=None, granular=None,
-                 batch=1, dim=3, seed=0, seeds=None, dtype=np.float32, domain=None, sub_emitters=()):
-        """``domain``: (lower, upper) box [m] of the DEM neighbour grid (default +-5 m; outside points are
-        clamped into its border cells, exact but slower). ``sub_emitters``: a list of
-        :class:`tianim.particles.SubEmitter` (children on death or collision). Other arguments: see the
-        module docstring."""
+
+class ParticleModel:
+    """The validated, read-only description of a particle system (see the module docstring).
+
+    Parameters
+    ----------
+    capacity : int
+        Slots of the pool C (each copy).
+    emitters : list of Emitter
+        Shapes, rates and bursts (:mod:`tianim.particles.emitters`).
+    forces : list of Drag, Attractor, Vortex, CurlNoise
+    colliders : list of Ground, Sphere or (collider, mode) pairs, mode in ``MODES``
+    gravity : (D,) [m/s^2], default (0, -9.81[, 0])
+    granular : Granular or None
+        DEM soft-sphere contact between particles.
+    dim : 2 or 3
+    dtype : np.float32 (default) or np.float64
+        Precision of the state's arrays and kernels.
+    domain : ((D,), (D,)) or None
+        (lower, upper) box [m] of the DEM neighbour grid (default +-5 m; outside points are clamped
+        into its border cells, exact but slower).
+    sub_emitters : list of SubEmitter
+        Children on death or collision (:mod:`tianim.particles.subemitters`).
+    """
+
+    def __init__(self, capacity, emitters=(), forces=(), colliders=(), gravity=None, granular=None, dim=3,
+                 dtype=np.float32, domain=None, sub_emitters=()):
         self.capacity = check_int("capacity", capacity, lo=1, hi=1 << 26)
-        self.batch = check_int("batch", batch, lo=1, hi=1 << 16)
         self.dim = check_int("dim", dim, lo=2, hi=3)
-        dt_ = None if dtype is None else np.dtype(dtype) if not isinstance(dtype, str) or dtype in ("float32", "float64") else None
-        if dt_ not in (np.float32, np.float64):
-            raise TypeError(f"dtype={fmt(dtype)} is not supported; use np.float32 or np.float64")
-        self.dtype = dt_.type
+        self.dtype = real_dtype(dtype)
         if not isinstance(emitters, (list, tuple)):
             raise TypeError(f"emitters={fmt(emitters)} must be a list of emitters")
         for k, e in enumerate(emitters):
@@ -172,76 +190,197 @@ class ParticleSystem:
         self.sub_emitters = tuple(sub_emitters)
         if gravity is None:
             gravity = (0.0, -9.81, 0.0)[: self.dim]
-        self.gravity = as_float_array("gravity", gravity, shape=(self.dim,))
-        self._forces, self._noise = force_table(list(forces), self.dim)
-        self._kinds = tuple(int(k) for k in self._forces[:, 0])  # the kernel's force loop is unrolled for these
-        self._coll, self._modes = _colliders(list(colliders), self.dim, self.gravity)
-        if seeds is None:
-            seed = check_int("seed", seed, lo=0, hi=None)
-            seeds = [seed + b for b in range(self.batch)]
-        if len(seeds) != self.batch:
-            raise ValueError(f"seeds has {len(seeds)} entries; expected batch={self.batch}")
-        self.seeds = tuple(check_int(f"seeds[{b}]", s, lo=0, hi=None) for b, s in enumerate(seeds))
-        self.rngs = [np.random.default_rng(s) for s in self.seeds]
+        self.gravity = _frozen(as_float_array("gravity", gravity, shape=(self.dim,)))
+        forces_, noise = force_table(list(forces), self.dim)
+        self.forces = tuple(forces)
+        #: the force kinds, row by row: the kernel's force loop is unrolled for these
+        self.kinds = tuple(int(k) for k in forces_[:, 0])
+        coll, modes = _colliders(list(colliders), self.dim, self.gravity)
+        self.colliders = tuple(colliders)
         if granular is not None and not isinstance(granular, Granular):
             raise TypeError(f"granular={fmt(granular)} must be a Granular(...)")
         self.granular = granular.check() if granular is not None else None
         #: contact distance of the colliders [m]: the DEM radius (particles rest on their surface), else 0
         self.collider_radius = float(self.granular.radius) if self.granular is not None else 0.0
-        B, C, D, f = self.batch, self.capacity, self.dim, self.dtype
+        D, f = self.dim, self.dtype
+        lo, hi = (np.full(D, -5.0), np.full(D, 5.0)) if domain is None else domain
+        self.domain = (_frozen(np.asarray(lo, np.float64)), _frozen(np.asarray(hi, np.float64)))
+        self.dem = None
+        if self.granular is not None:
+            g = self.granular
+            #: DEM parameters of the kernel: [2R, k/m, c/m, mu, gamma_t]
+            self.dem = _frozen(np.array([2 * g.radius, g.stiffness / g.mass, g.damping() / g.mass, g.friction,
+                                         g.tangential_damping], dtype=f))
+        #: the tables the step kernel reads, in the model's dtype (read-only)
+        self.tables = dict(g=_frozen(self.gravity.astype(f)), forces=_frozen(forces_.astype(f)),
+                           noise=_frozen(noise.astype(f)),
+                           coll=_frozen(coll.astype(f) if len(coll) else np.zeros((0, 7), f)),
+                           modes=_frozen(modes if len(modes) else np.zeros(0, np.int32)))
+        self._sealed = True
+
+    def __setattr__(self, name, value):
+        if getattr(self, "_sealed", False):
+            raise AttributeError(f"ParticleModel is read-only (tried to set {name!r}); build a new model")
+        object.__setattr__(self, name, value)
+
+    @property
+    def n_sources(self) -> int:
+        """Emitters plus sub-emitters (the values ``state.source`` takes, besides -1)."""
+        return len(self.emitters) + len(self.sub_emitters)
+
+    def __repr__(self) -> str:
+        return (f"ParticleModel(capacity={self.capacity}, dim={self.dim}, emitters={len(self.emitters)}, "
+                f"sub_emitters={len(self.sub_emitters)}, forces={len(self.forces)}, colliders={len(self.colliders)}, "
+                f"granular={self.granular is not None}, dtype={np.dtype(self.dtype).name})")
+
+
+class ParticleState(StateArrays):
+    """Everything that changes in B copies of a :class:`ParticleModel`'s pool.
+
+    Parameters
+    ----------
+    model : ParticleModel
+    batch : int
+        Copies B.
+    seed : int
+        Copy b draws from ``np.random.default_rng(seed + b)`` ...
+    seeds : sequence of B ints, optional
+        ... or from ``default_rng(seeds[b])``.
+
+    Attributes
+    ----------
+    x, v : (B, C, D) model dtype
+        Positions [m], velocities [m/s].
+    age, lifetime : (B, C) model dtype
+        [s].
+    alive, event : (B, C) uint8
+        0 dead, 1 flying, 2 stuck; the last launch's event per slot (:mod:`tianim.particles._kernels`).
+    source : (B, C) int32
+        Emitter k, ``len(emitters) + k`` for sub-emitter k, -1 placed by hand.
+    t : (B,) float64
+        Each copy's time [s].
+    rng : (B, 6) uint64
+        Each copy's PCG64 state (:func:`tianim.stepping.rng_states`).
+    overflow, contact_overflow : (B,) int64
+        Births dropped for lack of room and DEM rows over ``max_neighbours``, accumulated.
+    """
+
+    ARRAYS = ("x", "v", "age", "lifetime", "alive", "source", "event", "t", "rng", "overflow", "contact_overflow")
+
+    def __init__(self, model, batch=1, seed=0, seeds=None):
+        if not isinstance(model, ParticleModel):
+            raise TypeError(f"model={fmt(model)} must be a ParticleModel(...)")
+        batch = check_int("batch", batch, lo=1, hi=1 << 16)
+        if seeds is None:
+            seed = check_int("seed", seed, lo=0, hi=None)
+            seeds = [seed + b for b in range(batch)]
+        if len(seeds) != batch:
+            raise ValueError(f"seeds has {len(seeds)} entries; expected batch={batch}")
+        self.seeds = tuple(check_int(f"seeds[{b}]", s, lo=0, hi=None) for b, s in enumerate(seeds))
+        self.model = model
+        B, C, D, f = batch, model.capacity, model.dim, model.dtype
         self.x = np.zeros((B, C, D), f)
         self.v = np.zeros((B, C, D), f)
         self.age = np.zeros((B, C), f)
         self.lifetime = np.ones((B, C), f)
         self.alive = np.zeros((B, C), np.uint8)
-        #: which source made each slot: emitter k, len(emitters) + k for sub-emitter k, -1 placed by hand
         self.source = np.full((B, C), -1, np.int32)
         self.event = np.zeros((B, C), np.uint8)
-        self._extra = np.zeros((B, C, D), f)
-        self.t = 0.0
+        self.t = np.zeros(B, np.float64)
+        self.rng = rng_states(self.seeds)
         self.overflow = np.zeros(B, np.int64)
         self.contact_overflow = np.zeros(B, np.int64)
-        self._grid = None
-        if self.granular is not None:
-            from tianim.spatial import NeighbourGrid
 
-            lo, hi = (np.full(D, -5.0), np.full(D, 5.0)) if domain is None else domain
-            lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-            # cells: at most ~4 per slot, since the serial build costs O(capacity + cells) per substep
-            cell = max(2 * self.granular.radius, float(np.prod(hi - lo) / (4 * C)) ** (1 / D))
-            self._grid = NeighbourGrid(lo, hi, cell, C, batch=B,
-                                       max_neighbours=self.granular.max_neighbours, dtype=f)
-            g = self.granular
-            self._dem = np.array([2 * g.radius, g.stiffness / g.mass, g.damping() / g.mass, g.friction,
-                                  g.tangential_damping], dtype=f)
-        k = self._kernel_data()
-        self._k = k
-
-    def _kernel_data(self):
-        f = self.dtype
-        coll = self._coll.astype(f) if len(self._coll) else np.zeros((0, 7), f)
-        return dict(g=self.gravity.astype(f), forces=self._forces.astype(f), noise=self._noise.astype(f),
-                    coll=coll, modes=self._modes if len(self._modes) else np.zeros(0, np.int32))
+    @property
+    def batch(self) -> int:
+        return self.t.shape[0]
 
     def __repr__(self) -> str:
-        return (f"ParticleSystem(capacity={self.capacity}, batch={self.batch}, dim={self.dim}, "
-                f"live={int(np.count_nonzero(self.alive))}, t={self.t:g})")
+        return (f"ParticleState(batch={self.batch}, capacity={self.model.capacity}, dim={self.model.dim}, "
+                f"live={int(np.count_nonzero(self.alive))}, t={fmt(self.t.tolist() if self.batch <= 4 else self.t[:4].tolist())})")
 
     @property
     def n_alive(self) -> np.ndarray:
         """Live particles per copy (B,)."""
         return np.count_nonzero(self.alive, axis=1)
 
-    def _place(self, births, t1):
-        """Put each copy's births into its lowest free slots, advanced ballistically to t1, all copies
-        at once. ``births[b]``: None or (x (n, D), v (n, D), t (n,) <= t1, life (n,), source (n,)) of copy b,
+    def normalized_age(self) -> np.ndarray:
+        """age / lifetime (B, capacity), in [0, 1] for live particles: the parameter of attribute tracks."""
+        return np.clip(self.age / self.lifetime, 0.0, 1.0)
+
+    def attribute(self, track) -> np.ndarray:
+        """A ``tianim.keyframe.Track`` (or any callable of normalized age) at every slot: (B, capacity, ...)."""
+        u = self.normalized_age().astype(np.float64)
+        out = np.asarray(track(u.ravel()))
+        return out.reshape(u.shape + out.shape[1:])
+
+    def check_arrays(self, model) -> None:
+        """Raise if this state does not fit ``model`` or an array was replaced by one of the wrong shape or dtype."""
+        B, C, D, f = self.batch, model.capacity, model.dim, np.dtype(model.dtype)
+        want = dict(x=((B, C, D), f), v=((B, C, D), f), age=((B, C), f), lifetime=((B, C), f),
+                    alive=((B, C), np.dtype(np.uint8)), source=((B, C), np.dtype(np.int32)),
+                    event=((B, C), np.dtype(np.uint8)), t=((B,), np.dtype(np.float64)),
+                    rng=((B, 6), np.dtype(np.uint64)), overflow=((B,), np.dtype(np.int64)),
+                    contact_overflow=((B,), np.dtype(np.int64)))
+        for name, (shape, dt) in want.items():
+            a = getattr(self, name, None)
+            if not isinstance(a, np.ndarray) or a.shape != shape or a.dtype != dt:
+                raise ValueError(f"state.{name} has shape {getattr(a, 'shape', None)} and dtype "
+                                 f"{getattr(a, 'dtype', None)}; this model needs {shape} {dt.name}: make the state "
+                                 f"with ParticleState(model, ...) and write into it in place (state.{name}[...] = ...)")
+            if not a.flags.c_contiguous or not a.flags.writeable:
+                raise ValueError(f"state.{name} must be a C-contiguous, writeable array; assign with "
+                                 f"state.{name}[...] = values")
+
+
+class ParticleSolver:
+    """Steps a :class:`ParticleState` of a :class:`ParticleModel`: ``step(model, state, dt, substeps)``.
+
+    Holds only work buffers (the DEM neighbour grid and contact accelerations), cached by shape:
+    one solver can step any number of states and models.
+    """
+
+    def __init__(self):
+        self._grids = {}
+        self._extra = {}
+
+    def __repr__(self) -> str:
+        return "ParticleSolver()"
+
+    # ---------------------------------------------------------------- work buffers
+    def _extra_buffer(self, shape, dtype):
+        key = (shape, np.dtype(dtype).name)
+        if key not in self._extra:
+            self._extra = {key: np.zeros(shape, dtype)}  # one buffer: the last shape stepped
+        return self._extra[key]
+
+    def _grid(self, model, batch):
+        from tianim.spatial import NeighbourGrid
+
+        lo, hi = model.domain
+        C, D = model.capacity, model.dim
+        # cells: at most ~4 per slot, since the serial build costs O(capacity + cells) per substep
+        cell = max(2 * model.granular.radius, float(np.prod(hi - lo) / (4 * C)) ** (1 / D))
+        key = (tuple(lo), tuple(hi), cell, C, batch, model.granular.max_neighbours, np.dtype(model.dtype).name)
+        if key not in self._grids:
+            if len(self._grids) >= 4:
+                self._grids.pop(next(iter(self._grids)))
+            self._grids[key] = NeighbourGrid(lo, hi, cell, C, batch=batch,
+                                             max_neighbours=model.granular.max_neighbours, dtype=model.dtype)
+        return self._grids[key]
+
+    # ---------------------------------------------------------------- births
+    @staticmethod
+    def _place(model, state, births, t1):
+        """Put each copy's births into its lowest free slots, advanced ballistically to t1 (B,), all copies
+        at once. ``births[b]``: None or (x (n, D), v (n, D), t (n,) <= t1[b], life (n,), source (n,)) of copy b,
         in placement order. Returns (placed, dropped) per copy (B,)."""
-        B, C = self.batch, self.capacity
+        B, C = state.batch, model.capacity
         n = np.array([0 if p is None else len(p[2]) for p in births], np.int64)
         placed = np.zeros(B, np.int64)
         if not n.any():
             return placed, placed.copy()
-        free = self.alive == 0
+        free = state.alive == 0
         n_free = np.count_nonzero(free, axis=1)
         placed = np.minimum(n, n_free)
         parts = [p for p in births if p is not None and len(p[2])]
@@ -254,112 +393,145 @@ class ParticleSystem:
         offset = np.cumsum(n_free) - n_free
         flat = slots[offset[copy[keep]] + rank[keep]]
         xs, vs, ts, ls, src = (a[keep] for a in cat)
-        tau = (t1 - ts)[:, None]
-        g = self.gravity
-        self.x.reshape(B * C, -1)[flat] = xs + vs * tau + 0.5 * g * tau ** 2
-        self.v.reshape(B * C, -1)[flat] = vs + g * tau
-        self.age.reshape(-1)[flat] = tau[:, 0]
-        self.lifetime.reshape(-1)[flat] = ls
-        self.alive.reshape(-1)[flat] = 1
-        self.source.reshape(-1)[flat] = src
+        tau = (np.asarray(t1, np.float64)[copy[keep]] - ts)[:, None]
+        g = model.gravity
+        state.x.reshape(B * C, -1)[flat] = xs + vs * tau + 0.5 * g * tau ** 2
+        state.v.reshape(B * C, -1)[flat] = vs + g * tau
+        state.age.reshape(-1)[flat] = tau[:, 0]
+        state.lifetime.reshape(-1)[flat] = ls
+        state.alive.reshape(-1)[flat] = 1
+        state.source.reshape(-1)[flat] = src
         return placed, n - placed
 
-    def _warn_dropped(self, dropped, t1, what="births"):
+    @staticmethod
+    def _warn_dropped(model, state, dropped, t1, what="births"):
         if dropped.any():
-            self.overflow += dropped
-            warnings.warn(f"particle pool full (capacity={self.capacity}): {int(dropped.sum())} {what} dropped "
-                          f"at t={t1:g} s (ParticleSystem.overflow counts them); give a larger capacity",
+            state.overflow += dropped
+            warnings.warn(f"particle pool full (capacity={model.capacity}): {int(dropped.sum())} {what} dropped "
+                          f"at t={float(np.max(t1)):g} s (state.overflow counts them); give a larger capacity",
                           RuntimeWarning, stacklevel=4)
 
-    def _emit(self, t0, t1):
+    def _emit(self, model, state, t0, t1):
         births = []
-        for b in range(self.batch):  # each copy draws from its own generator, emitters in order
-            parts = [e.emit(t0, t1, self.rngs[b]) for e in self.emitters]
+        for b in range(state.batch):  # each copy draws from its own stream, emitters in order
+            with draw(state.rng, b) as rng:
+                parts = [e.emit(float(t0[b]), float(t1[b]), rng) for e in model.emitters]
             if sum(len(p) for p in parts) == 0:
                 births.append(None)
                 continue
             cat = [np.concatenate([getattr(p, f) for p in parts]) for f in ("x", "v", "t", "life")]
             births.append((*cat, np.concatenate([np.full(len(p), k, np.int32) for k, p in enumerate(parts)])))
-        born, dropped = self._place(births, t1)
-        self._warn_dropped(dropped, t1)
+        born, dropped = self._place(model, state, births, t1)
+        self._warn_dropped(model, state, dropped, t1)
         return born, dropped
 
-    def _spawn(self, t):
-        """Sub-emitter children of the events of the launch that ended at ``t`` [s]: (placed, dropped) (B,)."""
+    def _spawn(self, model, state, t):
+        """Sub-emitter children of the events of the launch that ended at ``t`` (B,) [s]: (placed, dropped) (B,)."""
         from tianim.particles.subemitters import spawn_children
 
         births = []
-        for b in range(self.batch):
-            kids = spawn_children(self.sub_emitters, len(self.emitters), self.event[b], self.source[b], self.x[b],
-                                  self.v[b], t, self.rngs[b])
-            births.append(None if kids is None else (kids[0], kids[1], np.full(len(kids[2]), t), kids[2], kids[3]))
-        placed, dropped = self._place(births, t)
-        self._warn_dropped(dropped, t, "sub-emitter children")
+        for b in range(state.batch):
+            with draw(state.rng, b) as rng:
+                kids = spawn_children(model.sub_emitters, len(model.emitters), state.event[b], state.source[b],
+                                      state.x[b], state.v[b], float(t[b]), rng)
+            births.append(None if kids is None else (kids[0], kids[1], np.full(len(kids[2]), t[b]), kids[2], kids[3]))
+        placed, dropped = self._place(model, state, births, t)
+        self._warn_dropped(model, state, dropped, t, "sub-emitter children")
         return placed, dropped
 
-    def step(self, dt, substeps=1) -> ParticleStats:
-        """Advance every copy by ``substeps`` substeps of ``dt`` [s] (as the physics solvers do:
-        ``dt`` is the substep): births, forces, colliders, deaths."""
+    # ---------------------------------------------------------------- step
+    def step(self, model, state, dt, substeps=1) -> StepStats:
+        """Advance every copy of ``state`` by ``substeps`` substeps of ``dt`` [s] (as the physics solvers:
+        ``dt`` is the substep): births, forces, colliders, deaths. Returns a
+        :class:`~tianim.stepping.StepStats` whose ``counts`` are :data:`COUNTS` (per copy, (B,) int64)."""
+        if not isinstance(model, ParticleModel):
+            raise TypeError(f"model={fmt(model)} must be a ParticleModel(...)")
+        if not isinstance(state, ParticleState):
+            raise TypeError(f"state={fmt(state)} must be a ParticleState(model, ...)")
+        state.check_arrays(model)
         h = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
         substeps = check_int("substeps", substeps, lo=1)
-        dt = h * substeps
         from tianim.particles._kernels import particle_kernels
 
-        step, dem_accel = particle_kernels(np.dtype(self.dtype).name, self.dim, self._kinds, len(self._modes))
-        t0, t1 = self.t, self.t + dt
-        k = self._k
-        died = np.zeros(self.batch, np.int64)
-        killed = np.zeros(self.batch, np.int64)
-        stuck = np.zeros(self.batch, np.int64)
-        c_over = np.zeros(self.batch, np.int64)
-        bounced = np.zeros(self.batch, np.int64)
-        spawned = np.zeros(self.batch, np.int64)
-        sub_dropped = np.zeros(self.batch, np.int64)
-        prad = self.collider_radius
+        step, dem_accel = particle_kernels(np.dtype(model.dtype).name, model.dim, model.kinds, len(model.tables["modes"]))
+        B = state.batch
+        t0 = state.t.copy()
+        t1 = t0 + h * substeps
+        k = model.tables
+        extra = self._extra_buffer(state.x.shape, model.dtype)
+        c = {name: np.zeros(B, np.int64) for name in COUNTS}
+        sub_dropped = np.zeros(B, np.int64)
+        prad = model.collider_radius
+        ev = state.event
 
         def tally(s):
-            died[:] += np.count_nonzero(self.event == 1, axis=1)
-            killed[:] += np.count_nonzero(self.event == 2, axis=1)
-            stuck[:] += np.count_nonzero(self.event == 3, axis=1)
-            bounced[:] += np.count_nonzero(self.event == 4, axis=1)
-            if self.sub_emitters:
-                p, d = self._spawn(t0 + (s + 1) * h)
-                spawned[:] += p
+            c["died"] += np.count_nonzero(ev == 1, axis=1)
+            c["killed"] += np.count_nonzero(ev == 2, axis=1)
+            c["stuck"] += np.count_nonzero(ev == 3, axis=1)
+            c["bounced"] += np.count_nonzero(ev == 4, axis=1)
+            if model.sub_emitters:
+                p, d = self._spawn(model, state, t0 + (s + 1) * h)
+                c["spawned"] += p
                 sub_dropped[:] += d
 
-        if self._grid is None and not self.sub_emitters:
-            step(self.x, self.v, self.age, self.lifetime, self.alive, self.event, self._extra, 0, k["g"],
-                 k["forces"], k["noise"], k["coll"], k["modes"], h, substeps, prad)
+        args = (k["g"], k["forces"], k["noise"], k["coll"], k["modes"], h)
+        if model.granular is None and not model.sub_emitters:
+            step(state.x, state.v, state.age, state.lifetime, state.alive, ev, extra, 0, *args, substeps, prad)
             tally(substeps - 1)
-        elif self._grid is None:  # sub-emitters: one substep per launch, so events are found where they happen
+        elif model.granular is None:  # sub-emitters: one substep per launch, so events are found where they happen
             for s in range(substeps):
-                step(self.x, self.v, self.age, self.lifetime, self.alive, self.event, self._extra, 0, k["g"],
-                     k["forces"], k["noise"], k["coll"], k["modes"], h, 1, prad)
+                step(state.x, state.v, state.age, state.lifetime, state.alive, ev, extra, 0, *args, 1, prad)
                 tally(s)
         else:
+            grid = self._grid(model, B)
             for s in range(substeps):
-                nb = self._grid.build(self.x, active=self.alive, check=False).query(2 * self.granular.radius,
-                                                                                    on_overflow="report")
-                c_over += np.count_nonzero(nb.counts > nb.max_neighbours, axis=1)
-                dem_accel(self.x, self.v, self.alive, nb.indices, nb.counts, self._dem, self._extra)
-                step(self.x, self.v, self.age, self.lifetime, self.alive, self.event, self._extra, 1, k["g"],
-                     k["forces"], k["noise"], k["coll"], k["modes"], h, 1, prad)
+                nb = grid.build(state.x, active=state.alive, check=False).query(2 * model.granular.radius,
+                                                                               on_overflow="report")
+                c["contact_overflow"] += np.count_nonzero(nb.counts > nb.max_neighbours, axis=1)
+                dem_accel(state.x, state.v, state.alive, nb.indices, nb.counts, model.dem, extra)
+                step(state.x, state.v, state.age, state.lifetime, state.alive, ev, extra, 1, *args, 1, prad)
                 tally(s)
-            if c_over.any():
-                self.contact_overflow += c_over
-                warnings.warn(f"{int(c_over.sum())} particle rows had more than max_neighbours="
-                              f"{self.granular.max_neighbours} contacts (extra contacts ignored this substep); "
+            if c["contact_overflow"].any():
+                state.contact_overflow += c["contact_overflow"]
+                warnings.warn(f"{int(c['contact_overflow'].sum())} particle rows had more than max_neighbours="
+                              f"{model.granular.max_neighbours} contacts (extra contacts ignored this substep); "
                               "raise Granular.max_neighbours", RuntimeWarning, stacklevel=2)
-        born, dropped = self._emit(t0, t1)  # after the kernel: births are already advanced to t1
-        self.t = t1
-        return ParticleStats(born + spawned, died, killed, stuck, dropped + sub_dropped, c_over, bounced, spawned)
+        born, dropped = self._emit(model, state, t0, t1)  # after the kernel: births are already advanced to t1
+        state.t[:] = t1
+        c["born"] = born + c["spawned"]
+        c["dropped"] = dropped + sub_dropped
+        return StepStats("particles", h, substeps, np.zeros(B, bool), counts=c)
 
-    def normalized_age(self) -> np.ndarray:
-        """age / lifetime (B, capacity), in [0, 1] for live particles: the parameter of attribute tracks."""
-        return np.clip(self.age / self.lifetime, 0.0, 1.0)
 
-    def attribute(self, track) -> np.ndarray:
-        """A ``tianim.keyframe.Track`` (or any callable of normalized age) at every slot: (B, capacity, ...)."""
-        u = self.normalized_age().astype(np.float64)
-        out = np.asarray(track(u.ravel()))
-        return out.reshape(u.shape + out.shape[1:])
+class ParticleSystem:
+    """A :class:`ParticleModel`, a :class:`ParticleState` of it and a :class:`ParticleSolver`, in one object.
+
+    A convenience for scripts (the README and the gallery use it): ``ParticleSystem(capacity, ...,
+    batch=1, seed=0, seeds=None)`` takes the model's arguments plus the state's (``batch``, ``seed``,
+    ``seeds``); ``ps.step(dt, substeps)`` is ``ps.solver.step(ps.model, ps.state, dt, substeps)``.
+    Reading an attribute it does not have reads the state's (``ps.x``, ``ps.alive``, ``ps.t`` (B,),
+    ``ps.overflow``, ``ps.snapshot()``, ...) and then the model's (``ps.capacity``, ``ps.emitters``, ...).
+    """
+
+    def __init__(self, capacity, emitters=(), forces=(), colliders=(), gravity=None, granular=None,
+                 batch=1, dim=3, seed=0, seeds=None, dtype=np.float32, domain=None, sub_emitters=()):
+        self.model = ParticleModel(capacity, emitters=emitters, forces=forces, colliders=colliders, gravity=gravity,
+                                   granular=granular, dim=dim, dtype=dtype, domain=domain, sub_emitters=sub_emitters)
+        self.state = ParticleState(self.model, batch=batch, seed=seed, seeds=seeds)
+        self.solver = ParticleSolver()
+
+    def step(self, dt, substeps=1) -> StepStats:
+        """``solver.step(model, state, dt, substeps)``: see :meth:`ParticleSolver.step`."""
+        return self.solver.step(self.model, self.state, dt, substeps)
+
+    def __getattr__(self, name):
+        if name in ("model", "state", "solver") or name.startswith("__"):
+            raise AttributeError(name)
+        for part in (self.state, self.model):
+            if hasattr(part, name):
+                return getattr(part, name)
+        raise AttributeError(f"ParticleSystem has no attribute {name!r} (nor its state or model)")
+
+    def __repr__(self) -> str:
+        return (f"ParticleSystem(capacity={self.model.capacity}, batch={self.state.batch}, dim={self.model.dim}, "
+                f"live={int(np.count_nonzero(self.state.alive))}, t={float(self.state.t[0]):g})")
