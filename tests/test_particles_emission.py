@@ -224,18 +224,18 @@ def test_mesh_emitter_bad_input(make, exc, match):
         make()
 
 
-@pytest.mark.parametrize("sub, exc, match", [
-    (SubEmitter("sparks"), TypeError, "emitter"),
-    (SubEmitter(PointEmitter(), parent=3), ValueError, "parent"),
-    (SubEmitter(PointEmitter(), parent=-1), ValueError, "parent"),
-    (SubEmitter(PointEmitter(), on="birth"), ValueError, "on"),
-    (SubEmitter(PointEmitter(), count=0), ValueError, "count"),
-    (SubEmitter(PointEmitter(), count=2.5), TypeError, "count"),
-    (SubEmitter(PointEmitter(), inherit_velocity=float("nan")), ValueError, "inherit_velocity"),
-    (SubEmitter(PointEmitter(position=(0, 0))), ValueError, "2D"),
-    (SubEmitter(PointEmitter(lifetime=0)), ValueError, "lifetime"),
-    ("sparks", TypeError, "SubEmitter"),
+@pytest.mark.parametrize("make, exc, match", [
+    (lambda: SubEmitter("sparks"), TypeError, "emitter"),
+    (lambda: SubEmitter(PointEmitter(), parent=3), ValueError, "parent"),
+    (lambda: SubEmitter(PointEmitter(), parent=-1), ValueError, "parent"),
+    (lambda: SubEmitter(PointEmitter(), on="birth"), ValueError, "on"),
+    (lambda: SubEmitter(PointEmitter(), count=0), ValueError, "count"),
+    (lambda: SubEmitter(PointEmitter(), count=2.5), TypeError, "count"),
+    (lambda: SubEmitter(PointEmitter(), inherit_velocity=float("nan")), ValueError, "inherit_velocity"),
+    (lambda: SubEmitter(PointEmitter(position=(0, 0))), ValueError, "2D"),
+    (lambda: SubEmitter(PointEmitter(lifetime=0)), ValueError, "lifetime"),
+    (lambda: "sparks", TypeError, "SubEmitter"),
 ])
-def test_sub_emitter_bad_input(sub, exc, match):
-    with pytest.raises(exc, match=match):
-        ParticleSystem(10, emitters=[PointEmitter()], sub_emitters=[sub])
+def test_sub_emitter_bad_input(make, exc, match):
+    with pytest.raises(exc, match=match):  # checked when built, or by the system (parent, dimension)
+        ParticleSystem(10, emitters=[PointEmitter()], sub_emitters=[make()])

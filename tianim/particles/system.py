@@ -47,7 +47,11 @@ A step (t0, t1]
    the deaths and collisions of that substep birth their children at its end.
 4. Births with birth time t_k in (t0, t1] are placed, advanced ballistically to t1 under gravity
    alone (``x += v tau + g tau^2 / 2``, ``v += g tau``, ``tau = t1 - t_k``), their age starting at
-   tau; forces and colliders act on them from the next step.
+   tau; forces and colliders act on them from the next step. A birth whose lifetime ends within the
+   step (``tau >= lifetime``, to 1e-9 s) takes no slot: it is counted born and died, and dies at
+   ``t_k + lifetime`` at its ballistic position then, where its on-death children are born (and
+   advanced to t1 in turn). So lifetimes shorter than a frame leave exactly the births of the last
+   lifetime alive, and every particle dies within one substep of its lifetime.
 """
 
 from __future__ import annotations
@@ -64,6 +68,8 @@ from tianim.particles.forces import force_table
 from tianim.stepping import StateArrays, StepStats, draw, rng_states
 
 MODES = ("bounce", "stick", "kill")
+#: Most births one emitter may make in one step (a larger dt * rate is refused before anything changes).
+MAX_BIRTHS = 1 << 26
 #: The counters of :class:`~tianim.stepping.StepStats` ``counts`` a particle step fills, per copy (B,):
 #: births (sub-emitter children included), deaths by age, kills and sticks by colliders, births
 #: dropped for lack of room, DEM rows over max_neighbours, bounces off colliders (one per particle and
@@ -76,8 +82,11 @@ class Granular:
     """Soft-sphere (DEM) contact between particles: linear spring-dashpot normal force and Coulomb friction.
 
     ``radius`` R [m], ``mass`` m [kg], ``stiffness`` k [N/m], ``restitution`` e in (0, 1],
-    ``friction`` mu >= 0, ``tangential_damping`` gamma_t [1/s] (viscous tangential force per unit
-    mass, capped by mu times the normal one). The dashpot c follows from e for the pair's reduced mass
+    ``friction`` mu >= 0, ``tangential_damping`` gamma_t [1/s]: the tangential force per unit mass
+    is viscous, ``gamma_t |u_t|``, capped by mu times the normal one (Haff & Werner 1986), so friction
+    needs gamma_t > 0. The default ``None`` takes gamma_t = omega0 = sqrt(2 k / m) (the contact's
+    natural frequency: a sliding contact reaches the Coulomb cap within about one contact time);
+    ``tangential_damping=0`` turns tangential forces off and then requires ``friction=0``. The dashpot c follows from e for the pair's reduced mass
     m/2 (Cundall & Strack 1979; e.g. Schwager & Poeschel 2007): ``zeta = -ln e / sqrt(pi^2 + ln^2 e)``,
     ``c = 2 zeta sqrt(k m / 2)``; contact time ``t_c = pi / (omega0 sqrt(1 - zeta^2))``,
     ``omega0 = sqrt(2 k / m)``. Take substeps ``h <= t_c / 20``.
@@ -88,8 +97,17 @@ class Granular:
     stiffness: float = 1e4
     restitution: float = 0.5
     friction: float = 0.5
-    tangential_damping: float = 0.0
+    tangential_damping: float | None = None
     max_neighbours: int = 24
+
+    def __post_init__(self):
+        self.check()
+
+    def gamma_t(self) -> float:
+        """The tangential damping gamma_t [1/s] used (``tangential_damping`` or its default sqrt(2 k / m))."""
+        if self.tangential_damping is None:
+            return math.sqrt(2 * self.stiffness / self.mass)
+        return float(self.tangential_damping)
 
     def zeta(self) -> float:
         le = math.log(self.restitution)
@@ -110,7 +128,12 @@ class Granular:
         check_finite_scalar("granular.stiffness", self.stiffness, lo=0.0, lo_open=True)
         check_finite_scalar("granular.restitution", self.restitution, lo=0.0, hi=1.0, lo_open=True)
         check_finite_scalar("granular.friction", self.friction, lo=0.0)
-        check_finite_scalar("granular.tangential_damping", self.tangential_damping, lo=0.0)
+        if self.tangential_damping is not None:
+            gt = check_finite_scalar("granular.tangential_damping", self.tangential_damping, lo=0.0)
+            if gt == 0 and self.friction > 0:
+                raise ValueError(f"granular.friction={fmt(self.friction)} has no effect with tangential_damping=0 "
+                                 "(the friction force is min(gamma_t |u_t|, mu |f_n|)); give tangential_damping > 0, "
+                                 "leave it None (sqrt(2 k / m)) or set friction=0")
         check_int("granular.max_neighbours", self.max_neighbours, lo=1, hi=4096)
         return self
 
@@ -132,6 +155,59 @@ def _colliders(colliders, dim, gravity):
     if not len(objs):
         table = np.zeros((0, 7))
     return table, np.array(modes, dtype=np.int32)
+
+
+def _as_list(name, value, kinds, what):
+    if isinstance(value, kinds):
+        return [value]
+    if not isinstance(value, (list, tuple)):
+        raise TypeError(f"{name}={fmt(value)} must be a list of {what} (or one of them)")
+    return list(value)
+
+
+def _limit(dtype) -> float:
+    """Largest magnitude of a scene value the kernels take in ``dtype``: sqrt(max) (squares stay finite)."""
+    return float(np.finfo(dtype).max) ** 0.5
+
+
+def _check_magnitude(name, values, dtype):
+    a = np.asarray(values, np.float64)
+    big = np.abs(a) > _limit(dtype)
+    if big.any():
+        raise ValueError(f"{name} holds {fmt(float(a[big][0]))}, beyond what {np.dtype(dtype).name} kernels hold "
+                         f"(|value| <= {_limit(dtype):.3g}); rescale the scene or use dtype=np.float64")
+
+
+def _check_fields(name, emitter, dtype):
+    """Every numeric option of ``emitter`` within the kernels' range (:func:`_check_magnitude`)."""
+    import dataclasses
+
+    for f in dataclasses.fields(emitter):
+        value = getattr(emitter, f.name)
+        if f.name.startswith("_") or value is None or isinstance(value, (str, bool)):
+            continue
+        try:
+            a = np.asarray(value if f.name != "bursts" else [b[0] for b in value], np.float64)
+        except (TypeError, ValueError):
+            continue
+        _check_magnitude(f"{name}.{f.name}", a, dtype)
+
+
+def _domain(domain, dim):
+    try:
+        lo, hi = domain
+        lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
+    except (TypeError, ValueError):
+        raise TypeError(f"domain={fmt(domain)} must be (lower, upper), each {dim} coordinates [m]") from None
+    if lo.shape != (dim,) or hi.shape != (dim,):
+        raise ValueError(f"domain={fmt(domain)} has corners of shape {lo.shape} and {hi.shape}; this system is "
+                         f"{dim}D: give (lower, upper), each {dim} coordinates [m]")
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise ValueError(f"domain={fmt(domain)} is not finite; give finite corners [m]")
+    if np.any(hi <= lo):
+        raise ValueError(f"domain={fmt(domain)}: upper must be > lower on every axis (reversed corners?); "
+                         "give (lower, upper)")
+    return lo, hi
 
 
 def _frozen(a: np.ndarray) -> np.ndarray:
@@ -162,40 +238,59 @@ class ParticleModel:
         into its border cells, exact but slower).
     sub_emitters : list of SubEmitter
         Children on death or collision (:mod:`tianim.particles.subemitters`).
+
+    One object given where a list is expected (``forces=Drag()``, ``colliders=Ground()``,
+    ``colliders=(Ground(), "kill")``, ``emitters=PointEmitter(...)``) is a one-element list. Every
+    value is checked here (ValueError/TypeError naming the argument): finite, within the range the
+    ``dtype`` kernels hold (:func:`_check_magnitude`), a ``domain`` with lower < upper in ``dim``
+    coordinates.
     """
 
     def __init__(self, capacity, emitters=(), forces=(), colliders=(), gravity=None, granular=None, dim=3,
                  dtype=np.float32, domain=None, sub_emitters=()):
+        from tianim.particles.forces import Attractor, CurlNoise, Drag, Vortex
+        from tianim.particles.subemitters import SubEmitter
+        from tianim.physics.model import Ground, Sphere
+
         self.capacity = check_int("capacity", capacity, lo=1, hi=1 << 26)
         self.dim = check_int("dim", dim, lo=2, hi=3)
         self.dtype = real_dtype(dtype)
-        if not isinstance(emitters, (list, tuple)):
-            raise TypeError(f"emitters={fmt(emitters)} must be a list of emitters")
+        # one object where a list is expected is taken as a one-element list, for every list argument
+        emitters = _as_list("emitters", emitters, Emitter, "emitters (PointEmitter, BoxEmitter, ...)")
+        forces = _as_list("forces", forces, (Drag, Attractor, Vortex, CurlNoise), "Drag/Attractor/Vortex/CurlNoise")
+        one_pair = (isinstance(colliders, tuple) and len(colliders) == 2 and isinstance(colliders[1], str)
+                    and isinstance(colliders[0], (Ground, Sphere)))
+        colliders = [colliders] if one_pair else _as_list("colliders", colliders, (Ground, Sphere),
+                                                             "Ground/Sphere or (collider, mode) pairs")
+        sub_emitters = _as_list("sub_emitters", sub_emitters, SubEmitter, "SubEmitter")
         for k, e in enumerate(emitters):
             if not isinstance(e, Emitter):
                 raise TypeError(f"emitters[{k}]={fmt(e)} is not an emitter; use PointEmitter, BoxEmitter, ...")
             e.check(f"emitters[{k}]")
             if e.dim != self.dim:
                 raise ValueError(f"emitters[{k}] is {e.dim}D but the system is {self.dim}D (dim={self.dim})")
+            _check_fields(f"emitters[{k}]", e, self.dtype)
         self.emitters = tuple(emitters)
-        from tianim.particles.subemitters import SubEmitter
-
-        if not isinstance(sub_emitters, (list, tuple)):
-            raise TypeError(f"sub_emitters={fmt(sub_emitters)} must be a list of SubEmitter")
         n_src = len(self.emitters) + len(sub_emitters)
         for k, se in enumerate(sub_emitters):
             if not isinstance(se, SubEmitter):
                 raise TypeError(f"sub_emitters[{k}]={fmt(se)} is not a SubEmitter; use SubEmitter(emitter, parent, on, count)")
             se.check(f"sub_emitters[{k}]", n_src, self.dim)
+            _check_fields(f"sub_emitters[{k}].emitter", se.emitter, self.dtype)
         self.sub_emitters = tuple(sub_emitters)
         if gravity is None:
             gravity = (0.0, -9.81, 0.0)[: self.dim]
         self.gravity = _frozen(as_float_array("gravity", gravity, shape=(self.dim,)))
+        _check_magnitude("gravity", self.gravity, self.dtype)
         forces_, noise = force_table(list(forces), self.dim)
+        for i, row in enumerate(forces_):
+            _check_magnitude(f"forces[{i}]", row, self.dtype)
         self.forces = tuple(forces)
         #: the force kinds, row by row: the kernel's force loop is unrolled for these
         self.kinds = tuple(int(k) for k in forces_[:, 0])
         coll, modes = _colliders(list(colliders), self.dim, self.gravity)
+        for i, row in enumerate(coll):
+            _check_magnitude(f"colliders[{i}]", row, self.dtype)
         self.colliders = tuple(colliders)
         if granular is not None and not isinstance(granular, Granular):
             raise TypeError(f"granular={fmt(granular)} must be a Granular(...)")
@@ -203,14 +298,17 @@ class ParticleModel:
         #: contact distance of the colliders [m]: the DEM radius (particles rest on their surface), else 0
         self.collider_radius = float(self.granular.radius) if self.granular is not None else 0.0
         D, f = self.dim, self.dtype
-        lo, hi = (np.full(D, -5.0), np.full(D, 5.0)) if domain is None else domain
+        lo, hi = (np.full(D, -5.0), np.full(D, 5.0)) if domain is None else _domain(domain, D)
+        _check_magnitude("domain", np.concatenate([lo, hi]), self.dtype)
         self.domain = (_frozen(np.asarray(lo, np.float64)), _frozen(np.asarray(hi, np.float64)))
+        #: where each emitter's bursts start in a state's ``fired`` row (emitter k: offsets[k]:offsets[k + 1])
+        self.burst_offsets = tuple(int(o) for o in np.cumsum([0] + [e.n_bursts for e in self.emitters]))
         self.dem = None
         if self.granular is not None:
             g = self.granular
             #: DEM parameters of the kernel: [2R, k/m, c/m, mu, gamma_t]
             self.dem = _frozen(np.array([2 * g.radius, g.stiffness / g.mass, g.damping() / g.mass, g.friction,
-                                         g.tangential_damping], dtype=f))
+                                         g.gamma_t()], dtype=f))
         #: the tables the step kernel reads, in the model's dtype (read-only)
         self.tables = dict(g=_frozen(self.gravity.astype(f)), forces=_frozen(forces_.astype(f)),
                            noise=_frozen(noise.astype(f)),
@@ -263,9 +361,12 @@ class ParticleState(StateArrays):
         Each copy's PCG64 state (:func:`tianim.stepping.rng_states`).
     overflow, contact_overflow : (B,) int64
         Births dropped for lack of room and DEM rows over ``max_neighbours``, accumulated.
+    fired : (B, n_bursts) bool
+        Which bursts of the emitters (emitter k's at ``model.burst_offsets[k]:[k + 1]``) have fired in each copy.
     """
 
-    ARRAYS = ("x", "v", "age", "lifetime", "alive", "source", "event", "t", "rng", "overflow", "contact_overflow")
+    ARRAYS = ("x", "v", "age", "lifetime", "alive", "source", "event", "t", "rng", "overflow", "contact_overflow",
+              "fired")
 
     def __init__(self, model, batch=1, seed=0, seeds=None):
         if not isinstance(model, ParticleModel):
@@ -290,6 +391,7 @@ class ParticleState(StateArrays):
         self.rng = rng_states(self.seeds)
         self.overflow = np.zeros(B, np.int64)
         self.contact_overflow = np.zeros(B, np.int64)
+        self.fired = np.zeros((B, model.burst_offsets[-1]), bool)
 
     @property
     def batch(self) -> int:
@@ -321,7 +423,7 @@ class ParticleState(StateArrays):
                     alive=((B, C), np.dtype(np.uint8)), source=((B, C), np.dtype(np.int32)),
                     event=((B, C), np.dtype(np.uint8)), t=((B,), np.dtype(np.float64)),
                     rng=((B, 6), np.dtype(np.uint64)), overflow=((B,), np.dtype(np.int64)),
-                    contact_overflow=((B,), np.dtype(np.int64)))
+                    contact_overflow=((B,), np.dtype(np.int64)), fired=((B, model.burst_offsets[-1]), np.dtype(bool)))
         for name, (shape, dt) in want.items():
             a = getattr(self, name, None)
             if not isinstance(a, np.ndarray) or a.shape != shape or a.dtype != dt:
@@ -336,16 +438,33 @@ class ParticleState(StateArrays):
 class ParticleSolver:
     """Steps a :class:`ParticleState` of a :class:`ParticleModel`: ``step(model, state, dt, substeps)``.
 
-    Holds only work buffers (the DEM neighbour grid and contact accelerations), cached by shape:
-    one solver can step any number of states and models.
+    Holds only its option and work buffers (the DEM neighbour grid and contact accelerations), cached
+    by shape: one solver can step any number of states and models.
+
+    ``on_divergence``: what a step does when a live particle's position or velocity is no longer
+    finite (a step far too large for the forces or contact stiffness): ``"raise"`` (default) raises
+    :class:`tianim.physics.DivergenceError` naming the copies, the state left as the step made it
+    (restore a snapshot taken before the call to go on); ``"rollback"`` snapshots the state before
+    every step (a copy of its arrays: slower), puts the diverged copies back to the start of the call
+    and reports them in ``StepStats.diverged``, the others keeping their results.
     """
 
-    def __init__(self):
+    def __init__(self, on_divergence="raise"):
+        self.on_divergence = check_choice("on_divergence", on_divergence, ("raise", "rollback"))
         self._grids = {}
         self._extra = {}
 
     def __repr__(self) -> str:
-        return "ParticleSolver()"
+        return f"ParticleSolver(on_divergence={self.on_divergence!r})"
+
+    @staticmethod
+    def _diverged(state) -> np.ndarray:
+        """(B,) copies with a live particle whose x or v is not finite (a cheap sum first: NaN and inf
+        propagate through it; the exact test only when it is not finite)."""
+        if np.isfinite(state.x.sum()) and np.isfinite(state.v.sum()):
+            return np.zeros(state.batch, bool)
+        bad = ~(np.isfinite(state.x).all(axis=2) & np.isfinite(state.v).all(axis=2))
+        return (bad & (state.alive != 0)).any(axis=1)
 
     # ---------------------------------------------------------------- work buffers
     def _extra_buffer(self, shape, dtype):
@@ -412,18 +531,65 @@ class ParticleSolver:
                           RuntimeWarning, stacklevel=4)
 
     def _emit(self, model, state, t0, t1):
-        births = []
-        for b in range(state.batch):  # each copy draws from its own stream, emitters in order
+        """The emitters' births of the step (t0, t1] (B,), placed. A birth whose lifetime ends before t1
+        (tau = t1 - t_k >= life) dies at t_k + life without taking a slot, and its on-death children
+        are born then (cascades followed). Returns (born, died, spawned, dropped) (B,)."""
+        births, missed = [], []
+        B = state.batch
+        died, split = np.zeros(B, np.int64), np.zeros((B, 3), np.int64)
+        offs = model.burst_offsets
+        for b in range(B):  # each copy draws from its own stream, emitters in order
             with draw(state.rng, b) as rng:
-                parts = [e.emit(float(t0[b]), float(t1[b]), rng) for e in model.emitters]
-            if sum(len(p) for p in parts) == 0:
-                births.append(None)
-                continue
-            cat = [np.concatenate([getattr(p, f) for p in parts]) for f in ("x", "v", "t", "life")]
-            births.append((*cat, np.concatenate([np.full(len(p), k, np.int32) for k, p in enumerate(parts)])))
-        born, dropped = self._place(model, state, births, t1)
+                lost = []
+                parts = [e.emit(float(t0[b]), float(t1[b]), rng, state.fired[b, offs[k]:offs[k + 1]], lost)
+                         for k, e in enumerate(model.emitters)]
+                missed += [(b, bt) for _, bt in lost]
+                if sum(len(p) for p in parts) == 0:
+                    births.append(None)
+                    continue
+                cat = [np.concatenate([getattr(p, f) for p in parts]) for f in ("x", "v", "t", "life")]
+                cat.append(np.concatenate([np.full(len(p), k, np.int32) for k, p in enumerate(parts)]))
+                cat, died[b], split[b] = self._short_lives(model, cat, float(t1[b]), rng)
+            births.append(cat)
+        if missed:
+            warnings.warn(f"{len(missed)} burst(s) at t={sorted({bt for _, bt in missed})} s are before the time the "
+                          f"state started stepping (t={fmt(float(np.min(t0)))} s) and will not fire; give burst times at "
+                          "or after the state's start", RuntimeWarning, stacklevel=3)
+        placed, dropped = self._place(model, state, births, t1)
         self._warn_dropped(model, state, dropped, t1)
-        return born, dropped
+        # children of births dead within the step: placed (they follow the emitters' births) or dead
+        spawned = np.clip(placed - split[:, 0], 0, split[:, 1]) + split[:, 2]
+        return placed + died, died, spawned, dropped
+
+    @staticmethod
+    def _short_lives(model, cat, t1, rng):
+        """Split births (x, v, t, life, source) of one copy at t1: those alive at t1 (returned, in order)
+        and those that die before (counted; their on-death children drawn from ``rng`` and split the
+        same way). Returns (alive births, deaths, (emitter births alive, children alive, children dead))."""
+        from tianim.particles.subemitters import death_children
+
+        keep, deaths, kids_dead = [], 0, 0
+        g = model.gravity
+        while cat is not None:
+            x, v, t, life, src = cat
+            gone = (t1 - t) >= life - 1e-9  # the bursts' tolerance for accumulated step ends (t1 += dt)
+            if not gone.any():
+                keep.append(cat)
+                break
+            keep.append([a[~gone] for a in cat])
+            deaths += int(np.count_nonzero(gone))
+            if len(keep) > 1:
+                kids_dead += int(np.count_nonzero(gone))
+            if not model.sub_emitters:
+                break
+            lg = life[gone][:, None]  # ballistic to the death, as a placed birth would fly
+            cat = death_children(model.sub_emitters, len(model.emitters), src[gone], x[gone] + v[gone] * lg
+                                 + 0.5 * g * lg ** 2, v[gone] + g * lg, t[gone] + life[gone], rng)
+            if cat is not None:
+                cat = [cat[0], cat[1], cat[4], cat[2], cat[3].astype(np.int32)]
+        out = keep[0] if len(keep) == 1 else [np.concatenate([k[i] for k in keep]) for i in range(5)]
+        first = len(keep[0][2])  # the emitters' own births alive at t1 come first, then children
+        return out, deaths, (first, len(out[2]) - first, kids_dead)
 
     def _spawn(self, model, state, t):
         """Sub-emitter children of the events of the launch that ended at ``t`` (B,) [s]: (placed, dropped) (B,)."""
@@ -434,7 +600,7 @@ class ParticleSolver:
             with draw(state.rng, b) as rng:
                 kids = spawn_children(model.sub_emitters, len(model.emitters), state.event[b], state.source[b],
                                       state.x[b], state.v[b], float(t[b]), rng)
-            births.append(None if kids is None else (kids[0], kids[1], np.full(len(kids[2]), t[b]), kids[2], kids[3]))
+            births.append(None if kids is None else (kids[0], kids[1], kids[4], kids[2], kids[3]))
         placed, dropped = self._place(model, state, births, t)
         self._warn_dropped(model, state, dropped, t, "sub-emitter children")
         return placed, dropped
@@ -451,6 +617,14 @@ class ParticleSolver:
         state.check_arrays(model)
         h = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
         substeps = check_int("substeps", substeps, lo=1)
+        span = h * substeps
+        for k, e in enumerate(model.emitters):
+            if e.rate * span > MAX_BIRTHS:
+                raise ValueError(f"dt * substeps = {span:g} s makes emitters[{k}] (rate={e.rate:g}/s) birth "
+                                 f"{e.rate * span:.3g} particles in one step, more than {MAX_BIRTHS}; take smaller steps")
+        if not np.isfinite(state.t + span).all():
+            raise ValueError(f"dt={fmt(dt)} with substeps={substeps} takes the time past the float range; give a smaller dt")
+        snap = state.snapshot() if self.on_divergence == "rollback" else None
         from tianim.particles._kernels import particle_kernels
 
         step, dem_accel = particle_kernels(np.dtype(model.dtype).name, model.dim, model.kinds, len(model.tables["modes"]))
@@ -496,29 +670,48 @@ class ParticleSolver:
                 warnings.warn(f"{int(c['contact_overflow'].sum())} particle rows had more than max_neighbours="
                               f"{model.granular.max_neighbours} contacts (extra contacts ignored this substep); "
                               "raise Granular.max_neighbours", RuntimeWarning, stacklevel=2)
-        born, dropped = self._emit(model, state, t0, t1)  # after the kernel: births are already advanced to t1
+        born, died, spawned, dropped = self._emit(model, state, t0, t1)  # after the kernel: births advanced to t1
         state.t[:] = t1
-        c["born"] = born + c["spawned"]
+        c["died"] += died
+        c["born"] = born + c["spawned"]  # + the children placed after substeps (born counts _emit's own)
+        c["spawned"] += spawned
         c["dropped"] = dropped + sub_dropped
-        return StepStats("particles", h, substeps, np.zeros(B, bool), counts=c)
+        bad = self._diverged(state)
+        stats = StepStats("particles", h, substeps, bad, reason=None, counts=c)
+        if bad.any():
+            from tianim.physics.watchdog import DivergenceError
+
+            stats.reason = "non-finite particle positions or velocities"
+            copies = [int(b) for b in np.flatnonzero(bad)]
+            if self.on_divergence == "raise":
+                raise DivergenceError(f"particles diverged in copies {copies} (non-finite x or v) in the step to "
+                                      f"t={float(t1[bad][0]):g} s with dt={h:g} s, substeps={substeps}: take a smaller dt "
+                                      "(or softer forces, a lower Granular.stiffness); the state keeps the step's "
+                                      "values (restore a snapshot to go on)", copies, stats)
+            for name in state.ARRAYS:
+                getattr(state, name)[bad] = snap[name][bad]
+            for v in c.values():
+                v[bad] = 0  # the rolled-back copies did nothing
+        return stats
 
 
 class ParticleSystem:
     """A :class:`ParticleModel`, a :class:`ParticleState` of it and a :class:`ParticleSolver`, in one object.
 
     A convenience for scripts (the README and the gallery use it): ``ParticleSystem(capacity, ...,
-    batch=1, seed=0, seeds=None)`` takes the model's arguments plus the state's (``batch``, ``seed``,
-    ``seeds``); ``ps.step(dt, substeps)`` is ``ps.solver.step(ps.model, ps.state, dt, substeps)``.
+    batch=1, seed=0, seeds=None, on_divergence="raise")`` takes the model's arguments, the state's
+    (``batch``, ``seed``, ``seeds``) and the solver's (``on_divergence``); ``ps.step(dt, substeps)`` is ``ps.solver.step(ps.model, ps.state, dt, substeps)``.
     Reading an attribute it does not have reads the state's (``ps.x``, ``ps.alive``, ``ps.t`` (B,),
     ``ps.overflow``, ``ps.snapshot()``, ...) and then the model's (``ps.capacity``, ``ps.emitters``, ...).
     """
 
     def __init__(self, capacity, emitters=(), forces=(), colliders=(), gravity=None, granular=None,
-                 batch=1, dim=3, seed=0, seeds=None, dtype=np.float32, domain=None, sub_emitters=()):
+                 batch=1, dim=3, seed=0, seeds=None, dtype=np.float32, domain=None, sub_emitters=(),
+                 on_divergence="raise"):
         self.model = ParticleModel(capacity, emitters=emitters, forces=forces, colliders=colliders, gravity=gravity,
                                    granular=granular, dim=dim, dtype=dtype, domain=domain, sub_emitters=sub_emitters)
         self.state = ParticleState(self.model, batch=batch, seed=seed, seeds=seeds)
-        self.solver = ParticleSolver()
+        self.solver = ParticleSolver(on_divergence=on_divergence)
 
     def step(self, dt, substeps=1) -> StepStats:
         """``solver.step(model, state, dt, substeps)``: see :meth:`ParticleSolver.step`."""
