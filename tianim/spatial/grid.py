@@ -170,6 +170,7 @@ class NeighbourGrid:
         self.order = np.zeros((B, N), np.int32)
         self.sorted_x = np.zeros((B, N, D), self.dtype)
         self._out: tuple[np.ndarray, np.ndarray] | None = None  # query outputs (flat, grow-only)
+        self._views = None  # (q, indices, counts): views of _out for the last query size
         self._all_active = np.ones((B, N), np.uint8)
         self._built = None
 
@@ -312,10 +313,13 @@ class NeighbourGrid:
         """Output arrays for q query points: C-contiguous views of two flat buffers that only grow (to
         the largest q queried), so memory stays bounded whatever sequence of query sizes comes."""
         B, K = self.batch, self.max_neighbours
+        if self._views is not None and self._views[0] == q:
+            return self._views[1:]  # the same arrays as the last query of this size
         if self._out is None or self._out[1].size < B * q:
             self._out = (np.zeros(B * q * K, np.int32), np.zeros(B * q, np.int32))
         nbr, count = self._out
-        return nbr[: B * q * K].reshape(B, q, K), count[: B * q].reshape(B, q)
+        self._views = (q, nbr[: B * q * K].reshape(B, q, K), count[: B * q].reshape(B, q))
+        return self._views[1:]
 
 
 def neighbour_lists(points, radius, max_neighbours=None, lower=None, upper=None):
