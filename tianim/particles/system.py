@@ -244,6 +244,10 @@ class ParticleModel:
     value is checked here (ValueError/TypeError naming the argument): finite, within the range the
     ``dtype`` kernels hold (:func:`_check_magnitude`), a ``domain`` with lower < upper in ``dim``
     coordinates.
+
+    Emitters have no per-copy memory (a step's births are a function of its window (t0, t1]; which
+    bursts fired is ``ParticleState.fired``). A :class:`~tianim.particles.MeshEmitter`'s mesh is an
+    input the caller moves (``MeshEmitter.move``), shared by every copy and state, not state.
     """
 
     def __init__(self, capacity, emitters=(), forces=(), colliders=(), gravity=None, granular=None, dim=3,
