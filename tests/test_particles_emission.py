@@ -31,7 +31,7 @@ def test_every_death_spawns_exactly_n_children_at_the_death_position_and_time():
     for _ in range(240):  # 1 s, one substep per step so each step can be checked on its own
         x0, v0, alive0, src0 = ps.x[0].copy(), ps.v[0].copy(), ps.alive[0].copy(), ps.source[0].copy()
         age0, life0 = ps.age[0].copy(), ps.lifetime[0].copy()
-        t_end = ps.t + h
+        t_end = ps.t[0] + h
         st = ps.step(h)
         died = np.flatnonzero((ps.event[0] == 1) & (alive0 == 1))
         # where each parent died: one symplectic-Euler step from its state before the step
@@ -47,7 +47,7 @@ def test_every_death_spawns_exactly_n_children_at_the_death_position_and_time():
         life, age = life0[died], age0[died] + h
         assert np.all(age >= life - 1e-12) and np.all(age < life + h + 1e-12)
         assert np.all(src0[died] == 0)
-        assert t_end == pytest.approx(ps.t)
+        assert t_end == pytest.approx(ps.t[0])
         deaths += len(died)
         spawned += int(st.spawned[0])
     assert deaths >= 7 + math.floor(20 * (1 - 0.6))  # the burst and every rocket born before 1 s - 0.6 s
@@ -224,18 +224,18 @@ def test_mesh_emitter_bad_input(make, exc, match):
         make()
 
 
-@pytest.mark.parametrize("sub, exc, match", [
-    (SubEmitter("sparks"), TypeError, "emitter"),
-    (SubEmitter(PointEmitter(), parent=3), ValueError, "parent"),
-    (SubEmitter(PointEmitter(), parent=-1), ValueError, "parent"),
-    (SubEmitter(PointEmitter(), on="birth"), ValueError, "on"),
-    (SubEmitter(PointEmitter(), count=0), ValueError, "count"),
-    (SubEmitter(PointEmitter(), count=2.5), TypeError, "count"),
-    (SubEmitter(PointEmitter(), inherit_velocity=float("nan")), ValueError, "inherit_velocity"),
-    (SubEmitter(PointEmitter(position=(0, 0))), ValueError, "2D"),
-    (SubEmitter(PointEmitter(lifetime=0)), ValueError, "lifetime"),
-    ("sparks", TypeError, "SubEmitter"),
+@pytest.mark.parametrize("make, exc, match", [
+    (lambda: SubEmitter("sparks"), TypeError, "emitter"),
+    (lambda: SubEmitter(PointEmitter(), parent=3), ValueError, "parent"),
+    (lambda: SubEmitter(PointEmitter(), parent=-1), ValueError, "parent"),
+    (lambda: SubEmitter(PointEmitter(), on="birth"), ValueError, "on"),
+    (lambda: SubEmitter(PointEmitter(), count=0), ValueError, "count"),
+    (lambda: SubEmitter(PointEmitter(), count=2.5), TypeError, "count"),
+    (lambda: SubEmitter(PointEmitter(), inherit_velocity=float("nan")), ValueError, "inherit_velocity"),
+    (lambda: SubEmitter(PointEmitter(position=(0, 0))), ValueError, "2D"),
+    (lambda: SubEmitter(PointEmitter(lifetime=0)), ValueError, "lifetime"),
+    (lambda: "sparks", TypeError, "SubEmitter"),
 ])
-def test_sub_emitter_bad_input(sub, exc, match):
-    with pytest.raises(exc, match=match):
-        ParticleSystem(10, emitters=[PointEmitter()], sub_emitters=[sub])
+def test_sub_emitter_bad_input(make, exc, match):
+    with pytest.raises(exc, match=match):  # checked when built, or by the system (parent, dimension)
+        ParticleSystem(10, emitters=[PointEmitter()], sub_emitters=[make()])

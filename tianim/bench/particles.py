@@ -106,6 +106,9 @@ class NumpyParticles:
                 vx[idx] = scale * ux
                 vz[idx] = scale * uz
                 vy[idx] = -e * vn
+                # the position follows the friction's tangential velocity change (x = x_prev + h v_new)
+                x[idx] += h32 * (vx[idx] - ux)
+                z[idx] += h32 * (vz[idx] - uz)
             self.age += h32
             if np.any(self.age >= self.life):  # never here (lifetimes 1e9 s), but the model has it
                 self.alive &= self.age < self.life

@@ -53,7 +53,7 @@ def frames(width: int, height: int, n_frames: int, fps: float, substeps: int = 4
         live = np.flatnonzero(system.alive[0] > 0)
         src = system.source[0, live]
         u = system.normalized_age()[0, live]
-        born = system.t - system.age[0, live].astype(np.float64)
+        born = system.t[0] - system.age[0, live].astype(np.float64)
         hue = PALETTE[(np.round(born * 997).astype(np.int64)) % len(PALETTE)]
         spark = src == 1
         if np.any(~spark):

@@ -9,7 +9,7 @@ from tianim.particles.emitters import BoxEmitter, DiscEmitter, Emitter, PointEmi
 from tianim.particles.mesh_emitter import MeshEmitter
 from tianim.particles.subemitters import SubEmitter
 from tianim.particles.forces import Attractor, CurlNoise, Drag, Vortex, curl_noise
-from tianim.particles.system import Granular, ParticleStats, ParticleSystem
+from tianim.particles.system import Granular, ParticleModel, ParticleSolver, ParticleState, ParticleSystem
 
-__all__ = ["Attractor", "BoxEmitter", "CurlNoise", "DiscEmitter", "Drag", "Emitter", "Granular", "MeshEmitter", "ParticleStats",
+__all__ = ["Attractor", "BoxEmitter", "CurlNoise", "DiscEmitter", "Drag", "Emitter", "Granular", "MeshEmitter", "ParticleModel", "ParticleSolver", "ParticleState",
            "ParticleSystem", "PointEmitter", "SphereEmitter", "SubEmitter", "Vortex", "curl_noise"]

@@ -106,7 +106,8 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), n_colliders: i
     @ti.func
     def collide(xi, vi, coll: ti.template(), modes: ti.template(), g_norm, h, prad):
         """Collider response of tianim.physics.contact (restitution, Coulomb friction as an impulse,
-        e = 0 below the resting speed 2 |g| h), plus the modes: returns (x, v, event, hit), hit = 1
+        e = 0 below the resting speed 2 |g| h; the position follows the friction's tangential velocity
+        change over the substep), plus the modes: returns (x, v, event, hit), hit = 1
         when the particle bounced with a normal speed above the resting speed (resting contact is no
         event). ``prad`` [m]: the particle's radius (contact when phi < prad)."""
         event = 0
@@ -126,7 +127,15 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), n_colliders: i
                     else:
                         if vi.dot(n) < -v_rest:  # an impact, not resting contact
                             hit = 1
+                        v_in = vi
                         vi = bounce(vi, n, coll[c, 1], coll[c, 2], v_rest)
+                        if coll[c, 2] > 0:
+                            # friction changed the tangential velocity of this substep: move the position
+                            # as if the substep had used it (x = x_prev + h v_new), so that static friction
+                            # holds a particle in place on a slope below the friction angle instead of
+                            # creeping g sin(a) h^2 per substep with v = 0
+                            dv = vi - v_in
+                            xi += h * (dv - dv.dot(n) * n)
         return xi, vi, event, hit
 
     @ti.kernel

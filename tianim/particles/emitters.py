@@ -7,7 +7,13 @@ Every emitter has a shape (:class:`PointEmitter`, :class:`BoxEmitter`, :class:`S
   ``t_k = start + k / rate``, so a step (t0, t1] births ``floor(rate (t1 - start)) -
   floor(rate (t0 - start))`` particles (each floor taken with a 1e-6 tolerance, :data:`TOL`): the count over any time T is exactly ``floor(rate T)``,
   whatever the frame rate (no accumulator that drifts), and births are spread evenly within a frame;
-* ``bursts``: ``((time [s], count), ...)``, each born at its time;
+* ``bursts``: ``((time [s], count), ...)``, each born at its time (times >= 0): a burst fires in
+  the step whose window (t0, t1] holds its time, and a burst at the very time a state starts
+  (``t = 0``: a burst at 0) fires in its first step; each state records which bursts fired
+  (``ParticleState.fired``), so a burst fires once per copy. A burst before the time of a copy's
+  first step (a state whose ``t`` was set past it) can no longer fire: it is marked fired and a
+  ``RuntimeWarning`` names it (a warning, not an error, because the model is valid: only that
+  state started late);
 * velocity: a direction drawn uniformly on the spherical cap of half-angle ``cone`` [rad] around
   ``direction`` (a circle sector in 2D), times a speed uniform in ``speed = (lo, hi)`` [m/s], plus
   the emitter's own ``velocity`` [m/s];
@@ -29,6 +35,8 @@ from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt
 
 #: Births within TOL / rate [s] after a step's end belong to that step (rounding of accumulated time).
 TOL = 1e-6
+#: Largest emission rate [particles/s] an emitter takes.
+MAX_RATE = 1e9
 
 
 @dataclass(frozen=True)
@@ -73,19 +81,37 @@ class Emitter:
         """Velocities plus the velocity of the shape where each particle was placed (moving shapes)."""
         return v
 
+    def __post_init__(self):
+        # validated at construction (naming the class), numbers stored as Python floats and ints: a
+        # NumPy float32 rate would make rate * t a float32 product and lose births
+        if type(self) is Emitter:
+            return
+        name = type(self).__name__
+        self.check(name)
+        for f in ("rate", "start", "cone", "lifetime", "lifetime_variance"):
+            object.__setattr__(self, f, float(getattr(self, f)))
+        object.__setattr__(self, "bursts", tuple((float(bt), int(n)) for bt, n in self.bursts))
+
+    @property
+    def n_bursts(self) -> int:
+        return len(self.bursts)
+
     def check(self, name: str = "emitter") -> "Emitter":
         """Validate every option (ValueError/TypeError naming ``name.option``); returns self."""
         self._check_shape(name)
         d = self.dim
-        check_finite_scalar(f"{name}.rate", self.rate, lo=0.0)
+        rate = check_finite_scalar(f"{name}.rate", self.rate, lo=0.0)
+        if rate > MAX_RATE:
+            raise ValueError(f"{name}.rate={fmt(self.rate)} particles/s is above {MAX_RATE:g}; give a smaller rate "
+                             "(a pool holds at most 2^26 particles)")
         check_finite_scalar(f"{name}.start", self.start)
         if not isinstance(self.bursts, (tuple, list)):
             raise TypeError(f"{name}.bursts={fmt(self.bursts)} must be a sequence of (time, count) pairs")
         for k, b in enumerate(self.bursts):
             if not isinstance(b, (tuple, list)) or len(b) != 2:
                 raise TypeError(f"{name}.bursts[{k}]={fmt(b)} must be a (time [s], count) pair")
-            check_finite_scalar(f"{name}.bursts[{k}] time", b[0])
-            check_int(f"{name}.bursts[{k}] count", b[1], lo=0)
+            check_finite_scalar(f"{name}.bursts[{k}] time", b[0], lo=0.0)
+            check_int(f"{name}.bursts[{k}] count", b[1], lo=0, hi=1 << 26)
         dirn = as_float_array(f"{name}.direction", self.direction[:d] if len(self.direction) > d else self.direction, shape=(d,))
         if np.linalg.norm(dirn) == 0:
             raise ValueError(f"{name}.direction={fmt(self.direction)} has zero length; give a non-zero direction")
@@ -105,21 +131,33 @@ class Emitter:
         """Particles born in (t0, t1] [s]: rate births plus bursts."""
         return len(self._birth_times(t0, t1))
 
-    def _birth_times(self, t0: float, t1: float) -> np.ndarray:
+    def _birth_times(self, t0: float, t1: float, fired=None, missed=None) -> np.ndarray:
+        """Birth times in (t0, t1] [s], sorted. ``fired`` (n_bursts,) bool, optional: the bursts that
+        already fired (updated in place); with it, every burst not yet fired with a time <= t1 fires if
+        it is not before t0 (so a burst at t0 fires), and is appended to ``missed`` (a list) if it is."""
         times = []
         if self.rate > 0 and t1 > self.start:
             # TOL: step ends accumulated in floating point (t += dt) land a few ulps below k / rate
             k0 = math.floor(self.rate * max(t0 - self.start, 0.0) + TOL)
             k1 = math.floor(self.rate * (t1 - self.start) + TOL)
             times.append(self.start + np.arange(k0 + 1, k1 + 1, dtype=np.float64) / self.rate)
-        for bt, n in self.bursts:
-            if t0 + 1e-9 < bt <= t1 + 1e-9:  # the same tolerance for accumulated step ends
+        for j, (bt, n) in enumerate(self.bursts):
+            if fired is None:
+                due = t0 + 1e-9 < bt <= t1 + 1e-9  # the same tolerance for accumulated step ends
+            elif fired[j] or bt > t1 + 1e-9:
+                continue
+            else:
+                fired[j] = True
+                due = bt >= t0 - 1e-9
+                if not due and missed is not None:
+                    missed.append((j, bt))
+            if due:
                 times.append(np.full(int(n), float(bt)))
         return np.sort(np.concatenate(times), kind="stable") if times else np.zeros(0)
 
-    def emit(self, t0: float, t1: float, rng: np.random.Generator) -> Births:
-        """The particles born in (t0, t1] [s], drawn from ``rng``."""
-        return self.draw(self._birth_times(t0, t1), rng)
+    def emit(self, t0: float, t1: float, rng: np.random.Generator, fired=None, missed=None) -> Births:
+        """The particles born in (t0, t1] [s], drawn from ``rng`` (``fired``, ``missed``: see ``_birth_times``)."""
+        return self.draw(self._birth_times(t0, t1, fired, missed), rng)
 
     def draw(self, t: np.ndarray, rng: np.random.Generator) -> Births:
         """Particles born at times ``t`` (n,) [s]: positions on the shape, velocities, lifetimes from ``rng``."""

@@ -60,7 +60,11 @@ class Vortex:
 
 @dataclass(frozen=True)
 class CurlNoise:
-    """Divergence-free turbulence: ``amplitude`` [m/s^2], length ``scale`` [m], ``modes`` sinusoids, ``seed``."""
+    """Divergence-free turbulence: ``amplitude`` [m/s^2], length ``scale`` [m], ``modes`` sinusoids, ``seed``.
+
+    ``amplitude`` sets the field's size, not its RMS: the RMS magnitude is sqrt(7/3) = 1.53 amplitude in
+    3D and sqrt(7/6) = 1.08 amplitude in 2D (:func:`noise_table`), whatever the scale and modes.
+    """
 
     amplitude: float = 1.0
     scale: float = 1.0
@@ -71,8 +75,12 @@ class CurlNoise:
 def noise_table(noise: CurlNoise, dim: int) -> np.ndarray:
     """(M, 10) rows ``[k (3), phi (3), A (3), 0]`` of the potential's sinusoids (2D: only the z part is used).
 
-    Wave vectors have random directions and lengths in [1, 2] (in units of 1/scale); amplitudes
-    1/sqrt(M) so the field's RMS is about ``amplitude`` whatever M.
+    Wave vectors have random directions and lengths |k| ~ U(1, 2) (in units of 1/scale); amplitudes
+    A_mc ~ N(0, 1/M), phases uniform, so the field's mean square does not depend on M. Over space and
+    seeds, the curl of psi_c e_c is sum_m A_mc cos(.) (k_m x e_c), hence
+    ``E|a|^2 = amplitude^2 E|k|^2 = (7/3) amplitude^2`` in 3D (RMS magnitude sqrt(7/3) = 1.53
+    amplitude, 0.88 amplitude per component) and ``(7/6) amplitude^2`` in 2D (RMS 1.08 amplitude),
+    with E|k|^2 = (2^3 - 1^3) / 3 = 7/3 (tests/test_particles.py measures both).
     """
     rng = np.random.default_rng(noise.seed)
     m = noise.modes

@@ -61,6 +61,7 @@ class MeshEmitter(Emitter):
         if self.vertex_velocities is not None:
             object.__setattr__(self, "vertex_velocities",
                                as_float_array("emitter.vertex_velocities", self.vertex_velocities, shape=v.shape))
+        super().__post_init__()
 
     @classmethod
     def from_model(cls, model, x=None, **options) -> "MeshEmitter":

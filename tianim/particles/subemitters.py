@@ -18,6 +18,9 @@ where they happen (the time and position are exact to one substep) and at most o
 event per particle and substep is counted. Parents are visited in slot order, sub-emitters in
 their order, and each copy draws from its own generator: deterministic, batch = separate runs.
 Children that do not fit in the pool are dropped and counted as the system's ``overflow``.
+A parent born and dead within one step (a lifetime shorter than the time left in the step) dies at
+its birth time plus its lifetime, at its ballistic position then; its children are born there and
+then, and advanced to the step's end like any birth.
 """
 
 from __future__ import annotations
@@ -43,6 +46,16 @@ class SubEmitter:
     count: int = 1
     inherit_velocity: float = 0.0
 
+    def __post_init__(self):
+        # what can be checked without the system (its sources and dimension) is checked at construction
+        if not isinstance(self.emitter, Emitter):
+            raise TypeError(f"SubEmitter.emitter={fmt(self.emitter)} is not an emitter; use PointEmitter(...), SphereEmitter(...)")
+        check_int("SubEmitter.parent", self.parent, lo=0)
+        check_choice("SubEmitter.on", self.on, tuple(TRIGGERS))
+        check_int("SubEmitter.count", self.count, lo=1, hi=1 << 20)
+        object.__setattr__(self, "inherit_velocity", check_finite_scalar("SubEmitter.inherit_velocity",
+                                                                         self.inherit_velocity))
+
     def check(self, name: str, n_sources: int, dim: int) -> "SubEmitter":
         if not isinstance(self.emitter, Emitter):
             raise TypeError(f"{name}.emitter={fmt(self.emitter)} is not an emitter; use PointEmitter(...), SphereEmitter(...)")
@@ -60,19 +73,31 @@ def spawn_children(subs, n_emitters, event, source, x, v, t, rng):
     """Children of one copy for the events of one substep ending at ``t`` [s].
 
     ``event``, ``source`` (C,) and ``x``, ``v`` (C, D) are the copy's arrays after the substep.
-    Returns (x, v, life, source) of the children in sub-emitter order, then parent-slot order, or None.
+    Returns (x, v, life, source, t) of the children in sub-emitter order, then parent-slot order, or None.
     """
+    return _children(subs, n_emitters, lambda sub: np.flatnonzero(np.isin(event, TRIGGERS[sub.on]) & (source == sub.parent)),
+                     x, v, np.full(len(source), float(t)), rng)
+
+
+def death_children(subs, n_emitters, source, x, v, t, rng):
+    """Children of particles that died between two launches (born and dead within one step): parents
+    of ``source`` (n,) died at times ``t`` (n,) [s] at ``x``, ``v`` (n, D). Returns as :func:`spawn_children`."""
+    return _children(subs, n_emitters, lambda sub: np.flatnonzero(source == sub.parent) if sub.on == "death"
+                     else np.zeros(0, np.int64), x, v, t, rng)
+
+
+def _children(subs, n_emitters, select, x, v, t, rng):
     parts = []
     for k, sub in enumerate(subs):
-        hit = np.isin(event, TRIGGERS[sub.on]) & (source == sub.parent)
-        slots = np.flatnonzero(hit)
+        slots = select(sub)
         if not len(slots):
             continue
         n = len(slots) * sub.count
-        kids = sub.emitter.draw(np.full(n, t), rng)
+        tk = np.repeat(t[slots], sub.count)
+        kids = sub.emitter.draw(tk, rng)
         px = np.repeat(x[slots].astype(np.float64), sub.count, axis=0)
         pv = np.repeat(v[slots].astype(np.float64), sub.count, axis=0)
-        parts.append((px + kids.x, kids.v + sub.inherit_velocity * pv, kids.life, np.full(n, n_emitters + k)))
+        parts.append((px + kids.x, kids.v + sub.inherit_velocity * pv, kids.life, np.full(n, n_emitters + k), tk))
     if not parts:
         return None
-    return tuple(np.concatenate([p[i] for p in parts]) for i in range(4))
+    return tuple(np.concatenate([p[i] for p in parts]) for i in range(5))

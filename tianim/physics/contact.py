@@ -10,6 +10,12 @@ the normal ``n``, and if it moves inward (``v.n < 0``):
 * tangential velocity reduced by at most ``mu`` times the normal velocity change
   ``(1 + e) |v_n|`` (Coulomb friction as an impulse): a particle sliding on the
   ground decelerates at ``mu g`` and stops after ``v0^2 / (2 mu g)``.
+
+The response changes velocities (and pushes positions out along ``n``) only. A caller
+whose position update already used the pre-contact velocity (symplectic Euler) and
+wants static friction to hold positions (rest on a slope below the friction angle
+instead of creeping ``g sin(a) h^2`` per step) adds ``h`` times the tangential part
+of the velocity change to the position, as :mod:`tianim.particles._kernels` does.
 """
 
 from tianim.physics.kernel_types import cached_variants, kernel_types

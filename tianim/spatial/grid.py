@@ -21,7 +21,9 @@ Rules
   axis. Queries stay exact (clamping is monotone, so the clamped query box still covers every
   neighbour); only speed suffers when many points pile into border cells.
 * **Capacity.** Buffers are sized once (``n_points``, ``batch``, ``max_neighbours``): building and
-  querying every step allocates nothing. A query row with more than ``max_neighbours`` neighbours
+  querying every step allocates nothing. Query outputs live in one buffer that grows to the largest
+  number of query points asked for (never one per size), so a :class:`NeighbourList` is valid until
+  the next query. A query row with more than ``max_neighbours`` neighbours
   stores the first ``max_neighbours`` (in the fixed order) and reports the true count in
   ``NeighbourList.counts``; ``NeighbourList.overflow`` counts such rows, and ``query`` raises
   (``on_overflow="raise"``, default) or warns (``"warn"``): neighbours are never dropped silently.
@@ -167,7 +169,8 @@ class NeighbourGrid:
         self.start = np.zeros((B, n_cells + 2), np.int32)  # + the cell of inactive points
         self.order = np.zeros((B, N), np.int32)
         self.sorted_x = np.zeros((B, N, D), self.dtype)
-        self._out: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._out: tuple[np.ndarray, np.ndarray] | None = None  # query outputs (flat, grow-only)
+        self._views = None  # (q, indices, counts): views of _out for the last query size
         self._all_active = np.ones((B, N), np.uint8)
         self._built = None
 
@@ -178,7 +181,7 @@ class NeighbourGrid:
     @property
     def nbytes(self) -> int:
         """Bytes held by the grid's buffers (cells, sort, sorted positions, query outputs)."""
-        arrays = [self.cell, self.start, self.order, self.sorted_x] + [a for pair in self._out.values() for a in pair]
+        arrays = [self.cell, self.start, self.order, self.sorted_x] + list(self._out or ())
         return int(sum(a.nbytes for a in arrays))
 
     @property
@@ -307,9 +310,16 @@ class NeighbourGrid:
         return out
 
     def _buffers(self, q: int):
-        if q not in self._out:
-            self._out[q] = (np.zeros((self.batch, q, self.max_neighbours), np.int32), np.zeros((self.batch, q), np.int32))
-        return self._out[q]
+        """Output arrays for q query points: C-contiguous views of two flat buffers that only grow (to
+        the largest q queried), so memory stays bounded whatever sequence of query sizes comes."""
+        B, K = self.batch, self.max_neighbours
+        if self._views is not None and self._views[0] == q:
+            return self._views[1:]  # the same arrays as the last query of this size
+        if self._out is None or self._out[1].size < B * q:
+            self._out = (np.zeros(B * q * K, np.int32), np.zeros(B * q, np.int32))
+        nbr, count = self._out
+        self._views = (q, nbr[: B * q * K].reshape(B, q, K), count[: B * q].reshape(B, q))
+        return self._views[1:]
 
 
 def neighbour_lists(points, radius, max_neighbours=None, lower=None, upper=None):
