@@ -1,7 +1,7 @@
 """Taichi kernel of the boids steps (grid rebuild and one thread per agent, fused in one launch).
 
 Cached factory, one variant per float type, dimension and steps per launch (docs/architecture.md,
-"Kernel conventions"). Each step rebuilds the grid (:func:`tianim.spatial._kernels.grid_funcs`) and
+"Kernel conventions"). Each step rebuilds the grid (:func:`tianim.kernels.grid.grid_funcs`) and
 copies the velocities into the grid's sorted order; each agent's thread then reads the old state
 only from those sorted copies (Jacobi update), adds up its neighbour terms while it scans the grid's
 cells (no neighbour list is written) and writes only its own agent in place. Sums over neighbours
@@ -13,9 +13,9 @@ avoid (weight, distance), wander (weight, jitter).
 """
 
 from tianim.crowds._shapes import wall_parts
-from tianim.physics.contact import contact_parts
-from tianim.physics.kernel_types import cached_variants, kernel_types
-from tianim.spatial._kernels import BOX_PAD, grid_funcs
+from tianim.kernels.contact import contact_parts
+from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.grid import BOX_PAD, grid_funcs
 
 #: Names of the entries of the boids parameter vector, in order.
 PRM = ("max_speed", "max_force", "min_speed", "dt",

@@ -2,7 +2,7 @@
 
 Each step rebuilds the neighbour grid in the same launch; then one thread per agent selects its
 ``max_neighbors`` nearest neighbours closer than the neighbour distance straight from the grid's
-cells (``tianim.spatial._kernels.grid_funcs().nearest``: RVO2's ``insertAgentNeighbor`` order,
+cells (``tianim.kernels.grid.grid_funcs().nearest``: RVO2's ``insertAgentNeighbor`` order,
 nearest first, exact ties by the lower index; cells pruned at the current K-th distance as RVO2's
 kd-tree prunes), builds one
 ORCA half-plane per neighbour, and solves for the velocity closest to its preferred one with the
@@ -13,8 +13,8 @@ only its own rows and its own new velocity: bit-identical for any thread count. 
 (RVO2's polygon obstacles) are not modelled.
 """
 
-from tianim.physics.kernel_types import cached_variants, kernel_types
-from tianim.spatial._kernels import grid_funcs
+from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.grid import grid_funcs
 
 #: RVO2's RVO_EPSILON: below it two ORCA lines count as parallel.
 RVO_EPSILON = 1e-5

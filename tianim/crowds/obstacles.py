@@ -4,7 +4,7 @@ The shapes are the colliders of :mod:`tianim.physics` (one concept in one place)
 :class:`tianim.physics.Sphere` (a sphere in 3D, a circle in 2D) and :class:`tianim.physics.Ground`
 (a plane ``n . x = height`` in 3D, a line in 2D; agents stay on the side the normal points to),
 plus :class:`Wall`, a 2D segment of some half-thickness, and :func:`polygon`, a closed chain of walls.
-Their signed distance and outward normal come from :func:`tianim.physics.contact.contact_parts`
+Their signed distance and outward normal come from :func:`tianim.kernels.contact.contact_parts`
 (spheres, planes) and :func:`wall_surface` (segments); restitution and friction are ignored.
 """
 
@@ -40,7 +40,7 @@ def polygon(vertices, half_thickness=0.05) -> list:
 
 def obstacle_tables(obstacles, dim: int) -> tuple[np.ndarray, np.ndarray]:
     """``(colliders (C, 7), walls (W, 5))`` float64 tables of ``obstacles`` for the kernels."""
-    from tianim.physics.model import COLLIDER_ROW, Ground, Sphere, _collider_table
+    from tianim.kernels.colliders import COLLIDER_ROW, Ground, Sphere, collider_table as _collider_table
 
     if not isinstance(obstacles, (list, tuple)):
         raise TypeError(f"obstacles={fmt(obstacles)} must be a list of tianim.physics.Sphere/Ground or crowds.Wall")

@@ -1,15 +1,32 @@
-"""Shared plumbing of the kernel modules: Taichi types per float type and dimension,
-and a cache that builds each kernel variant once per process."""
+"""The kernel layer: what every Taichi kernel module of tianim shares, below every subpackage.
 
+* :func:`cached_variants` - the one kernel-factory cache (``build(*key)`` runs once per distinct key and
+  process);
+* :func:`kernel_types` - the Taichi types of a float type and dimension;
+* :mod:`tianim.kernels.colliders` - the collider types and the (C, 7) collider table kernels read;
+* :mod:`tianim.kernels.contact` - the contact response with those colliders, as ``ti.func`` factories;
+* :mod:`tianim.kernels.grid` - the neighbour grid's steps (cell ids, counting sort, queries) as ``ti.func``s.
+
+Taichi itself is imported only by :mod:`tianim._ti` (and initialised by :mod:`tianim.runtime`); importing
+this package or any of its modules loads no Taichi module and imports nothing above it (no physics,
+spatial, particles, crowds), so the subpackages built on it stay in their layers
+(``tests/test_layering.py`` checks the layer order; docs/architecture.md, "Kernel conventions").
+"""
+
+import functools
 from types import SimpleNamespace
 
-from tianim._ti import cached_kernels
 from tianim.runtime import ensure_taichi
 
 
-#: The one kernel-factory cache (:func:`tianim._ti.cached_kernels`): ``build(*key)`` runs once per
-#: distinct key; kernels take arrays as arguments, so a variant compiled for one scene serves every other.
-cached_variants = cached_kernels
+def cached_variants(build):
+    """Decorator of a kernel factory: ``build(*key)`` runs once per distinct key and process.
+
+    The key is the factory's compile-time choices (float type, dimension, which terms are on); kernels
+    take arrays as arguments, so a variant compiled for one scene serves every other, and defining the
+    kernels inside the factory keeps Taichi out of import time.
+    """
+    return functools.lru_cache(maxsize=None)(build)
 
 
 def kernel_types(real_name: str, dim: int) -> SimpleNamespace:
@@ -17,7 +34,7 @@ def kernel_types(real_name: str, dim: int) -> SimpleNamespace:
 
     ``real``, ``vec`` (dim), ``mat`` (dim x dim); array annotations ``vec_arr`` (B, N) of vec,
     ``mat_arr`` (B, N) of mat, ``work_arr`` (K, B, N) of vec, ``real_arr`` and ``int_arr`` 1D,
-    ``real2_arr`` 2D, ``mask_arr`` (B, N) of u8; and ``ti`` itself.
+    ``real2_arr`` 2D, ``mask_arr`` (B, N) of u8; and ``ti`` itself (initialised).
     """
     ti = ensure_taichi()
     real = ti.f64 if real_name == "float64" else ti.f32

@@ -1,7 +1,9 @@
-"""Contact response with ground planes and spheres, as a Taichi function shared by all solvers.
+"""Contact response with ground planes and spheres, as Taichi functions shared by every solver, the
+particle systems and the crowd obstacles.
 
 For each collider row ``[kind, e, mu, offset_or_radius, n_or_center]`` of the
-model's collider table (:data:`tianim.physics.model.COLLIDER_ROW`), a particle
+collider table (:func:`tianim.kernels.colliders.collider_table`, rows of
+:data:`~tianim.kernels.colliders.COLLIDER_ROW`), a particle
 at signed distance ``phi < 0`` (inside) is pushed back onto the surface along
 the normal ``n``, and if it moves inward (``v.n < 0``):
 
@@ -12,8 +14,8 @@ the normal ``n``, and if it moves inward (``v.n < 0``):
   ground decelerates at ``mu g`` and stops after ``v0^2 / (2 mu g)``.
 """
 
-from tianim.physics.kernel_types import cached_variants, kernel_types
-from tianim.physics.model import PLANE
+from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.colliders import PLANE
 
 
 @cached_variants

@@ -30,8 +30,8 @@ spring topology; ``W`` the work buffers (see :func:`_build`).
 
 import numpy as np
 
-from tianim.physics.contact import contact_response
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels.contact import contact_response
+from tianim.kernels import cached_variants, kernel_types
 from tianim.physics.model import GRID_STENCIL
 
 #: Phases of each integrator: (``pre`` run once per call, ``step`` per substep).
@@ -167,7 +167,7 @@ def substep_funcs(real_name, dim, grid, colliders, spring_damping, medium_dampin
 
     @ti.func
     def collide(b, i, x: ti.template(), v: ti.template(), coll: ti.template(), P: ti.template(), dt):
-        """Contact response of particle i (tianim.physics.contact)."""
+        """Contact response of particle i (tianim.kernels.contact)."""
         x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, gravity_norm(P), dt)
 
     @ti.func

@@ -36,8 +36,8 @@ size compiles nothing new.
 
 import numpy as np
 
-from tianim.physics.contact import contact_response
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels.contact import contact_response
+from tianim.kernels import cached_variants, kernel_types
 from tianim.physics.model import GRID_STENCIL
 
 #: Particles per vector, by float type: one SSE register (8 lanes in two registers ran 0.8-0.95x as fast at

@@ -31,8 +31,8 @@ before, and results are bit-identical to theirs. Every pass gathers per particle
 import numpy as np
 
 from tianim.physics.bending import bending_funcs
-from tianim.physics.contact import contact_response
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels.contact import contact_response
+from tianim.kernels import cached_variants, kernel_types
 from tianim.physics.selfcollision import contact_funcs, contacts_for
 from tianim.physics.strain import SOR, strain_funcs
 

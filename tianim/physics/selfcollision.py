@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tianim._checks import check_finite_scalar, check_int, check_positive_int, fmt
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels import cached_variants, kernel_types
 
 #: Fixed-point steps per thickness of the correction sums (2^40: resolution 1e-12 t; sums up to 8e6 t).
 FIXED_POINT = float(2 ** 40)
