@@ -330,10 +330,8 @@ def _dls(chain, tgt, q, tol, iters, rest, path=None):
             its.append(kb)
         return np.array(qs, dtype=np.float64), np.array(rs, dtype=np.float64), np.array(its, dtype=np.int64)
     if path == "kernel":
-        from tianim.kinematics.ik_kernel import solve_planar_batch
-        from tianim.runtime import ensure_taichi
+        from tianim.kinematics.ik_kernel import solve_planar_batch  # (initialises Taichi on first use)
 
-        ensure_taichi()
         return solve_planar_batch(chain, tgt, q, rest if polishing else None, tol, iters, POLISH_ITERS,
                                   KERNEL_CONSTANTS)
     q, r, it = dls_batch(chain, tgt, q, tol, iters)
