@@ -1,7 +1,7 @@
 """Taichi kernel of the boids steps (grid rebuild and one thread per agent, fused in one launch).
 
 Cached factory, one variant per float type, dimension and steps per launch (docs/architecture.md,
-"Kernel conventions"). Each step rebuilds the grid (:func:`tianim.kernels.grid.grid_funcs`) and
+"Kernel conventions"). Each step rebuilds the grid (:func:`tianim.spatial._kernels.grid_funcs`) and
 copies the velocities into the grid's sorted order; each agent's thread then reads the old state
 only from those sorted copies (Jacobi update), adds up its neighbour terms while it scans the grid's
 cells (no neighbour list is written) and writes only its own agent in place. Sums over neighbours

@@ -2,7 +2,7 @@
 
 Each step rebuilds the neighbour grid in the same launch; then one thread per agent selects its
 ``max_neighbors`` nearest neighbours closer than the neighbour distance straight from the grid's
-cells (``tianim.kernels.grid.grid_funcs().nearest``: RVO2's ``insertAgentNeighbor`` order,
+cells (``tianim.spatial._kernels.grid_funcs().nearest``: RVO2's ``insertAgentNeighbor`` order,
 nearest first, exact ties by the lower index; cells pruned at the current K-th distance as RVO2's
 kd-tree prunes), builds one
 ORCA half-plane per neighbour, and solves for the velocity closest to its preferred one with the
