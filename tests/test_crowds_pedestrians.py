@@ -152,19 +152,15 @@ def test_pedestrians_batch_equals_separate_runs_bit_for_bit(model_cls):
         assert np.array_equal(agents.x[b], a1.x[0]) and np.array_equal(agents.v[b], a1.v[0])
 
 
-def test_orca_copy_kernel_equals_agent_kernel_and_any_chunking_bit_for_bit(monkeypatch):
+def test_orca_copy_kernel_equals_agent_kernel_and_any_chunking_bit_for_bit():
     """The copy-parallel kernel (small crowds, all steps in one launch) and the agent-parallel one
     (2 unrolled steps per launch here, then single steps) give the same bits, for 9 steps in one call
     or one step per call (times and arrival times included)."""
-    import tianim.crowds.orca as orca
-
-    monkeypatch.setattr(orca, "MAX_STEPS_PER_LAUNCH", 2)  # (a cheaper variant to compile than 4)
-
     def run(copy_kernel, calls):
-        monkeypatch.setattr(orca, "COPY_KERNEL_MAX_AGENTS", 1024 if copy_kernel else 0)
         a, g = circle_scenario(40, 4.0, batch=2, dtype=np.float32)
         g[:, ::4] = 0.8 * a.x[:, ::4]  # a quarter have near goals: they arrive within the 9 steps
-        m = ORCA(goals=g, radius=0.2, pref_speed=1.0, arrival_radius=0.3)
+        m = ORCA(goals=g, radius=0.2, pref_speed=1.0, arrival_radius=0.3, path="copy" if copy_kernel else "agent",
+                 steps_per_launch=2)  # (a cheaper variant to compile than 4)
         for steps in calls:
             m.step(a, 0.25, steps)
         return a.x, a.v, a.heading, a.t, m.arrival_time, m.closest, m.ticks
@@ -177,18 +173,15 @@ def test_orca_copy_kernel_equals_agent_kernel_and_any_chunking_bit_for_bit(monke
 
 
 @pytest.mark.parametrize("copy_kernel", [True, False])
-def test_orca_takes_the_max_neighbors_nearest_within_neighbour_dist(monkeypatch, copy_kernel):
+def test_orca_takes_the_max_neighbors_nearest_within_neighbour_dist(copy_kernel):
     """RVO2's neighbour rule, checked by brute force: each agent's K nearest others strictly closer than
     neighbour_dist (nearest first, exact ties by index), in a dense crowd (a lattice part: exact ties)."""
-    import tianim.crowds.orca as orca
-
-    monkeypatch.setattr(orca, "COPY_KERNEL_MAX_AGENTS", 1024 if copy_kernel else 0)
     rng = np.random.default_rng(4)
     x = rng.uniform(-6, 6, (2, 300, 2))
     x[:, :64] = np.stack(np.meshgrid(np.arange(8.0), np.arange(8.0)), -1).reshape(-1, 2) * 0.7
     agents = Agents(x, dtype=np.float64)
     K, dist = 7, 1.6
-    model = ORCA(goals=-x, radius=0.1, neighbour_dist=dist, max_neighbors=K)
+    model = ORCA(goals=-x, radius=0.1, neighbour_dist=dist, max_neighbors=K, path="copy" if copy_kernel else "agent")
     model.step(agents, 0.05)
     w = model._work
     for b in range(2):
@@ -208,10 +201,8 @@ _THREAD_SCRIPT = textwrap.dedent("""
     a, g = circle_scenario(400, 20.0, batch=2, dtype=np.float32)
     m = ORCA(goals=g, radius=0.12, pref_speed=1.0)
     m.step(a, 0.1, 60)
-    import tianim.crowds.orca as orca
-    orca.COPY_KERNEL_MAX_AGENTS = 0  # the agent-parallel kernel too
     a2, g2 = circle_scenario(400, 20.0, batch=2, dtype=np.float32)
-    ORCA(goals=g2, radius=0.12, pref_speed=1.0).step(a2, 0.1, 3)
+    ORCA(goals=g2, radius=0.12, pref_speed=1.0, path="agent").step(a2, 0.1, 3)  # the agent-parallel kernel too
     rng = np.random.default_rng(0)
     x = rng.uniform(-10, 10, (2, 2000, 2))
     s = Agents(x, dtype=np.float32)
@@ -241,6 +232,8 @@ def test_pedestrians_bit_identical_with_one_and_two_threads():
     (lambda: ORCA(goals=(1.0, 2.0), domain=((0, 0), (0, 1))), ValueError, "domain"),
     (lambda: ORCA(goals=(1.0, 2.0), skin=-1), ValueError, "skin"),
     (lambda: ORCA(goals=(1.0, 2.0), grid_neighbours=0), ValueError, "grid_neighbours"),
+    (lambda: ORCA(goals=(1.0, 2.0), path="fast"), ValueError, "path='fast'.*'agent'"),
+    (lambda: ORCA(goals=(1.0, 2.0), steps_per_launch=0), ValueError, "steps_per_launch"),
     (lambda: SocialForce(goals=(1.0, 2.0), tau=0), ValueError, "tau"),
     (lambda: SocialForce(goals=(1.0, 2.0), sigma=-1), ValueError, "sigma"),
     (lambda: SocialForce(goals=(1.0, 2.0), c=1.5), ValueError, r"\bc=1.5"),

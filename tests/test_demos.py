@@ -37,7 +37,7 @@ def _labels(monkeypatch, name, width, height, n_frames, pick):
     """Per picked frame: (text boxes in pixels, the frame rendered without its text)."""
     from PIL import Image, ImageDraw
 
-    from tianim.render.canvas2d import _font
+    from tianim.render.canvas2d import label_font as _font
 
     seen = []
     image = Canvas2D.image

@@ -202,6 +202,11 @@ def test_3d_redundant_chain_rest_pose_optimum():
     assert _null_residual(chain, res.q[inside], rest).max() < 1e-6
 
 
+def test_kernel_path_needs_a_planar_chain():
+    with pytest.raises(ValueError, match="path='kernel' supports PlanarChain only"):
+        solve_ik(_serial7(), np.array([0.3, 0.2, 1.0]), path="kernel")
+
+
 def test_bad_rest_shape_raises():
     chain = _chain(7)
     with pytest.raises(ValueError, match="rest"):
@@ -209,8 +214,8 @@ def test_bad_rest_shape_raises():
 
 
 @pytest.mark.parametrize("n", [2, 3, 7])
-def test_batched_kernel_path_matches_loop_and_numpy_paths(n, monkeypatch):
-    # batches of KERNEL_MIN_BATCH or more targets on a planar chain run in the Taichi kernel
+def test_batched_kernel_path_matches_loop_and_numpy_paths(n):
+    # batches of KERNEL_MIN_BATCH or more targets on a planar chain run in the Taichi kernel ("auto")
     import tianim.kinematics.ik as ik
 
     chain = _chain(n)
@@ -219,11 +224,10 @@ def test_batched_kernel_path_matches_loop_and_numpy_paths(n, monkeypatch):
     assert kern.converged.all(), kern.residual.max()
     assert np.all(kern.q >= chain.lower) and np.all(kern.q <= chain.upper)
     np.testing.assert_allclose(chain.end_effector(kern.q), targets, atol=1.01e-8)
-    assert np.array_equal(kern.q, solve_ik(chain, targets, tol=1e-8).q)  # deterministic
-    monkeypatch.setattr(ik, "KERNEL_MIN_BATCH", 10**9)
-    loop = solve_ik(chain, targets, tol=1e-8)  # target by target, plain floats
-    monkeypatch.setattr(ik, "LOOP_MAX_BATCH", 0)
-    ref = solve_ik(chain, targets, tol=1e-8)  # vectorised NumPy
+    assert np.array_equal(kern.q, solve_ik(chain, targets, tol=1e-8, path="kernel").q)  # deterministic, the path
+    loop = solve_ik(chain, targets, tol=1e-8, path="loop")  # target by target, plain floats
+    ref = solve_ik(chain, targets, tol=1e-8, path="numpy")  # vectorised NumPy
+    np.testing.assert_array_equal(kern.q, loop.q)  # the kernel mirrors the plain-float path operation for operation
     np.testing.assert_allclose(kern.q, loop.q, atol=1e-6)
     np.testing.assert_allclose(kern.q, ref.q, atol=1e-6)
     if n > 2:  # least motion from q0 = 0 where no limit is active or nearly active (it can block the polish)
@@ -233,7 +237,7 @@ def test_batched_kernel_path_matches_loop_and_numpy_paths(n, monkeypatch):
 
 
 @pytest.mark.parametrize("path", ["single", "numpy", "kernel"])
-def test_unreachable_targets_converge_to_the_exact_closest_point(path, monkeypatch):
+def test_unreachable_targets_converge_to_the_exact_closest_point(path):
     # large-residual least squares: DLS alone converges linearly (~2.5% per step) at the stretched pose;
     # the full-Hessian LM it switches to converges quadratically
     import tianim.kinematics.ik as ik
@@ -243,23 +247,19 @@ def test_unreachable_targets_converge_to_the_exact_closest_point(path, monkeypat
     ang = rng.uniform(-np.pi, np.pi, 40)
     direction = np.stack([np.cos(ang), np.sin(ang)], axis=1)
     targets = chain.base + chain.reach * rng.uniform(1.05, 3.0, 40)[:, None] * direction
-    if path == "numpy":
-        monkeypatch.setattr(ik, "KERNEL_MIN_BATCH", 10**9)
-        monkeypatch.setattr(ik, "LOOP_MAX_BATCH", 0)
     if path == "single":
         res = [solve_ik(chain, t, max_iter=100) for t in targets[:8]]
         q, r = np.array([x.q for x in res]), np.array([x.residual for x in res])
         targets, direction = targets[:8], direction[:8]
     else:
-        out = solve_ik(chain, targets, max_iter=100)
+        out = solve_ik(chain, targets, max_iter=100, path=path)
         q, r = out.q, out.residual
     want = np.linalg.norm(targets - chain.base, axis=1) - chain.reach
     np.testing.assert_allclose(r, want, atol=1e-9)
     np.testing.assert_allclose(chain.end_effector(q), chain.base + chain.reach * direction, atol=1e-4)
 
 
-def test_3d_paths_agree_and_curvature_matches_finite_differences(monkeypatch):
-    import tianim.kinematics.ik as ik
+def test_3d_paths_agree_and_curvature_matches_finite_differences():
     from tianim.kinematics.nullspace import _curvature_fd
 
     chain = _serial7()
@@ -274,9 +274,9 @@ def test_3d_paths_agree_and_curvature_matches_finite_differences(monkeypatch):
         np.testing.assert_allclose(J1, J[b], atol=1e-14)
     targets = chain.end_effector(rng.uniform(-1.0, 1.0, size=(6, 7)))
     rest = np.full(7, -0.1)
-    loop = solve_ik(chain, targets, rest=rest, tol=1e-8)  # plain floats, target by target
-    monkeypatch.setattr(ik, "LOOP_MAX_BATCH", 0)
-    vec = solve_ik(chain, targets, rest=rest, tol=1e-8)  # vectorised NumPy
+    loop = solve_ik(chain, targets, rest=rest, tol=1e-8)  # "auto": plain floats, target by target
+    assert np.array_equal(loop.q, solve_ik(chain, targets, rest=rest, tol=1e-8, path="loop").q)
+    vec = solve_ik(chain, targets, rest=rest, tol=1e-8, path="numpy")  # vectorised NumPy
     assert loop.converged.all() and vec.converged.all()
     np.testing.assert_allclose(vec.q, loop.q, atol=1e-6)
 
@@ -376,25 +376,20 @@ def test_batched_equals_one_by_one_bit_for_bit(rest):
 
 
 @pytest.mark.parametrize("path", ["kernel", "numpy", "serial"])
-def test_identical_targets_identical_poses_and_batch_composition_irrelevant(path, monkeypatch):
-    import tianim.kinematics.ik as ik
-
-    if path == "numpy":
-        monkeypatch.setattr(ik, "KERNEL_MIN_BATCH", 10**9)
-        monkeypatch.setattr(ik, "LOOP_MAX_BATCH", 0)
+def test_identical_targets_identical_poses_and_batch_composition_irrelevant(path):
     chain = _serial7() if path == "serial" else PlanarChain(np.linspace(1.2, 0.8, 7) / 7, lower=-2.5, upper=2.5)
+    opt = {"path": "numpy" if path == "serial" else path}  # the serial chain: vectorised NumPy
     if path == "serial":
-        monkeypatch.setattr(ik, "LOOP_MAX_BATCH", 0)  # vectorised NumPy for the 3D chain
         targets = np.array([[0.3, 0.2, 1.6], [0.1, 0.0, 0.5], [2.0, 0.0, 0.0], [0.2, -0.3, 0.9]])
     else:
         targets = _mixed_targets(chain, 40, seed=2)
-    hard = targets[np.argmax(solve_ik(chain, targets).residual)]  # the worst target: every restart used
-    same = solve_ik(chain, np.repeat(hard[None], 40, axis=0))
+    hard = targets[np.argmax(solve_ik(chain, targets, **opt).residual)]  # the worst target: every restart used
+    same = solve_ik(chain, np.repeat(hard[None], 40, axis=0), **opt)
     assert len(np.unique(same.q, axis=0)) == 1
     mixed = np.concatenate([targets, hard[None]])
-    a = solve_ik(chain, np.concatenate([mixed, mixed[:5]]))
+    a = solve_ik(chain, np.concatenate([mixed, mixed[:5]]), **opt)
     perm = np.random.default_rng(0).permutation(len(mixed))
-    b = solve_ik(chain, np.concatenate([mixed[perm], targets[::-1]]))
+    b = solve_ik(chain, np.concatenate([mixed[perm], targets[::-1]]), **opt)
     np.testing.assert_array_equal(a.q[: len(mixed)][perm], b.q[: len(mixed)])
     np.testing.assert_array_equal(a.q[-6:-5], same.q[:1])
 
@@ -414,6 +409,8 @@ def test_identical_targets_identical_poses_and_batch_composition_irrelevant(path
     ({"seed": "x"}, TypeError, ["seed", "'x'"]),
     ({"seed": -3}, ValueError, ["seed", "-3"]),
     ({"method": None}, ValueError, ["method", "None"]),
+    ({"path": "fast"}, ValueError, ["path", "'fast'", "'kernel'"]),
+    ({"path": "kernel", "method": "ccd"}, ValueError, ["path='kernel'", "method='dls'"]),
 ])
 def test_bad_solver_options_name_the_argument_and_change_nothing(kwargs, exc, words):
     chain = _chain(3)

@@ -154,3 +154,148 @@ def test_env_benchmark_lives_with_the_envs():
     assert "python -m envs.bench" in out.stderr and "Traceback" not in out.stderr
     listed = subprocess.run([sys.executable, "-m", "tianim", "bench", "--list"], cwd=ROOT, capture_output=True, text=True)
     assert "envs" not in listed.stdout.split("benchmarks:")[-1]
+
+
+# ------------------------------------------------------------------------------ tianim's own layer order
+
+#: tianim's layers, bottom first (docs/architecture.md, "Layers"). A module may import its own unit (a
+#: subpackage, or a top-level module), any unit of a lower layer, and a unit of its own layer only where
+#: SIDEWAYS allows it. "" is the ``tianim`` package itself (its ``__init__``).
+LAYERS = (
+    ("kernels", "_ti", "runtime", "_checks", "_probe", "stepping"),
+    ("keyframe", "kinematics", "spatial"),
+    ("physics",),
+    ("particles", "crowds", "mocap"),
+    ("render", "timeline"),
+    ("bench", "gallery", "cli", "info", "__main__", ""),
+)
+#: Imports inside one layer that are allowed: the bottom layer's modules use each other, the top layer's
+#: commands use each other, and the timeline writes frames with render's exporter.
+SIDEWAYS = {0: None, len(LAYERS) - 1: None, 4: {("timeline", "render")}}
+#: Units whose imports of other units' private modules and names are not checked (benchmarks reach into
+#: kernels on purpose: they time them).
+PRIVATE_EXEMPT = ("bench",)
+_LAYER = {unit: k for k, units in enumerate(LAYERS) for unit in units}
+
+
+def _unit(module: str) -> str:
+    """``tianim.physics.model`` -> ``physics``; ``tianim._ti`` -> ``_ti``; ``tianim`` -> ``""``."""
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else ""
+
+
+def _module_of(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _is_module(name: str) -> bool:
+    rel = PKG.parent.joinpath(*name.split("."))
+    return rel.with_suffix(".py").exists() or (rel / "__init__.py").exists()
+
+
+def _tianim_imports(path: Path):
+    """(line, target module, imported name or None) of every import of tianim in ``path``; ``from a import b``
+    with ``b`` a module counts as an import of module ``a.b``."""
+    tree = ast.parse(path.read_text(), str(path))
+    package = ".".join(path.relative_to(ROOT).with_suffix("").parts[:-1])
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if _top(a.name) == "tianim":
+                    yield node.lineno, a.name, None
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")
+                parts = parts[: len(parts) - node.level + 1]
+                base = ".".join(parts + ([base] if base else []))
+            if _top(base) != "tianim":
+                continue
+            for a in node.names:
+                if _is_module(f"{base}.{a.name}"):
+                    yield node.lineno, f"{base}.{a.name}", None
+                else:
+                    yield node.lineno, base, a.name
+
+
+def test_layer_table_places_every_unit_of_tianim():
+    units = {_unit(_module_of(p)) for p in _files()}
+    assert units - set(_LAYER) == set(), f"place these in LAYERS: {sorted(units - set(_LAYER))}"
+
+
+def _allowed(src: str, dst: str) -> bool:
+    """Whether unit ``src`` may import unit ``dst``."""
+    if src == dst:
+        return True
+    ls, ld = _LAYER[src], _LAYER[dst]
+    if ld != ls:
+        return ld < ls
+    sideways = SIDEWAYS.get(ls, set())
+    return sideways is None or (src, dst) in sideways
+
+
+def test_tianim_imports_only_down_or_allowed_sideways():
+    bad = []
+    for p in _files():
+        src = _unit(_module_of(p))
+        for line, target, _ in _tianim_imports(p):
+            dst = _unit(target)
+            if not _allowed(src, dst):
+                bad.append(f"{p.relative_to(ROOT)}:{line} ({src or 'tianim'}, layer {_LAYER[src]}) imports "
+                           f"{target} ({dst or 'tianim'}, layer {_LAYER[dst]})")
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("src, dst, ok", [
+    ("crowds", "spatial", True), ("physics", "kernels", True), ("kernels", "_ti", True), ("cli", "gallery", True),
+    ("timeline", "render", True), ("spatial", "physics", False), ("kinematics", "spatial", False),
+    ("render", "timeline", False), ("kernels", "physics", False), ("crowds", "particles", False),
+    ("physics", "", False), ("_checks", "keyframe", False),
+])
+def test_layer_rule_itself(src, dst, ok):
+    """The rule the import check applies: down always, sideways only where SIDEWAYS says, never up."""
+    assert _allowed(src, dst) is ok
+
+
+def test_no_unit_imports_another_units_private_modules_or_names():
+    """``tianim.crowds`` may use ``tianim.spatial.NeighbourGrid`` but not ``tianim.spatial._kernels`` or
+    ``physics.model._collider_table``: shared kernel plumbing lives in ``tianim.kernels``. The bottom layer's
+    own modules (``tianim._ti``, ``tianim._checks``) are for everyone."""
+    bad = []
+    for p in _files():
+        src = _unit(_module_of(p))
+        if src in PRIVATE_EXEMPT:
+            continue
+        for line, target, name in _tianim_imports(p):
+            dst = _unit(target)
+            if dst == src:
+                continue
+            inner = target.split(".")[2:]
+            private_module = any(part.startswith("_") for part in inner)
+            private_name = name is not None and name.startswith("_") and not name.startswith("__")
+            if private_module or private_name:
+                bad.append(f"{p.relative_to(ROOT)}:{line} imports {target}" + (f".{name}" if name else ""))
+    assert not bad, "\n".join(bad)
+
+
+def test_lower_layers_load_no_physics_after_their_first_kernels():
+    """The neighbour grid and the batched IK kernel run without importing any physics module (the kernel
+    plumbing they share with physics lives in tianim.kernels)."""
+    out = _run("""
+        import numpy as np
+        import tianim.keyframe as kf
+        from tianim.kinematics import PlanarChain, solve_ik
+        from tianim.spatial import NeighbourGrid
+        x = np.random.default_rng(0).random((1, 50, 2))
+        grid = NeighbourGrid((0, 0), (1, 1), 0.1, 50, max_neighbours=50, dtype=np.float64).build(x)
+        assert grid.query(0.1).counts.sum() > 0
+        chain = PlanarChain([1.0, 0.8, 0.5])
+        targets = np.random.default_rng(1).uniform(-1.5, 1.5, (40, 2))
+        solve_ik(chain, targets, method="dls", path="kernel")
+        kf.catmull_rom(np.arange(8.0).reshape(4, 2))(0.5)
+        assert "taichi" in sys.modules or "quadrants" in sys.modules
+        print(sorted(m for m in sys.modules if m.startswith("tianim.physics")))
+    """, TIANIM_NUM_THREADS="1")
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout

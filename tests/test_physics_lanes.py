@@ -31,11 +31,10 @@ SCENES = {
 }
 
 
-@pytest.fixture(params=["serial", "parallel"])
-def lanes_mode(request, monkeypatch):
-    """Both paths of the layout: one thread for the whole call, or parallel loops with barriers."""
-    if request.param == "parallel":
-        monkeypatch.setattr(lanes, "SERIAL_MAX_PARTICLES", 0)
+@pytest.fixture(params=["lanes_serial", "lanes_parallel"])
+def lanes_mode(request):
+    """Both paths of the layout, as solver layouts: one thread for the whole call, or parallel loops with
+    barriers."""
     return request.param
 
 
@@ -46,7 +45,7 @@ def test_lanes_equal_the_substep_layout_bit_for_bit(scene, dtype, lanes_mode):
     for batch, substeps in ((1, 37), (3, 16), (2, 1), (1, 2)):
         a, b = loaded(model, batch, 4, dtype), loaded(model, batch, 4, dtype)
         tp.step(model, a, 3e-4, substeps=substeps, layout="substep", check=False)
-        tp.step(model, b, 3e-4, substeps=substeps, layout="lanes", check=False)
+        tp.step(model, b, 3e-4, substeps=substeps, layout=lanes_mode, check=False)
         assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v), (batch, substeps)
         assert not np.array_equal(a.x, loaded(model, batch, 4, dtype).x)  # it moved
 
@@ -97,7 +96,7 @@ def test_pool_growth_keeps_results(lanes_mode):
         for batch in (1, 5):
             a, b = loaded(model, batch, 9), loaded(model, batch, 9)
             tp.step(model, a, 2e-4, substeps=8, layout="substep", check=False)
-            tp.step(model, b, 2e-4, substeps=8, layout="lanes", check=False)
+            tp.step(model, b, 2e-4, substeps=8, layout=lanes_mode, check=False)
             assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
         assert lanes._POOLS[("float32", 3)].capacity == 512
     finally:
@@ -116,12 +115,10 @@ def test_second_scene_and_batch_compile_nothing_new():
 
 _THREAD_SCRIPT = textwrap.dedent("""
     import hashlib, numpy as np, tianim.physics as tp
-    from tianim.physics import lanes
-    lanes.SERIAL_MAX_PARTICLES = 0  # the parallel path (the serial one runs on one thread anyway)
     model = tp.cloth(40, 40, damping=(0.05, 0.02, 0.01), colliders=[tp.Sphere((0, 0.6, 0), 0.25)], pins="none")
     state = model.state(batch=2)
     state.x[1] += 0.01
-    tp.step(model, state, 1e-4, substeps=100, layout="lanes")
+    tp.step(model, state, 1e-4, substeps=100, layout="lanes_parallel")  # (the serial path runs on one thread)
     print(hashlib.sha256(state.x.tobytes() + state.v.tobytes()).hexdigest())
 """)
 

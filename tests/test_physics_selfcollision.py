@@ -165,13 +165,12 @@ def test_bit_identical_with_one_and_two_threads():
             solver.step(m, s, 1e-3 if method == "xpbd" else 2e-4, 100)
             h.update(s.x.tobytes()); h.update(s.v.tobytes())
         # symplectic Euler's fused contact launch, several substeps per launch, parallel loops
-        from tianim.physics import passes
-        passes.SERIAL_MAX, passes.SC_SUBSTEPS_PER_LAUNCH = 0, 4
         m = tp.cloth(12, 12, size=(0.3, 0.3), total_mass=0.05, stiffness=(100.0, 30.0, 3.0), pins="none",
                      plane="xy", origin=(-0.15, 0.32, 0.0), colliders=[tp.Ground(friction=0.5)])
         s = m.state(batch=2)
         s.x[..., 2] += np.random.default_rng(0).normal(0, 0.003, s.x.shape[:2]).astype(np.float32)
-        solver = tp.SymplecticEuler(self_collision=tp.SelfCollision(0.016, margin=0.004))
+        solver = tp.SymplecticEuler(layout="substep",
+                                    self_collision=tp.SelfCollision(0.016, margin=0.004, substeps_per_launch=4))
         solver.step(m, s, 0.5 * solver.stable_dt(m), 1002)
         h.update(s.x.tobytes()); h.update(s.v.tobytes())
         print(h.hexdigest())
@@ -228,6 +227,8 @@ BAD = [
     (lambda: tp.SelfCollision(0.01, margin=-1.0), "SelfCollision.margin"),
     (lambda: tp.SelfCollision(0.01, iterations=0), "SelfCollision.iterations"),
     (lambda: tp.SelfCollision(0.01, iterations=1.5), "SelfCollision.iterations"),
+    (lambda: tp.SelfCollision(0.01, path="fuse"), "SelfCollision.path"),
+    (lambda: tp.SelfCollision(0.01, substeps_per_launch=9), "SelfCollision.substeps_per_launch"),
     (lambda: tp.SelfCollision(0.01, exclude=-1), "SelfCollision.exclude"),
     (lambda: tp.SelfCollision(0.01, max_neighbours=0), "SelfCollision.max_neighbours"),
     (lambda: tp.SelfCollision(0.01, max_separation_speed=0.0), "SelfCollision.max_separation_speed"),
@@ -281,28 +282,24 @@ def test_bench_scene_agrees_at_a_tiny_size():
 
 
 @pytest.mark.parametrize("iterations,cap,per_launch", [(1, None, 1), (2, 0.5, 4), (3, None, 1)])
-def test_fused_symplectic_contact_launch_equals_the_two_launches(monkeypatch, iterations, cap, per_launch):
+def test_fused_symplectic_contact_launch_equals_the_two_launches(iterations, cap, per_launch):
     """Symplectic Euler with self-collision runs its substeps inside the contact launch (``per_launch`` of
     them, parallel loops; 1: the small-scene serial launch): bit for bit the solver's own substep launch
-    followed by the passes (FUSE_SYMPLECTIC=False), through contacts, ground contact, stale lists rebuilt
+    followed by the passes (``SelfCollision(path="split")``), through contacts, ground contact, stale lists rebuilt
     per copy (a copy stops inside a launch and goes on after its rebuild), a substep count that is not a
     multiple of ``per_launch``, and the separation-speed cap."""
-    from tianim.physics import passes
     from tianim.physics.selfcollision import contacts_for
 
-    if per_launch > 1:
-        monkeypatch.setattr(passes, "SERIAL_MAX", 0)
-        monkeypatch.setattr(passes, "SC_SUBSTEPS_PER_LAUNCH", per_launch)
-
+    layout = "substep" if per_launch > 1 else "auto"  # parallel loops (per_launch substeps a launch), or serial
     model, _ = drop_scene()
     start = model.state(batch=2)
     start.x[:, :, 2] += np.random.default_rng(3).normal(0, 0.003, start.x.shape[:2]).astype(np.float32)
     start.x[1, :, 1] -= 0.3  # copy 1 starts near the ground: it folds onto itself sooner
-    sc = tp.SelfCollision(THICKNESS, iterations=iterations, margin=0.004, max_separation_speed=cap)
     out = {}
     for fuse in (True, False):
-        monkeypatch.setattr(passes, "FUSE_SYMPLECTIC", fuse)
-        solver = tp.SymplecticEuler(self_collision=sc)
+        sc = tp.SelfCollision(THICKNESS, iterations=iterations, margin=0.004, max_separation_speed=cap,
+                              path="fused" if fuse else "split", substeps_per_launch=per_launch)
+        solver = tp.SymplecticEuler(layout=layout, self_collision=sc)
         s = start.copy()
         solver.step(model, s, 0.5 * solver.stable_dt(model), 1502)
         out[fuse] = (s.x.copy(), s.v.copy(), contacts_for(sc, model, s).rebuilt.tolist())
@@ -311,3 +308,27 @@ def test_fused_symplectic_contact_launch_equals_the_two_launches(monkeypatch, it
     assert not np.array_equal(plain.x, out[True][0])  # contacts acted
     assert min(out[True][2]) > 1 and out[True][2] == out[False][2]
     assert np.array_equal(out[True][0], out[False][0]) and np.array_equal(out[True][1], out[False][1])
+
+
+@pytest.mark.parametrize("method, everything", [("symplectic_euler", False), ("verlet", True)])
+def test_serial_and_parallel_passes_are_bit_identical(method, everything):
+    """The passes' Jacobi sweeps are one runtime loop on serial scenes (layout "serial") and one unrolled
+    parallel loop per sweep otherwise (layout "substep"): the same bits, for odd sweep counts (the copy
+    back) through contacts, the strain limit and bending; symplectic Euler with self-collision alone runs
+    the fused launch (1 substep a launch serially, 2 in parallel)."""
+    m = tp.cloth(12, 12, size=(0.3, 0.3), total_mass=0.05, stiffness=(100.0, 30.0, 3.0), pins="none", plane="xy",
+                 origin=(-0.15, 0.32, 0.0), colliders=[tp.Ground(friction=0.5)], medium_damping=2e-3,
+                 bending=1e-4 if everything else 0.0)
+    start = m.state(batch=2)
+    start.x[..., 2] += np.random.default_rng(5).normal(0, 0.003, start.x.shape[:2]).astype(np.float32)
+    start.x[1, :, 1] -= 0.3  # copy 1 lands on the ground and folds
+    sc = tp.SelfCollision(0.016, iterations=3, margin=0.004, substeps_per_launch=2)
+    strain = tp.StrainLimit(0.1, iterations=3) if everything else None
+    out = []
+    for layout in ("serial", "substep"):
+        solver = tp.make_solver(method, layout=layout, self_collision=sc, strain_limit=strain, watchdog=False)
+        s = start.copy()
+        solver.step(m, s, 2e-4, 801)  # (the bits, not the physics: no watchdog)
+        out.append((s.x.copy(), s.v.copy()))
+    assert np.isfinite(out[0][0]).all() and not np.array_equal(out[0][0], start.x)
+    assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])

@@ -3,8 +3,9 @@
 Every kernel module gets Taichi from here, never by ``import taichi``::
 
     from tianim import _ti
+    from tianim.kernels import cached_variants
 
-    @_ti.cached_kernels
+    @cached_variants
     def _build():                  # runs once per process, on first need
         ti = _ti.get()
         @ti.kernel
@@ -185,15 +186,6 @@ def get():
                     raise
                 raise _missing(name) from None
     return _module
-
-
-def cached_kernels(build):
-    """Decorator of a kernel factory: ``build(*key)`` runs once per distinct key and process.
-
-    Defining the kernels inside the factory keeps Taichi out of import time; the cache keeps
-    the hundredth scene from compiling anything again (kernels take arrays as arguments).
-    """
-    return functools.lru_cache(maxsize=None)(build)
 
 
 def __getattr__(name: str):

@@ -4,7 +4,7 @@ Three parts, each checked for agreement before anything is timed; times are medi
 
 * **Particles** - N = 1,000,000 (``--quick``: 20,000) float32 particles in one copy under gravity,
   linear + quadratic drag and a bouncing ground (restitution and Coulomb friction as
-  :mod:`tianim.physics.contact`), with ageing and the death test; 10 substeps of 1 ms per call.
+  :mod:`tianim.kernels.contact`), with ageing and the death test; 10 substeps of 1 ms per call.
   tianim: :class:`tianim.particles.ParticleSystem.step`. NumPy: :func:`numpy_steps`, the same model
   written as a skeptic would (structure of arrays, in-place ufuncs into preallocated buffers, the
   drag folded into one factor per particle, the contact response only on the particles below the

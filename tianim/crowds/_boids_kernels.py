@@ -13,9 +13,9 @@ avoid (weight, distance), wander (weight, jitter).
 """
 
 from tianim.crowds._shapes import wall_parts
-from tianim.physics.contact import contact_parts
-from tianim.physics.kernel_types import cached_variants, kernel_types
-from tianim.spatial._kernels import BOX_PAD, grid_funcs
+from tianim.kernels.contact import contact_parts
+from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.grid import BOX_PAD, grid_funcs
 
 #: Names of the entries of the boids parameter vector, in order.
 PRM = ("max_speed", "max_force", "min_speed", "dt",

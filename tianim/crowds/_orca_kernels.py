@@ -13,8 +13,8 @@ only its own rows and its own new velocity: bit-identical for any thread count. 
 (RVO2's polygon obstacles) are not modelled.
 """
 
-from tianim.physics.kernel_types import cached_variants, kernel_types
-from tianim.spatial._kernels import grid_funcs
+from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.grid import grid_funcs
 
 #: RVO2's RVO_EPSILON: below it two ORCA lines count as parallel.
 RVO_EPSILON = 1e-5

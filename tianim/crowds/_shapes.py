@@ -1,6 +1,6 @@
 """Taichi function of the 2D wall obstacle (:class:`tianim.crowds.Wall`): signed distance and normal."""
 
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels import cached_variants, kernel_types
 
 
 @cached_variants

@@ -6,8 +6,8 @@ own outputs: bit-identical for any thread count.
 """
 
 from tianim.crowds._shapes import wall_parts
-from tianim.physics.contact import contact_parts
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels.contact import contact_parts
+from tianim.kernels import cached_variants, kernel_types
 
 #: Below this value of b [m] (an agent on another's step segment) the repulsion is not evaluated.
 B_MIN = 1e-9

@@ -5,7 +5,7 @@ periodic images in a fixed order (see :mod:`tianim.crowds.vicsek`), then over ne
 grid's order: bit-identical for any thread count.
 """
 
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels import cached_variants, kernel_types
 
 
 @cached_variants

@@ -40,7 +40,7 @@ def polygon(vertices, half_thickness=0.05) -> list:
 
 def obstacle_tables(obstacles, dim: int) -> tuple[np.ndarray, np.ndarray]:
     """``(colliders (C, 7), walls (W, 5))`` float64 tables of ``obstacles`` for the kernels."""
-    from tianim.physics.model import COLLIDER_ROW, Ground, Sphere, _collider_table
+    from tianim.kernels.colliders import COLLIDER_ROW, Ground, Sphere, collider_table as _collider_table
 
     if not isinstance(obstacles, (list, tuple)):
         raise TypeError(f"obstacles={fmt(obstacles)} must be a list of tianim.physics.Sphere/Ground or crowds.Wall")

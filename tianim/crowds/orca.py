@@ -32,7 +32,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim._checks import check_finite_scalar, check_int
+from tianim._checks import check_choice, check_finite_scalar, check_int
 from tianim.crowds.agents import Agents
 from tianim.crowds.pedestrians import PedestrianModel
 
@@ -64,7 +64,9 @@ class ORCA(PedestrianModel):
     ``perturbation`` (default 0.1) the fraction of its magnitude added to each preferred velocity in a
     direction hashed from (agent, step) (RVO2's examples add 1e-4 m/s of random noise; symmetric
     circles of 20-64 agents with a 2 s horizon jam for good in a ring at 0.01 and all cross at 0.1;
-    agents at rest on their goals are not disturbed).
+    agents at rest on their goals are not disturbed). ``path``: ``"copy"`` (the copy-parallel kernel),
+    ``"agent"`` (agent-parallel, ``steps_per_launch`` unrolled steps a launch, default
+    :data:`MAX_STEPS_PER_LAUNCH`) or ``"auto"`` (copy up to :data:`COPY_KERNEL_MAX_AGENTS`); bit-identical.
     """
 
     #: Cells of neighbour_dist / 2 (up to 16 per agent): the nearest-K scan prunes at cell granularity.
@@ -73,8 +75,11 @@ class ORCA(PedestrianModel):
 
     def __init__(self, goals, pref_speed=1.0, radius=0.5, time_horizon=2.0, neighbour_dist=None,
                  max_neighbors=10, max_speed=2.0, safety=0.25, arrival_radius=1e-3, domain=None,
-                 grid_neighbours=256, skin=None, perturbation=0.1):
+                 grid_neighbours=256, skin=None, perturbation=0.1, path="auto", steps_per_launch=None):
         super().__init__(goals, pref_speed, arrival_radius, domain, grid_neighbours)
+        self.path = check_choice("path", path, ("auto", "copy", "agent"))
+        self.steps_per_launch = MAX_STEPS_PER_LAUNCH if steps_per_launch is None else check_int(
+            "steps_per_launch", steps_per_launch, lo=1, hi=8)
         self.radius = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
         self.time_horizon = check_finite_scalar("time_horizon", time_horizon, lo=0.0, lo_open=True)
         self.max_speed = check_finite_scalar("max_speed", max_speed, lo=0.0, lo_open=True)
@@ -136,9 +141,9 @@ class ORCA(PedestrianModel):
                 self.neighbour_dist)
         from tianim.crowds._orca_kernels import orca_copy_kernels, orca_kernels
 
-        copy = agents.x.shape[1] <= COPY_KERNEL_MAX_AGENTS  # all steps in one launch, parallel over copies
-        chunks = [steps] if copy else (
-            [MAX_STEPS_PER_LAUNCH] * (steps // MAX_STEPS_PER_LAUNCH) + [1] * (steps % MAX_STEPS_PER_LAUNCH))
+        copy = self.path == "copy" or (self.path == "auto" and agents.x.shape[1] <= COPY_KERNEL_MAX_AGENTS)
+        k = self.steps_per_launch  # agent path: k unrolled steps a launch; copy path: all steps in one launch
+        chunks = [steps] if copy else [k] * (steps // k) + [1] * (steps % k)
         for chunk in chunks:
             if copy:
                 orca_copy_kernels(name)(*args, chunk)

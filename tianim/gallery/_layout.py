@@ -14,7 +14,7 @@ MIN_SIZE = 5  # pixels: Canvas2D accepts >= 4
 
 @lru_cache(maxsize=256)
 def _font(size: int):
-    from tianim.render.canvas2d import _font as font
+    from tianim.render.canvas2d import label_font as font
 
     return font(size)
 

@@ -13,10 +13,10 @@ Taichi import when this module is imported).
 """
 
 
-import functools
+from tianim.kernels import cached_variants
 
 
-@functools.lru_cache(maxsize=None)
+@cached_variants
 def arm_step_kernel(n: int, gy_on: bool, gx_on: bool):
     """The kernel ``k(substeps, dt, p, q, qd, tau, active, cos_q, sin_q, tip)`` for ``n`` links.
 

@@ -40,7 +40,9 @@ Methods (``method=``):
            in one Taichi kernel (one target per thread; its first use in a process
            compiles or loads it: ~1.5 s cached, 5-8 s the very first time); a
            SerialChain takes a plain-float path per target up to ``LOOP_MAX_BATCH``
-           targets and vectorised NumPy beyond.
+           targets and vectorised NumPy beyond. That is ``path="auto"``; ``path="loop"``,
+           ``"kernel"`` (planar chains) or ``"numpy"`` forces one (the answers agree to
+           rounding; the loop and the kernel bit for bit).
 ``"jt"``   Jacobian transpose ``dq = mu a J^T e`` with Buss's step
            ``a = <e, J J^T e> / |J J^T e|^2`` (Buss 2004, eq. 7), and a multiplier
            mu that doubles after a step that lowers the error and drops below 1 after one
@@ -64,7 +66,9 @@ from tianim.kinematics.planar import PlanarChain
 from tianim.kinematics.tree import SerialChain
 
 METHODS = ("dls", "jt", "ccd", "fabrik")
-KERNEL_MIN_BATCH = 32  # planar DLS batches from this size run in one Taichi kernel (ik_kernel.py) ...
+#: DLS paths (``solve_ik(..., path=)``): "auto" chooses from the chain and the batch size.
+DLS_PATHS = ("auto", "loop", "kernel", "numpy")
+KERNEL_MIN_BATCH = 32  # "auto": planar DLS batches from this size run in one Taichi kernel (ik_kernel.py) ...
 LOOP_MAX_BATCH = 31  # ... smaller ones target by target on the plain-float path (no kernel compile)
 _DEFAULT_ITERS = {"dls": 200, "jt": 5000, "ccd": 1000, "fabrik": 1000}
 
@@ -142,7 +146,7 @@ def _check_chain(chain) -> None:
 
 
 def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max_iter: int | None = None,
-             rest=None, restarts: int = 16, seed: int = 0) -> IKResult:
+             rest=None, restarts: int = 16, seed: int = 0, path: str = "auto") -> IKResult:
     """Joint coordinates that put the end effector of ``chain`` on ``target`` (see the module docstring).
 
     Parameters
@@ -174,6 +178,10 @@ def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max
         reachable annulus (the proven closest point).
     seed : int
         Seed (>= 0) of the restart sequence.
+    path : {"auto", "loop", "kernel", "numpy"}
+        DLS only: how the batch runs (module docstring): ``"auto"`` chooses from the chain and
+        the batch size; ``"loop"`` plain floats target by target, ``"kernel"`` one Taichi launch
+        (PlanarChain only), ``"numpy"`` vectorised NumPy.
 
     Returns
     -------
@@ -188,6 +196,13 @@ def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max
         max_iter = check_int("max_iter", max_iter, lo=1)
     restarts = check_int("restarts", restarts, lo=0)
     seed = check_int("seed", seed, lo=0, hi=None)
+    path = check_choice("path", path, DLS_PATHS)
+    if path != "auto" and method != "dls":
+        raise ValueError(f"path={path!r} applies to method='dls' only; leave path='auto' for method={method!r}")
+    if path == "kernel" and not isinstance(chain, PlanarChain):
+        raise ValueError(f"path='kernel' supports PlanarChain only; use 'loop' or 'numpy' for {type(chain).__name__}")
+    if path == "loop" and not isinstance(chain, (PlanarChain, SerialChain)):
+        raise ValueError(f"path='loop' supports PlanarChain and SerialChain only; use 'numpy' for {type(chain).__name__}")
     m, n = chain.task_dim, chain.n
     tgt = _check_target(target, m)
     single = tgt.ndim == 1
@@ -217,7 +232,7 @@ def solve_ik(chain, target, method: str = "dls", q0=None, tol: float = 1e-6, max
         rest_arr = None
     iters = max_iter if max_iter is not None else _DEFAULT_ITERS[method]
     if method == "dls":  # one path for every attempt of the call, chosen from the whole batch
-        path = _dls_path(chain, B)
+        path = _dls_path(chain, B) if path == "auto" else path
         step = lambda *a: _dls(*a, path=path)  # noqa: E731
     else:
         step = {"jt": _jt, "ccd": _ccd, "fabrik": _fabrik}[method]
@@ -315,10 +330,8 @@ def _dls(chain, tgt, q, tol, iters, rest, path=None):
             its.append(kb)
         return np.array(qs, dtype=np.float64), np.array(rs, dtype=np.float64), np.array(its, dtype=np.int64)
     if path == "kernel":
-        from tianim.kinematics.ik_kernel import solve_planar_batch
-        from tianim.runtime import ensure_taichi
+        from tianim.kinematics.ik_kernel import solve_planar_batch  # (initialises Taichi on first use)
 
-        ensure_taichi()
         return solve_planar_batch(chain, tgt, q, rest if polishing else None, tol, iters, POLISH_ITERS,
                                   KERNEL_CONSTANTS)
     q, r, it = dls_batch(chain, tgt, q, tol, iters)

@@ -9,8 +9,8 @@ Events written per step (``event``): 0 none, 1 died of age, 2 killed by a collid
 same launch wins over a bounce).
 """
 
-from tianim.physics.contact import contact_parts
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels.contact import contact_parts
+from tianim.kernels import cached_variants, kernel_types
 from tianim.particles.forces import ATTRACTOR, CURL, DRAG, VORTEX
 
 BOUNCE, STICK, KILL = 0, 1, 2

@@ -139,7 +139,7 @@ class Granular:
 
 
 def _colliders(colliders, dim, gravity):
-    from tianim.physics.model import Ground, Sphere, _collider_table
+    from tianim.kernels.colliders import Ground, Sphere, collider_table as _collider_table
 
     if not isinstance(colliders, (list, tuple)):
         raise TypeError(f"colliders={fmt(colliders)} must be a list of Ground/Sphere or (collider, mode) pairs")

@@ -73,7 +73,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tianim._checks import check_finite_scalar
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels import cached_variants, kernel_types
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ substeps, Newton and CG iterations with their convergence tests) runs
 serially inside it, one kernel launch per call. Reductions (dot products)
 run in a fixed order, so results are bit-identical for any thread count.
 
-Colliders (:mod:`tianim.physics.contact`) act after each step on the solved
+Colliders (:mod:`tianim.kernels.contact`) act after each step on the solved
 positions and velocities, as in the explicit integrators.
 
 Backward Euler is first order and L-stable: on an undamped oscillator its
@@ -39,9 +39,9 @@ size: it is stable at every dt and dissipates energy (more at larger omega h).
 
 import numpy as np
 
-from tianim.physics.contact import contact_response
+from tianim.kernels.contact import contact_response
 from tianim.physics.model import GRID_STENCIL
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels import cached_variants, kernel_types
 
 #: Defaults of the nonlinear and linear solves, per float type:
 #: (relative Newton tolerance on |g|, relative CG tolerance, Newton iterations, CG iterations).
@@ -251,7 +251,7 @@ def run_implicit_euler(model, state, dt: float, substeps: int, options: dict, bu
     ----------
     model : Model
         Colliders, if any, act after each step (contact response of
-        :mod:`tianim.physics.contact` on the solved x+, v+; contacts are not part of the Newton solve).
+        :mod:`tianim.kernels.contact` on the solved x+, v+; contacts are not part of the Newton solve).
     state : State
         ``x``, ``v`` of shape (B, N, D) are updated.
     dt : float

@@ -19,9 +19,11 @@ Integrators are written as sequences of *phases*; each phase is one loop over
 * ``"serial"``: as ``"frame"`` with the loop over copies serial too (a
   single small scene: no thread-pool wake-up, the cheapest launch).
 * ``"substep"``: one parallel loop over (copy, particle) per phase (large
-  scenes); one launch runs :data:`SUBSTEPS_PER_LAUNCH` substeps, each top-level
-  loop ending in a barrier, and symplectic Euler fuses a whole substep into one
-  loop by ping-ponging between two position/velocity buffers.
+  scenes); one launch runs :func:`substeps_per_launch` substeps (at most
+  :data:`MAX_LOOPS_PER_LAUNCH` unrolled loops, so the compile time is bounded
+  whatever the call's substeps), each top-level loop ending in a barrier, and
+  symplectic Euler fuses a whole substep into one loop by ping-ponging between
+  two position/velocity buffers.
 
 Kernel arguments are packed (fewer arguments, cheaper launches from Python):
 ``P`` holds gravity, medium damping, masses and per-spring parameters; ``T`` the
@@ -30,8 +32,8 @@ spring topology; ``W`` the work buffers (see :func:`_build`).
 
 import numpy as np
 
-from tianim.physics.contact import contact_response
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels.contact import contact_response
+from tianim.kernels import cached_variants, kernel_types
 from tianim.physics.model import GRID_STENCIL
 
 #: Phases of each integrator: (``pre`` run once per call, ``step`` per substep).
@@ -59,9 +61,20 @@ WORK = {
     "accelerations": 1,
 }
 
-#: Substeps per launch in the "substep" layout (each is a sequence of parallel loops).
-#: Even, so that the fused symplectic Euler substeps end in (x, v).
-SUBSTEPS_PER_LAUNCH = 16  # measured on 128x128 cloth, 2 cores: 1.2x the rate of 4 (launch ~0.3 ms amortised); first compile +1-2 s
+#: Parallel loops one launch of the "substep" layout unrolls at most. Each substep is a sequence of
+#: top-level loops (a barrier after each), so a launch of k substeps unrolls k times the substep's loops:
+#: 16 substeps of RK4 were 128 loops and took minutes to compile cold on 2 loaded cores; 16 loops are
+#: seconds. Symplectic Euler's fused substep is one loop: 16 substeps per launch, measured on 128x128
+#: cloth, 2 cores: 1.2x the rate of 4 (launch ~0.3 ms amortised). Even, so the fused substeps end in (x, v).
+MAX_LOOPS_PER_LAUNCH = 16
+
+
+def substeps_per_launch(method: str) -> int:
+    """Substeps one launch of the "substep" layout advances for ``method``: as many as fit in
+    :data:`MAX_LOOPS_PER_LAUNCH` parallel loops (symplectic Euler 16, explicit Euler 8, Verlet 5, RK4 2);
+    the rest of a call runs one substep per launch. The arithmetic does not depend on it (bit-identical)."""
+    loops = 1 if method == "symplectic_euler" else len(PHASES[method][1])
+    return max(1, MAX_LOOPS_PER_LAUNCH // loops)
 
 
 def frame_kernel(real_np, dim: int, method: str, layout: str, grid: bool, colliders: bool, spring_damping: bool, medium_damping: bool):
@@ -69,7 +82,7 @@ def frame_kernel(real_np, dim: int, method: str, layout: str, grid: bool, collid
 
     All kernels share one signature ``(x, v, W, pinned, P, T, coll, dt, nx, nsub)``.
     ``pre_kernel`` is None when the integrator has no pre-phase; ``multi_step_kernel``
-    (substep layout only, else None) advances :data:`SUBSTEPS_PER_LAUNCH` substeps per launch.
+    (substep layout only, else None) advances :func:`substeps_per_launch` substeps per launch.
     """
     return _build(np.dtype(real_np).name, dim, method, layout, grid, colliders, spring_damping, medium_damping)
 
@@ -167,7 +180,7 @@ def substep_funcs(real_name, dim, grid, colliders, spring_damping, medium_dampin
 
     @ti.func
     def collide(b, i, x: ti.template(), v: ti.template(), coll: ti.template(), P: ti.template(), dt):
-        """Contact response of particle i (tianim.physics.contact)."""
+        """Contact response of particle i (tianim.kernels.contact)."""
         x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, gravity_norm(P), dt)
 
     @ti.func
@@ -285,10 +298,12 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
     step = make(step_phases, True)
     if layout != "substep":
         return pre, step, None
-    # Large scenes: one launch advances SUBSTEPS_PER_LAUNCH substeps (amortises the launch);
-    # symplectic Euler runs each of them as one fused loop (ping-pong buffers).
+    # Large scenes: one launch advances substeps_per_launch(method) substeps (amortises the launch; a
+    # constant, so the unrolled loops are bounded however many substeps a call asks for); symplectic Euler
+    # runs each of them as one fused loop (ping-pong buffers).
+    k = substeps_per_launch(method)
     if method == "symplectic_euler":
-        multi_phases = ("symplectic_fused_a", "symplectic_fused_b") * (SUBSTEPS_PER_LAUNCH // 2)
+        multi_phases = ("symplectic_fused_a", "symplectic_fused_b") * (k // 2)
     else:
-        multi_phases = step_phases * SUBSTEPS_PER_LAUNCH
+        multi_phases = step_phases * k
     return pre, step, make(multi_phases, True)

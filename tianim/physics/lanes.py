@@ -24,8 +24,10 @@ layout keeps the state of a call in a pool of vector fields of that many lanes (
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
 the pool, and unpacks. Up to :data:`SERIAL_MAX_PARTICLES` (batch x padded grid) one thread runs every
-substep of the call in one launch; above it, :data:`SUBSTEPS_PER_LAUNCH` substeps per launch, one
-parallel loop each. On the 2-vCPU machines this project targets, Taichi's workers sleep between
+substep of the call in one launch (path ``"serial"``, a runtime loop over the substeps); above it,
+:data:`SUBSTEPS_PER_LAUNCH` substeps per launch, one parallel loop each (path ``"parallel"``). The
+solver layouts ``"lanes_serial"`` / ``"lanes_parallel"`` force a path (``launch_lanes(path=)``).
+On the 2-vCPU machines this project targets, Taichi's workers sleep between
 parallel loops and take a few hundred microseconds to wake, so a substep of a 128x128 cloth (about
 0.3 ms on one thread) runs faster on one thread than split over two with a barrier after it; from
 256x256 on, two threads win.
@@ -36,8 +38,8 @@ size compiles nothing new.
 
 import numpy as np
 
-from tianim.physics.contact import contact_response
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels.contact import contact_response
+from tianim.kernels import cached_variants, kernel_types
 from tianim.physics.model import GRID_STENCIL
 
 #: Particles per vector, by float type: one SSE register (8 lanes in two registers ran 0.8-0.95x as fast at
@@ -306,10 +308,16 @@ def lane_kernels(real_name, dim, colliders, spring_damping, medium_damping):
     return pack, runs, unpack
 
 
-def launch_lanes(model, state, dt: float, substeps: int, data) -> None:
+#: Thread paths of the layout (``launch_lanes(path=)``): "auto" chooses from the scene size.
+PATHS = ("auto", "serial", "parallel")
+
+
+def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto") -> None:
     """Advance ``state`` by ``substeps`` symplectic Euler steps of ``dt`` in the lanes layout
     (no validation: :func:`tianim.physics.solvers.launch` is the caller). ``data`` is
-    ``model.kernel_data(state.dtype)``."""
+    ``model.kernel_data(state.dtype)``. ``path``: ``"serial"`` (one thread, the whole call in one
+    launch), ``"parallel"`` (parallel loops, :data:`SUBSTEPS_PER_LAUNCH` substeps per launch) or
+    ``"auto"`` (serial up to :data:`SERIAL_MAX_PARTICLES` batch x padded grid); bit-identical."""
     g = model.grid
     real_name = state.dtype.name
     L = LANES[real_name]
@@ -323,7 +331,7 @@ def launch_lanes(model, state, dt: float, substeps: int, data) -> None:
     pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], g.nx, H)
     dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
     args = (S, M, prm, off, data["coll"], packs, npk, g.nx, g.ny, H, dt)
-    if packs * L <= SERIAL_MAX_PARTICLES:
+    if path == "serial" or (path == "auto" and packs * L <= SERIAL_MAX_PARTICLES):
         runs["serial"](*args, substeps)
         unpack(S, substeps % 2, state.x, state.v, g.nx, H)
         return

@@ -26,97 +26,10 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from tianim._checks import as_float_array, as_index_array, check_finite_scalar, fmt
+from tianim.kernels.colliders import COLLIDER_ROW, Ground, Sphere, collider_table  # noqa: F401 (re-exported)
 
 #: Largest |coordinate| [m] a model accepts: squared distances must stay finite in float64 kernels.
 MAX_COORDINATE = 1e15
-
-
-# --------------------------------------------------------------------------- colliders
-@dataclass(frozen=True)
-class Ground:
-    """An infinite plane ``n . x = height`` that particles cannot cross.
-
-    Parameters
-    ----------
-    height : float
-        Offset of the plane along its normal [m].
-    restitution : float
-        Coefficient of restitution e in [0, 1]: the normal velocity after an
-        impact is ``-e`` times the one before (a drop from h rebounds to e^2 h).
-    friction : float
-        Coulomb friction coefficient mu >= 0: the tangential velocity change in
-        a contact is at most mu times the normal velocity change (a particle
-        sliding at v0 stops after v0^2 / (2 mu g)).
-    normal : sequence of float, optional
-        Outward unit normal. Default: opposite to gravity (``+y`` in 2D/3D when
-        gravity is zero; ``-x`` for the chapter's 1D spring whose x points down).
-    """
-
-    height: float = 0.0
-    restitution: float = 0.0
-    friction: float = 0.0
-    normal: tuple | None = None
-
-
-@dataclass(frozen=True)
-class Sphere:
-    """A solid sphere (a disc in 2D, an interval in 1D) that particles cannot enter.
-
-    Parameters
-    ----------
-    center : sequence of float, shape (D,)
-        Centre [m].
-    radius : float
-        Radius [m], > 0.
-    restitution, friction : float
-        As for :class:`Ground`.
-    """
-
-    center: tuple = (0.0, 0.0, 0.0)
-    radius: float = 1.0
-    restitution: float = 0.0
-    friction: float = 0.0
-
-
-#: Width of one row of the collider table passed to kernels:
-#: ``[kind, restitution, friction, offset_or_radius, n_or_center (3 values)]``.
-COLLIDER_ROW = 7
-PLANE, SPHERE = 0, 1
-
-
-def _collider_table(colliders: Sequence, dim: int, gravity: np.ndarray) -> np.ndarray:
-    rows = []
-    for idx, c in enumerate(colliders):
-        name = f"colliders[{idx}]"
-        if not isinstance(c, (Ground, Sphere)):
-            raise TypeError(f"{name}={c!r} is not a collider; use tianim.physics.Ground(...) or Sphere(...)")
-        e = check_finite_scalar(f"{name}.restitution", c.restitution, lo=0.0, hi=1.0)
-        mu = check_finite_scalar(f"{name}.friction", c.friction, lo=0.0)
-        row = np.zeros(COLLIDER_ROW)
-        row[1], row[2] = e, mu
-        if isinstance(c, Ground):
-            if c.normal is None:
-                gnorm = float(np.linalg.norm(gravity))
-                if gnorm > 0:
-                    n = -gravity / gnorm
-                else:
-                    n = np.zeros(dim)
-                    n[min(1, dim - 1)] = 1.0
-            else:
-                n = as_float_array(f"{name}.normal", c.normal, shape=(dim,))
-                nn = float(np.linalg.norm(n))
-                if nn == 0:
-                    raise ValueError(f"{name}.normal={c.normal!r} has zero length; give a non-zero normal")
-                n = n / nn
-            row[0] = PLANE
-            row[3] = check_finite_scalar(f"{name}.height", c.height)
-            row[4 : 4 + dim] = n
-        else:
-            row[0] = SPHERE
-            row[3] = check_finite_scalar(f"{name}.radius", c.radius, lo=0.0, lo_open=True)
-            row[4 : 4 + dim] = as_float_array(f"{name}.center", c.center, shape=(dim,))
-        rows.append(row)
-    return np.array(rows, dtype=np.float64).reshape(len(rows), COLLIDER_ROW)
 
 
 # --------------------------------------------------------------------------- grid topology
@@ -303,7 +216,7 @@ class Model:
         pin_idx = np.zeros(0, dtype=np.int32) if pins is None else as_index_array("pins", list(pins) if not isinstance(pins, np.ndarray) else pins, n, ndim=1)
         if isinstance(colliders, (Ground, Sphere)) or not isinstance(colliders, (list, tuple)):
             raise TypeError(f"colliders={fmt(colliders)} must be a list of colliders, e.g. [tianim.physics.Ground()]")
-        table = _collider_table(tuple(colliders), dim, g)
+        table = collider_table(tuple(colliders), dim, g)
 
         if faces is not None:
             faces = as_index_array("faces", faces, n, ndim=2)

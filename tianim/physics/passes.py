@@ -20,7 +20,7 @@ instead of 7 in two launches, and :data:`SC_SUBSTEPS_PER_LAUNCH` substeps per la
 A copy whose lists go stale stops inside the launch after its integration; Python rebuilds its lists,
 runs its contacts (the ``fix`` launch) and it goes on in the next launch, each copy counting its own
 substeps. The arithmetic per particle is the same as the two-launch path (bit-identical; the tests
-compare them with ``FUSE_SYMPLECTIC = False``).
+compare them with ``SelfCollision(path="split")``).
 
 Without these features none of this runs: the solvers launch exactly the kernels they launched
 before, and results are bit-identical to theirs. Every pass gathers per particle in a fixed order
@@ -31,8 +31,8 @@ before, and results are bit-identical to theirs. Every pass gathers per particle
 import numpy as np
 
 from tianim.physics.bending import bending_funcs
-from tianim.physics.contact import contact_response
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels.contact import contact_response
+from tianim.kernels import cached_variants, kernel_types
 from tianim.physics.selfcollision import contact_funcs, contacts_for
 from tianim.physics.strain import SOR, strain_funcs
 
@@ -155,8 +155,17 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
         # Jacobi sweeps ping-pong between x and W (the corrected positions), one parallel loop per sweep:
         # sweep k reads src and writes dst = src + correction (and v += correction / h); an odd count
         # ends with a copy back into x.
-        for it in ti.static(range(strain_iters)):
-            ti.loop_config(serialize=serial)
+        # Serial: the sweeps are a runtime loop (one body to compile, whatever the iterations); parallel: one
+        # top-level loop per sweep (unrolled: a loop nested in a runtime loop would run serially).
+        if ti.static(serial and strain_iters):
+            ti.loop_config(serialize=True)
+            for it in range(strain_iters):
+                for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                    if it % 2 == 0:
+                        strain_sweep(b, i, x, W, v, pinned, inv_mass, topo, rest, eps, nx, inv_h)
+                    else:
+                        strain_sweep(b, i, W, x, v, pinned, inv_mass, topo, rest, eps, nx, inv_h)
+        for it in ti.static(range(0 if serial else strain_iters)):
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 if ti.static(it % 2 == 0):
                     strain_sweep(b, i, x, W, v, pinned, inv_mass, topo, rest, eps, nx, inv_h)
@@ -169,8 +178,17 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
         if ti.static(sc_iters and check):
             # Are the neighbour lists still valid? (selfcollision.Contacts docstring)
             validity(x, xb, spread, run, margin, run, -1, True)
-        for it in ti.static(range(sc_iters)):
-            ti.loop_config(serialize=serial)
+        if ti.static(serial and sc_iters):
+            ti.loop_config(serialize=True)
+            for it in range(sc_iters):
+                for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                    if it % 2 == 0:
+                        contact_sweep(b, i, x, W, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
+                                      thick, inv_h, run, vcap)
+                    else:
+                        contact_sweep(b, i, W, x, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
+                                      thick, inv_h, run, vcap)
+        for it in ti.static(range(0 if serial else sc_iters)):
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 if ti.static(it % 2 == 0):
                     contact_sweep(b, i, x, W, v, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick,
@@ -264,9 +282,28 @@ def _symplectic_contact_kernel(real_name, dim, grid, colliders, spring_damping, 
                         spread[b, 2 * dim * c + a] = hi[a]
                         spread[b, 2 * dim * c + dim + a] = lo[a]
             check(xs, xb, spread, run, margin, lim, k, False)
-            # sweep j reads src and writes dst; the sources alternate xs, Wp, xs, ...; the last writes (x, v)
-            for it in ti.static(range(sc_iters)):
-                ti.loop_config(serialize=serial)
+            # sweep j reads src and writes dst; the sources alternate xs, Wp, xs, ...; the last writes (x, v).
+            # Serial scenes (one substep a launch): a runtime loop over the sweeps (4 bodies to compile,
+            # whatever the iterations); parallel: one top-level loop per sweep.
+            if ti.static(serial):
+                ti.loop_config(serialize=True)
+                for it in range(sc_iters):
+                    for b, i in ti.ndrange(x.shape[0], x.shape[1]):
+                        if k < lim[b]:
+                            if it == sc_iters - 1:
+                                if it % 2 == 0:
+                                    sweep(b, i, xs, x, vs, v, pinned, inv_mass, nbr, count, excl_off, excl_idx,
+                                          k_excl, nx, thick, inv_h, run, vcap, coll, g_norm, h, True)
+                                else:
+                                    sweep(b, i, Wp, x, vs, v, pinned, inv_mass, nbr, count, excl_off, excl_idx,
+                                          k_excl, nx, thick, inv_h, run, vcap, coll, g_norm, h, True)
+                            elif it % 2 == 0:
+                                sweep(b, i, xs, Wp, vs, vs, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl,
+                                      nx, thick, inv_h, run, vcap, coll, g_norm, h, False)
+                            else:
+                                sweep(b, i, Wp, xs, vs, vs, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl,
+                                      nx, thick, inv_h, run, vcap, coll, g_norm, h, False)
+            for it in ti.static(range(0 if serial else sc_iters)):
                 for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                     if k < lim[b]:
                         if ti.static(it == sc_iters - 1):
@@ -301,22 +338,29 @@ def _empty(shape):
     return a
 
 
-#: Run symplectic Euler with self-collision alone in one launch per substep (:func:`_symplectic_contact_kernel`);
-#: False runs the solver's substep launch and ``post`` (the same results bit for bit: the tests compare them).
-FUSE_SYMPLECTIC = True
-#: Substeps per launch of that kernel on scenes above SERIAL_MAX particles x copies (the loops are unrolled:
+#: Symplectic Euler with self-collision alone runs in one launch per substep (:func:`_symplectic_contact_kernel`)
+#: unless ``SelfCollision(path="split")`` asks for the solver's substep launch and ``post`` (the same results bit
+#: for bit: the tests compare them).
+#: Default substeps per launch of that kernel (``SelfCollision(substeps_per_launch=)``) on scenes above
+#: SERIAL_MAX particles x copies (the loops are unrolled:
 #: compile time grows with it; small scenes run one substep per launch). Measured on the 128x128 bench
 #: cloth, 2 noisy cores: cost ratio to the plain substep 2.1 at 4 and 2.2 at 8 (3.3 at 1); first compile
 #: 3.3 s at 4, 8.9 s at 8.
 SC_SUBSTEPS_PER_LAUNCH = 4
 
 
+#: Loop paths of the passes (``run_with_passes(loops=)``): "auto" runs them serially up to SERIAL_MAX.
+LOOPS = ("auto", "serial", "parallel")
+
+
 def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_collision, strain_limit, buffer,
-                    method=None):
+                    method=None, loops="auto"):
     """Advance ``substeps`` substeps of ``dt``: ``advance_one()`` runs one substep of the solver, the
     passes (module docstring) run around it. ``explicit``: bending as a kick before the substep
     (explicit solvers) or as an XPBD pass after it. ``method``: the solver's name; symplectic Euler with
-    self-collision and no other pass fuses its substep into the contact launch."""
+    self-collision and no other pass fuses its substep into the contact launch (unless
+    ``self_collision.path == "split"``). ``loops``: the passes' loops ``"serial"``, ``"parallel"``, or
+    ``"auto"`` (serial up to :data:`SERIAL_MAX` particles x copies); bit-identical."""
     bend = model.bending
     grid = model.grid is not None
     bend_kind = None if bend is None else ("kick" if explicit else "xpbd")
@@ -326,7 +370,7 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
     dtype = state.dtype
     def real(value):  # a Python float holding the state dtype's value (quadrants caches launches on primitives)
         return float(dtype.type(value))
-    serial = state.batch * model.n_particles <= SERIAL_MAX
+    serial = loops == "serial" or (loops == "auto" and state.batch * model.n_particles <= SERIAL_MAX)
     pre, post = _kernels(dtype.name, model.dim, grid, bend_kind, strain_iters, sc_iters, len(model.colliders) > 0,
                          serial)
     data = model.kernel_data(dtype)
@@ -357,10 +401,11 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
                               False)
     else:
         spread, run, margin = np.zeros((1, 2), dtype), _empty((1,)), real(0)
-    fuse = (FUSE_SYMPLECTIC and method == "symplectic_euler" and contacts is not None and bend_kind is None
-            and not strain_iters)
+    fuse = (method == "symplectic_euler" and contacts is not None and self_collision.path != "split"
+            and bend_kind is None and not strain_iters)
     if fuse:
-        n_sub = 1 if serial else SC_SUBSTEPS_PER_LAUNCH
+        per_launch = self_collision.substeps_per_launch or SC_SUBSTEPS_PER_LAUNCH
+        n_sub = 1 if serial else per_launch
         kernel = _symplectic_contact_kernel(dtype.name, model.dim, grid, len(model.colliders) > 0,
                                             model.has_spring_damping, model.medium_damping > 0, sc_iters, serial, n_sub)
         xs, vs = buffer("passes_xs", state.x.shape, dtype), buffer("passes_vs", state.x.shape, dtype)

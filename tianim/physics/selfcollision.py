@@ -42,13 +42,17 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tianim._checks import check_finite_scalar, check_int, check_positive_int, fmt
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim._checks import check_choice, check_finite_scalar, check_int, check_positive_int, fmt
+from tianim.kernels import cached_variants, kernel_types
 
 #: Fixed-point steps per thickness of the correction sums (2^40: resolution 1e-12 t; sums up to 8e6 t).
 FIXED_POINT = float(2 ** 40)
 #: The query radius grows the grid cells; beyond this many cells per copy the cell size is increased.
 MAX_GRID_CELLS = 1 << 22
+
+
+#: Launch structures of symplectic Euler with self-collision (``SelfCollision(path=)``).
+SC_PATHS = ("auto", "fused", "split")
 
 
 @dataclass(frozen=True)
@@ -73,6 +77,14 @@ class SelfCollision:
         Cap [m/s] on the velocity a contact correction adds to a particle (``|dx / h|``), as PhysX's
         ``maxDepenetrationVelocity``: overlaps that did not arise within the substep (particles placed
         or teleported into each other) are then pushed apart without a blow-up. None (default): no cap.
+    path : {"auto", "fused", "split"}
+        How symplectic Euler runs with self-collision alone (:mod:`tianim.physics.passes`): ``"fused"``
+        (its substep inside the contact launch), ``"split"`` (the solver's substep launch, then the passes'
+        launch); ``"auto"``: fused. Bit-identical; other solvers and pass mixes always split.
+    substeps_per_launch : int, optional
+        Substeps per fused launch when its loops run in parallel (1 to 8; they are unrolled, so the
+        compile time grows with it). Default: :data:`tianim.physics.passes.SC_SUBSTEPS_PER_LAUNCH`;
+        serial scenes always run 1. Bit-identical for any value.
     """
 
     thickness: float
@@ -81,6 +93,8 @@ class SelfCollision:
     exclude: int | None = None
     max_neighbours: int | None = None
     max_separation_speed: float | None = None
+    path: str = "auto"
+    substeps_per_launch: int | None = None
 
     def __post_init__(self):
         t = check_finite_scalar("SelfCollision.thickness", self.thickness, lo=0.0, lo_open=True)
@@ -94,6 +108,9 @@ class SelfCollision:
         if self.max_separation_speed is not None:
             check_finite_scalar("SelfCollision.max_separation_speed", self.max_separation_speed, lo=0.0,
                                 lo_open=True)
+        check_choice("SelfCollision.path", self.path, SC_PATHS)
+        if self.substeps_per_launch is not None:
+            check_positive_int("SelfCollision.substeps_per_launch", self.substeps_per_launch, hi=8)
         del t
 
     @property

@@ -36,7 +36,7 @@ import numpy as np
 
 from tianim._checks import check_choice, check_finite_scalar, check_positive_int
 from tianim.physics import lanes, theory
-from tianim.physics.kernels import SUBSTEPS_PER_LAUNCH, WORK, frame_kernel
+from tianim.physics.kernels import WORK, frame_kernel, substeps_per_launch
 from tianim.physics.passes import has_passes, run_with_passes
 from tianim.physics.selfcollision import SelfCollision, as_self_collision
 from tianim.physics.selfcollision import check_model as check_sc_model
@@ -44,8 +44,9 @@ from tianim.physics.strain import StrainLimit, as_strain_limit
 from tianim.physics.watchdog import DivergenceError, Watchdog
 from tianim.stepping import StepStats
 
-#: Loop layouts of the explicit kernels (all give bit-identical results; "lanes": symplectic Euler on grids only).
-LAYOUTS = ("auto", "serial", "frame", "substep", "lanes")
+#: Loop layouts of the explicit kernels (all give bit-identical results; "lanes": symplectic Euler on grids only,
+#: its thread path chosen from the scene; "lanes_serial" / "lanes_parallel" force one (tianim.physics.lanes)).
+LAYOUTS = ("auto", "serial", "frame", "substep", "lanes", "lanes_serial", "lanes_parallel")
 #: Loop layouts of XPBD.
 XPBD_LAYOUTS = ("auto", "per_copy", "parallel")
 
@@ -213,7 +214,11 @@ class _Explicit(Solver):
     ----------
     layout : str
         ``"auto"`` (:func:`choose_layout`), ``"serial"``, ``"frame"``, ``"substep"`` or ``"lanes"``
-        (symplectic Euler on a cloth grid: :mod:`tianim.physics.lanes`); all give bit-identical results.
+        (symplectic Euler on a cloth grid: :mod:`tianim.physics.lanes`; ``"lanes_serial"`` /
+        ``"lanes_parallel"``: its one-thread or its parallel path, instead of the choice from the
+        scene size); all give bit-identical results. With passes (below), ``"serial"`` and
+        ``"lanes_serial"`` run the passes' loops serially, ``"substep"`` and ``"lanes_parallel"`` in
+        parallel; otherwise the scene size decides.
     self_collision : SelfCollision, optional
         Particle-particle self-collision after every substep (:mod:`tianim.physics.selfcollision`).
     strain_limit : float or StrainLimit, optional
@@ -243,7 +248,13 @@ class _Explicit(Solver):
             check_sc_model(self.self_collision, model)
         run_with_passes(model, state, dt, substeps,
                         lambda: launch(model, state, dt, 1, self.name, self.layout, self._buffer),
-                        True, self.self_collision, self.strain_limit, self._buffer, method=self.name)
+                        True, self.self_collision, self.strain_limit, self._buffer, method=self.name,
+                        loops=_PASS_LOOPS.get(self.layout, "auto"))
+
+
+#: The passes' loops (tianim.physics.passes) under an explicit solver's layout: serial or parallel as the
+#: layout's own loops; "auto" and "frame" leave the choice to the scene size.
+_PASS_LOOPS = {"serial": "serial", "substep": "parallel", "lanes_serial": "serial", "lanes_parallel": "parallel"}
 
 
 def _with_passes(opts: dict, solver) -> dict:
@@ -300,12 +311,12 @@ def launch(model, state, dt, substeps, method, layout, buffer):
     if layout == "auto":
         layout = choose_layout(model, state.batch, method, substeps, state.dtype)
     data = model.kernel_data(state.dtype)
-    if layout == "lanes":
+    if layout.startswith("lanes"):
         if method != "symplectic_euler" or not lanes.supports(model, state.dtype):
-            raise ValueError(f"layout='lanes' runs symplectic_euler on a cloth grid of at least "
+            raise ValueError(f"layout={layout!r} runs symplectic_euler on a cloth grid of at least "
                              f"{lanes.lanes_for(state.dtype) + 1} rows; got method={method!r} on model "
                              f"{model.name!r}; use layout='auto' or 'substep'")
-        lanes.launch_lanes(model, state, dt, substeps, data)
+        lanes.launch_lanes(model, state, dt, substeps, data, path=layout[len("lanes_"):] or "auto")
         return None
     pre, kernel, multi = frame_kernel(
         state.dtype, model.dim, method, layout,
@@ -324,9 +335,10 @@ def launch(model, state, dt, substeps, method, layout, buffer):
     if pre is not None:
         pre(*args, 1)
     if layout == "substep":
-        for _ in range(substeps // SUBSTEPS_PER_LAUNCH):
-            multi(*args, SUBSTEPS_PER_LAUNCH)
-        for _ in range(substeps % SUBSTEPS_PER_LAUNCH):
+        per_launch = substeps_per_launch(method)
+        for _ in range(substeps // per_launch):
+            multi(*args, per_launch)
+        for _ in range(substeps % per_launch):
             kernel(*args, 1)
     else:
         kernel(*args, substeps)

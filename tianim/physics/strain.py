@@ -19,7 +19,7 @@ the previous substep, a substep only has to remove the stretch it added.
 from dataclasses import dataclass
 
 from tianim._checks import check_finite_scalar, check_positive_int, fmt
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels import cached_variants, kernel_types
 from tianim.physics.model import GRID_STENCIL
 
 #: Over-relaxation of the averaged Jacobi corrections (Macklin et al. 2014 suggest 1 <= omega <= 2; 1.8 measured best on a dragged 10x10 cloth).

@@ -38,7 +38,7 @@ import weakref
 import numpy as np
 
 from tianim.physics.model import GRID_STENCIL
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels import cached_variants, kernel_types
 
 
 class DivergenceError(RuntimeError):

@@ -17,7 +17,7 @@ and damping ``beta = c`` (``gamma = alpha~ beta h = c / (k h)``). One substep of
        lambda += dlambda,   x_i += w_i dlambda n,   x_j -= w_j dlambda n,   n = (x_i - x_j)/|x_i - x_j|
 
    (w = 1/m, 0 for pinned particles), and every correction is added to ``dx`` as well;
-3. ``v = dx / h``; colliders (:mod:`tianim.physics.contact`) then push
+3. ``v = dx / h``; colliders (:mod:`tianim.kernels.contact`) then push
    particles out and apply restitution and friction.
 
 Velocity in float32. The papers form ``v = (x - p) / h`` from two positions. In float32 that
@@ -59,9 +59,9 @@ substeps x iterations (the sweeps propagate a correction a few springs each).
 
 import numpy as np
 
-from tianim.physics.contact import contact_response
+from tianim.kernels.contact import contact_response
 from tianim.physics.model import GRID_STENCIL
-from tianim.physics.kernel_types import cached_variants, kernel_types
+from tianim.kernels import cached_variants, kernel_types
 
 #: Stencil offsets each grid particle owns (the "forward" half: each spring once).
 FORWARD = tuple(o for o, (dc, dr, _) in enumerate(GRID_STENCIL) if dc > 0 or (dc == 0 and dr > 0))
@@ -251,7 +251,7 @@ def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: st
     ----------
     model : Model
         Colliders, if any, act after each substep (position projection plus
-        restitution and friction, :mod:`tianim.physics.contact`).
+        restitution and friction, :mod:`tianim.kernels.contact`).
     state : State
         ``x``, ``v`` of shape (B, N, D) are updated.
     dt : float

@@ -14,6 +14,7 @@ result is deterministic and order-correct without atomics.
 from types import SimpleNamespace
 
 from tianim import _ti
+from tianim.kernels import cached_variants
 
 #: Width [px] of the anti-aliasing ramp: coverage falls from 1 to 0 over one pixel centred on the edge.
 AA_HALF_WIDTH = 0.5
@@ -23,7 +24,7 @@ AA_PAD = 1.0
 MIN_ALPHA = 1e-6
 
 
-@_ti.cached_kernels
+@cached_variants
 def kernels():
     """The 2D kernels (built once per process): ``draw_capsules``."""
     ti = _ti.get()

@@ -34,6 +34,7 @@ All kernels take NumPy arrays, so a new scene or size compiles nothing new.
 from types import SimpleNamespace
 
 from tianim import _ti
+from tianim.kernels import cached_variants
 
 #: An empty sample of the visibility buffer (the largest key: every primitive is nearer).
 EMPTY = 0x7FFFFFFFFFFFFFFF
@@ -73,7 +74,7 @@ SPHERE_PAD = 1.0
 SPHERE_SILHOUETTE_EPS = 1e-12
 
 
-@_ti.cached_kernels
+@cached_variants
 def kernels():
     """The 3D rasterising kernels (built once per process): ``vertices`` and ``raster``; the array
     types and the ``ti.func`` helpers ``_key``, ``_depth``, ``_row3``, ``_vec3`` are in the namespace

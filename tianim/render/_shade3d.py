@@ -9,6 +9,7 @@ See :mod:`tianim.render._kernels3d` for the whole pipeline and its references.
 from types import SimpleNamespace
 
 from tianim import _ti
+from tianim.kernels import cached_variants
 from tianim.render import _kernels3d
 from tianim.render._kernels3d import EMPTY, SPAN_EMPTY, SPH_COLOR, SPH_VIEW, _ID_MASK
 
@@ -36,7 +37,7 @@ SHADOW_NONE, SHADOW_QUAD, SHADOW_ALL = 0, 1, 2
 SHADOW_QUAD_PAD = 2.0
 
 
-@_ti.cached_kernels
+@cached_variants
 def kernels():
     """The shading kernels (built once per process): ``ground_cache`` and ``resolve``."""
     ti = _ti.get()

@@ -31,7 +31,8 @@ from tianim.runtime import ensure_taichi
 RASTER_BANDS = 16
 
 
-def _font(size: int):
+def label_font(size: int):
+    """The font :meth:`Canvas2D.text` draws labels of ``size`` pixels with (Pillow's default font)."""
     from PIL import ImageFont
 
     try:
@@ -265,7 +266,7 @@ class Canvas2D:
             draw = ImageDraw.Draw(pil)
             fonts = {}
             for p, s, size, c, anchor in self._texts:
-                font = fonts.setdefault(size, _font(size))
+                font = fonts.setdefault(size, label_font(size))
                 try:
                     draw.text(p, s, fill=c, font=font, anchor=anchor)
                 except ValueError:  # bitmap fonts do not support anchors

@@ -187,7 +187,7 @@ class NeighbourGrid:
     @property
     def kernel_buffers(self) -> tuple:
         """``(geom, dims, cell, start, order, sorted_x)``: the arrays that fused kernels built on
-        :func:`tianim.spatial._kernels.grid_funcs` take (geom (D + 1,) float64 = [lower, cell_size],
+        :func:`tianim.kernels.grid.grid_funcs` take (geom (D + 1,) float64 = [lower, cell_size],
         dims (D,) int32 cells per axis, cell (B, N), start (B, M + 2), order (B, N) int32, sorted_x
         (B, N, D)); such a kernel sorts the points into them itself (``grid_funcs().sort_copy``)."""
         return self._geom, self.dims, self.cell, self.start, self.order, self.sorted_x

@@ -1,7 +1,9 @@
-"""Contact response with ground planes and spheres, as a Taichi function shared by all solvers.
+"""Contact response with ground planes and spheres, as Taichi functions shared by every solver, the
+particle systems and the crowd obstacles.
 
 For each collider row ``[kind, e, mu, offset_or_radius, n_or_center]`` of the
-model's collider table (:data:`tianim.physics.model.COLLIDER_ROW`), a particle
+collider table (:func:`tianim.kernels.colliders.collider_table`, rows of
+:data:`~tianim.kernels.colliders.COLLIDER_ROW`), a particle
 at signed distance ``phi < 0`` (inside) is pushed back onto the surface along
 the normal ``n``, and if it moves inward (``v.n < 0``):
 
@@ -18,8 +20,8 @@ instead of creeping ``g sin(a) h^2`` per step) adds ``h`` times the tangential p
 of the velocity change to the position, as :mod:`tianim.particles._kernels` does.
 """
 
-from tianim.physics.kernel_types import cached_variants, kernel_types
-from tianim.physics.model import PLANE
+from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.colliders import PLANE
 
 
 @cached_variants
