@@ -56,7 +56,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
-from tianim.crowds import ORCA, Agents
+from tianim.crowds import ORCA, Agents, CrowdSolver
 
 from ._batched import SimEnv, SimVectorEnv, check_action
 
@@ -102,20 +102,18 @@ class CrowdNavSim:
         self.robot = np.zeros((batch, 2))
         self.robot_v = np.zeros((batch, 2))
         self.t = np.zeros(batch)
-        self.humans = Agents(np.zeros((batch, N_HUMANS, 2)), dtype=np.float64)
-        self.crowd = ORCA(goals=np.zeros((batch, N_HUMANS, 2)), pref_speed=V_PREF, radius=RADIUS, time_horizon=2.0,
+        self.crowd = ORCA(goals=(0.0, 0.0), pref_speed=V_PREF, radius=RADIUS, time_horizon=2.0,
                           max_speed=V_PREF, arrival_radius=0.05, domain=DOMAIN)
-        self.crowd.prepare(self.humans)
+        self.humans = self.crowd.state(Agents(np.zeros((batch, N_HUMANS, 2)), dtype=np.float64))
+        self.solver = CrowdSolver()
         self.success = np.zeros(batch, bool)
         self.collision = np.zeros(batch, bool)
         self.diverged = np.zeros(batch, bool)  # SimVectorEnv's name for "episode terminated"
 
     def reset(self, k: int, rng: np.random.Generator) -> None:
         h = sample_humans(rng)
-        self.humans.x[k], self.humans.v[k], self.humans.t[k] = h, 0.0, 0.0
-        self.humans.heading[k] = -h / np.linalg.norm(h, axis=1, keepdims=True)
-        self.crowd.goals[k] = -h
-        self.crowd.reset_copy(k, self.humans)
+        start = Agents(h, heading=-h, dtype=np.float64)  # at rest, facing their goals, t = 0
+        self.humans.restore(self.crowd.state(start, goals=-h).snapshot(), copies=[k])
         self.robot[k], self.robot_v[k], self.t[k] = START, 0.0, 0.0
         self.success[k] = self.collision[k] = self.diverged[k] = False
 
@@ -126,7 +124,7 @@ class CrowdNavSim:
         n = np.linalg.norm(a, axis=1, keepdims=True)
         v = V_PREF * np.where(n > 1, a / np.maximum(n, 1e-300), a)
         rel0 = self.humans.x - self.robot[:, None, :]
-        self.crowd.step(self.humans, DT)
+        self.solver.step(self.crowd, self.humans, DT)
         rel_v = self.humans.v - v[:, None, :]
         d = closest_approach(rel0, rel_v, DT) - 2 * RADIUS  # surface gaps (B, H)
         dmin = d.min(axis=1)
@@ -148,17 +146,11 @@ class CrowdNavSim:
         return spaces.Box(-1.0, 1.0, (2,), np.float32), spaces.Box(-OBS_HIGH, OBS_HIGH, dtype=np.float32)
 
     def save(self, mask):
-        h = self.humans
-        c = self.crowd
-        return (self.robot[mask].copy(), self.robot_v[mask].copy(), self.t[mask].copy(), h.x[mask].copy(),
-                h.v[mask].copy(), h.heading[mask].copy(), h.t[mask].copy(), c.arrival_time[mask].copy(),
-                c.ticks[mask].copy(), c.closest[mask].copy())
+        return (self.robot[mask].copy(), self.robot_v[mask].copy(), self.t[mask].copy(), self.humans.snapshot(mask))
 
     def restore(self, mask, saved):
-        h = self.humans
-        c = self.crowd
-        (self.robot[mask], self.robot_v[mask], self.t[mask], h.x[mask], h.v[mask], h.heading[mask], h.t[mask],
-         c.arrival_time[mask], c.ticks[mask], c.closest[mask]) = saved
+        self.robot[mask], self.robot_v[mask], self.t[mask], humans = saved
+        self.humans.restore(humans, mask)
         self.success[mask] = self.collision[mask] = self.diverged[mask] = False
 
     def frame(self, k: int) -> np.ndarray:

@@ -74,8 +74,7 @@ def test_collision_uses_the_closest_approach_within_the_step():
     sim = CrowdNavSim(1)
     sim.reset(0, np.random.default_rng(0))
     sim.humans.x[0] = [[0.0, -3.2], [5.0, 5.0], [-5.0, 5.0], [5.0, -5.0], [-5.0, -5.0]]
-    sim.crowd.goals[0] = sim.humans.x[0]  # standing still
-    sim.crowd.reset_copy(0, sim.humans)
+    sim.humans.goal[0] = sim.humans.x[0]  # standing still
     r = sim.step(np.array([[0.0, 1.0]], np.float32))  # robot (0, -4) -> (0, -3.75): centres 0.55 < 2r apart
     assert sim.collision[0] and not sim.success[0] and r[0] == -0.25 and 2 * RADIUS == pytest.approx(0.6)
 
