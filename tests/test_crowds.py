@@ -276,3 +276,19 @@ def test_bad_step_raises_and_changes_nothing(call, exc, match):
     with pytest.raises(exc, match=match):
         call(m, a)
     assert all(np.array_equal(snap[k], getattr(a, k), equal_nan=True) for k in a.ARRAYS)
+
+
+def test_boids_overflow_raise_leaves_the_state_as_it_was_and_report_counts():
+    """Issue 21 item 8: on_overflow="raise" raised after the agents had been stepped. Now the call raises
+    with the state (positions, wander streams, times) exactly as before it; "report" counts the cut rows:
+    30 agents within 0.5 m all see the 29 others, so every row (30 per copy) is cut at K = 4."""
+    agents = Agents.random(30, (0, 0), (0.5, 0.5), speed=1.0, batch=2, seed=3)
+    rules = [Separation(1.0, radius=1.0), Wander(0.5, 0.3)]
+    strict = Boids(rules, max_neighbours=4, on_overflow="raise")
+    s = strict.state(agents)
+    before = s.snapshot()
+    with pytest.raises(RuntimeError, match="max_neighbours=4"):
+        S.step(strict, s, 0.05, 3)
+    assert all(np.array_equal(before[k], getattr(s, k), equal_nan=True) for k in s.ARRAYS)
+    stats = S.step(Boids(rules, max_neighbours=4, on_overflow="report"), s, 0.05, 1)
+    assert stats.neighbour_overflow.tolist() == [30, 30]

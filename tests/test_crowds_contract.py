@@ -26,9 +26,11 @@ def make(kind, batch=2, seeds=(5, 9)):
         agents = Agents.random(60, (0, 0), (5, 5), speed=0.3, batch=batch, seeds=seeds, dtype=np.float64)
         return model, agents
     x = np.stack([np.random.default_rng(s).uniform(-3, 3, (30, 2)) for s in seeds])
+    # no domain: the grid box is each state's bounding box, so a batch and its copies have different cells
+    # (ORCA takes the nearest by (distance, index); social force adds its forces in index order: issue 21 item 11)
     if kind == "orca":
-        return ORCA(goals=-x, pref_speed=1.0, radius=0.2, domain=((-6, -6), (6, 6))), Agents(x, dtype=np.float64)
-    return SocialForce(goals=-x, pref_speed=1.0, domain=((-6, -6), (6, 6))), Agents(x, dtype=np.float64)
+        return ORCA(goals=-x, pref_speed=1.0, radius=0.2), Agents(x, dtype=np.float64)
+    return SocialForce(goals=-x, pref_speed=1.0), Agents(x, dtype=np.float64)
 
 
 def same(p, q):

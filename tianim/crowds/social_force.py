@@ -17,7 +17,9 @@ HM95's values are the defaults: tau = 0.5 s, V0 = 2.1 m^2/s^2, sigma = 0.3 m, dt
 U0 = 10 m^2/s^2, R = 0.2 m, 2 phi = 200 degrees, c = 0.5. One explicit (symplectic Euler)
 step of dt: v += dt a, x += dt v; a lone pedestrian relaxes as v_n = v0 e + (v_0 - v0 e)(1 - dt/tau)^n.
 Pedestrians within the arrival radius of their goal desire rest. Interactions beyond ``cutoff`` [m]
-(where V is below V0 exp(-cutoff / sigma)) are dropped; neighbours come from the one grid.
+(where V is below V0 exp(-cutoff / sigma)) are dropped; neighbours come from the one grid and their
+forces are added in index order, so a copy of a batch equals a single run bit for bit whatever the
+grid's box (``domain`` given or not), as long as no row exceeds ``grid_neighbours``.
 """
 
 from __future__ import annotations
@@ -98,9 +100,18 @@ class SocialForce(PedestrianModel):
                 warnings.warn(f"{nb.overflow} pedestrians had more than grid_neighbours={self.grid_neighbours} others "
                               f"within cutoff={self.cutoff:g} m (the first ones in grid order were used)",
                               RuntimeWarning, stacklevel=3)
-            kernel(state.x, state.v, state.heading, target, nb.indices, nb.counts, *tables, prm, out)
+            kernel(state.x, state.v, state.heading, target, _by_index(nb.indices, nb.counts), nb.counts, *tables, prm,
+                   out)
             state.x[...], state.v[...], state.heading[...] = out[..., 0:2], out[..., 2:4], out[..., 4:6]
             state.t += dt
             state.ticks += 1
             arrived += state._record_arrivals(self.arrival_radius)
         return {"neighbour_overflow": overflow, "arrived": arrived}
+
+
+def _by_index(indices: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """Each agent's neighbour row (B, N, K) sorted by index (unused slots last): the forces are summed in
+    index order, whatever the grid's cells, so a copy of a batch equals a single run without ``domain``."""
+    K = indices.shape[2]
+    valid = np.arange(K) < np.minimum(counts, K)[..., None]
+    return np.sort(np.where(valid, indices, np.iinfo(np.int32).max), axis=2).astype(np.int32)
