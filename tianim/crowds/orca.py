@@ -64,7 +64,9 @@ class ORCA(PedestrianModel):
     ``perturbation`` (default 0.1) the fraction of its magnitude added to each preferred velocity in a
     direction hashed from (agent, step) (RVO2's examples add 1e-4 m/s of random noise; symmetric
     circles of 20-64 agents with a 2 s horizon jam for good in a ring at 0.01 and all cross at 0.1;
-    agents at rest on their goals are not disturbed).
+    agents at rest on their goals are not disturbed). ``approach_time`` [s] (default None: the step dt)
+    caps the preferred speed at ``|goal - x| / approach_time``: with dt an agent lands on its goal in
+    one step; RVO2's Circle example and CrowdNav use 1 s (unit speed beyond 1 m, then the offset itself).
     """
 
     METHOD = "orca"
@@ -75,7 +77,7 @@ class ORCA(PedestrianModel):
 
     def __init__(self, goals, pref_speed=1.0, radius=0.5, time_horizon=2.0, neighbour_dist=None,
                  max_neighbors=10, max_speed=2.0, safety=0.25, arrival_radius=1e-3, domain=None,
-                 grid_neighbours=256, skin=None, perturbation=0.1):
+                 grid_neighbours=256, skin=None, perturbation=0.1, approach_time=None):
         super().__init__(goals, pref_speed, arrival_radius, domain, grid_neighbours)
         self.radius = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
         self.time_horizon = check_finite_scalar("time_horizon", time_horizon, lo=0.0, lo_open=True)
@@ -87,6 +89,8 @@ class ORCA(PedestrianModel):
             "neighbour_dist", neighbour_dist, lo=0.0, lo_open=True)
         self.perturbation = check_finite_scalar("perturbation", perturbation, lo=0.0)
         self.skin = 0.2 * self.neighbour_dist if skin is None else check_finite_scalar("skin", skin, lo=0.0)
+        self.approach_time = None if approach_time is None else check_finite_scalar(
+            "approach_time", approach_time, lo=0.0, lo_open=True)
         self._freeze()
 
     def __repr__(self) -> str:
@@ -101,8 +105,9 @@ class ORCA(PedestrianModel):
                 "neighbour_dist ** 2": self.neighbour_dist ** 2}
 
     def _prm(self, f, dt) -> np.ndarray:
+        approach = dt if self.approach_time is None else self.approach_time
         return np.array([self.radius * (1 + self.safety), self.time_horizon, dt, self.max_speed,
-                         self.neighbour_dist ** 2, self.arrival_radius, self.perturbation], f)
+                         self.neighbour_dist ** 2, self.arrival_radius, self.perturbation, approach], f)
 
     def _work_key(self, state: CrowdState) -> tuple:
         return super()._work_key(state) + (self.max_neighbors,)
