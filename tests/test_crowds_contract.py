@@ -138,3 +138,64 @@ def test_a_step_that_blows_up_is_reported_and_changes_nothing(kind):
     with pytest.raises(ValueError, match="dt=1e"):
         CrowdSolver().step(model, s, 1e39, 1)  # not even a float32
     assert same(before, s.snapshot())
+
+
+# --- bad input (issue 21's sweep): one clear error naming the argument, nothing changed ---------------
+
+A2 = Agents([[0.5, 0.5], [1.5, 1.0]], dtype=np.float64)
+A2F = Agents([[0.5, 0.5], [1.5, 1.0]])
+A3 = Agents([[0.5, 0.5, 0.5], [1.5, 1.0, 0.2]])
+
+
+@pytest.mark.parametrize("make, exc, match", [
+    (lambda: Boids([Separation()], domain=((5, 5), (0, 0))), ValueError, r"domain=.*reversed"),  # was a complex-number TypeError
+    (lambda: ORCA(goals=(1, 1), domain=((5, 5), (0, 0))), ValueError, r"domain=.*reversed"),
+    (lambda: SocialForce(goals=(1, 1), domain=((5, 5), (0, 0))), ValueError, r"domain=.*reversed"),
+    (lambda: Boids([Separation()], domain=((1j, 0), (5, 5))), TypeError, "domain="),
+    (lambda: ORCA(goals=(1, 1), domain=((0, 0, 0), (5, 5, 5))), ValueError, "domain=.*2 coordinates"),
+    (lambda: Boids([Separation()], domain=((0, 0), (5, 5))).state(A3), ValueError, "domain is 2D.*agents are 3D"),
+    (lambda: Boids([Avoid(Sphere((0, 0), 1.0))]), TypeError, "avoid.obstacles=.*wrap a single obstacle"),
+    (lambda: SocialForce(goals=(1, 1), obstacles=Sphere((0, 0), 1.0)), TypeError, "obstacles=.*wrap"),
+    (lambda: Boids([Separation(1e300)]).state(A2F), ValueError, "separation.weight=1e\\+300 does not fit"),
+    (lambda: Boids([Separation(radius=1e200)]).state(A2F), ValueError, "separation.radius=1e\\+200.*square"),
+    (lambda: Boids([Separation()], max_speed=1e300).state(A2F), ValueError, "max_speed=1e\\+300"),
+    (lambda: ORCA(goals=(1e300, 1.0)).state(A2F), ValueError, "goals=.*does not fit in the agents' float32"),
+    (lambda: ORCA(goals=(1e300, 1.0)).state(A2), ValueError, "span 1e\\+300 m.*domain="),  # was "negative dimensions"
+    (lambda: SocialForce(goals=(1.0, 1.0), cutoff=1e30).state(A2F), ValueError, "cutoff=1e\\+30"),
+    (lambda: Agents([[1e300, 0.0]]), ValueError, "x=.*does not fit in float32"),
+    (lambda: Agents.random(3, (0, 0), (1e300, 1.0)), ValueError, "upper=.*does not fit"),
+    (lambda: Vicsek(1e300).agents(3, dtype=np.float32), ValueError, "box=1e\\+300"),
+    (lambda: ORCA(goals=(1, 1), approach_time=0), ValueError, "approach_time"),
+    (lambda: ORCA(goals=(1, 1), pref_speed=[1, 2, 3]).state(A2), ValueError, "pref_speed has shape"),
+    (lambda: Boids([Wander()], seeds=[1, 2]).state(A2), ValueError, "seeds="),
+    (lambda: Boids([Seek((1, 1, 1))]).state(A2), ValueError, "seek.goal has shape"),
+    (lambda: ORCA(goals=(1, 1)).state(A2).snapshot(copies="x"), ValueError, "copies="),
+])
+def test_bad_input_names_the_argument(make, exc, match):
+    with pytest.raises(exc, match=match):
+        make()
+
+
+@pytest.mark.parametrize("kind", MODELS)
+@pytest.mark.parametrize("call, exc, match", [
+    (lambda m, s, o: CrowdSolver().step(m, s, float("nan")), ValueError, "dt=nan"),
+    (lambda m, s, o: CrowdSolver().step(m, s, True), TypeError, "dt=True"),
+    (lambda m, s, o: CrowdSolver().step(m, s, 0.1, 2 ** 40), ValueError, "substeps="),
+    (lambda m, s, o: CrowdSolver().step(o, s, 0.1), TypeError, "state was made for"),
+    (lambda m, s, o: CrowdSolver().step(m, Agents(s.x.copy()), 0.1), TypeError, r"model.state\(agents\)"),
+    (lambda m, s, o: (s.goal.__setitem__((0, 0, 0), np.nan), CrowdSolver().step(m, s, 0.1)), ValueError,
+     r"state.goal\[0, 0, 0\] is not finite"),
+    (lambda m, s, o: (setattr(s, "pref_speed", s.pref_speed[:, :3]), CrowdSolver().step(m, s, 0.1)), ValueError,
+     "state.pref_speed must be"),
+])
+def test_bad_step_raises_and_changes_nothing(kind, call, exc, match):
+    model, agents = make(kind)
+    other = make("vicsek" if kind != "vicsek" else "orca")[0]
+    s = model.state(agents)
+    CrowdSolver().step(model, s, 0.05)
+    before = s.snapshot()
+    with pytest.raises(exc, match=match):
+        call(model, s, other)
+    after = {k: getattr(s, k) for k in CrowdState.ARRAYS}
+    assert all(np.array_equal(before[k], after[k], equal_nan=True) for k in CrowdState.ARRAYS
+               if k not in ("goal", "pref_speed"))  # (the two the calls themselves broke)

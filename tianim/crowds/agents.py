@@ -101,6 +101,8 @@ class Agents(StateArrays):
         hi = as_float_array("upper", upper, ndim=1)
         if lo.size not in (2, 3) or hi.shape != lo.shape or np.any(hi <= lo):
             raise ValueError(f"lower={fmt(lo)}, upper={fmt(hi)} must be 2 or 3 coordinates with upper > lower")
+        for name, value in (("lower", lo), ("upper", hi), ("speed", speed)):
+            check_fits(name, value, real_dtype(dtype))
         seeds = seed_list(seed, seeds, batch)
         D = lo.size
         x = np.zeros((batch, n, D))
@@ -175,7 +177,8 @@ class CrowdState(Agents):
       neighbour at the start of any step (inf until one comes within ``neighbour_dist``);
     * ``ticks`` (B,) int32: steps taken (the hash input of ORCA's perturbation).
 
-    Arrays a model does not use keep their initial values. ``domain`` (lower, upper) is the box of the
+    Arrays a model does not use keep their initial values. ``kind`` names the model family the state
+    was made for (a solver refuses to step it with another). ``domain`` (lower, upper) is the box of the
     neighbour grid, fixed when the state is made and shared by copies. ``snapshot(copies)`` and
     ``restore(snap, copies)`` take an optional selection of copies (an index, a list, a slice or a
     (B,) bool mask) to save or roll back some rows only (an environment resetting one copy).
@@ -184,7 +187,7 @@ class CrowdState(Agents):
     ARRAYS = Agents.ARRAYS + ("rng", "wander", "goal", "pref_speed", "active", "arrival_time", "closest", "ticks")
 
     @classmethod
-    def _make(cls, agents: Agents, seeds, goal, pref_speed, domain) -> "CrowdState":
+    def _make(cls, agents: Agents, seeds, goal, pref_speed, domain, kind: str) -> "CrowdState":
         B, N, D = agents.x.shape
         f = agents.x.dtype
         st = cls.__new__(cls)
@@ -198,6 +201,7 @@ class CrowdState(Agents):
         st.arrival_time = np.full((B, N), np.nan)
         st.closest = np.full((B, N), np.inf, f)
         st.ticks = np.zeros(B, np.int32)
+        st.kind = kind  # the model family it was made for (StepStats.method)
         st.domain = (np.array(domain[0], np.float64), np.array(domain[1], np.float64))
         for a in st.domain:
             a.flags.writeable = False

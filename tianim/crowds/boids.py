@@ -167,7 +167,7 @@ class Boids(CrowdModel):
             w = 0.0 if bh is None else check_finite_scalar(f"{name}.weight", bh.weight, lo=0.0)
             r = 0.0 if bh is None else check_finite_scalar(f"{name}.radius", bh.radius, lo=0.0, lo_open=True)
             prm[key + "_w"], prm[key + "_r2"] = w, r * r if w > 0 else -1.0
-            names[key + "_w"], names[key + "_r2"] = f"{name}.weight", f"{name}.radius (squared)"
+            names[key + "_w"] = f"{name}.weight"
             prm[key + "_cos"] = -1.0 if bh is None else _fov_cos(name, bh.fov)
             if w > 0:
                 radius = max(radius, r)
@@ -235,12 +235,15 @@ class Boids(CrowdModel):
             except ValueError:
                 raise ValueError(f"{name} has shape {g.shape}; the agents need (D,), (N, D) or (B, N, D) = {(B, N, D)}") from None
         f = agents.x.dtype
-        self._fits(agents, {self._prm_arg[k]: v for k, v in self._prm.items() if k in self._prm_arg})
+        f = agents.x.dtype
+        radii = {f"{c.__name__.lower()}.radius": bh.radius for c, bh in self.behaviours.items()
+                 if c in (Separation, Alignment, Cohesion)}
+        self._fits(f, {self._prm_arg[k]: v for k, v in self._prm.items() if k in self._prm_arg}, squared=radii)
         if g is not None:
-            self._fits(agents, {name: g})
+            self._fits(f, {name: g})
         pad = self.radius if self.radius > 0 else 1.0
         box = self.domain if self.domain is not None else (agents.x.min(axis=(0, 1)) - pad, agents.x.max(axis=(0, 1)) + pad)
-        return CrowdState._make(agents, seeds, np.zeros(D, f) if g is None else g, 0.0, box)
+        return CrowdState._make(agents, seeds, np.zeros(D, f) if g is None else g, 0.0, box, self.METHOD)
 
     def _check(self, state: CrowdState) -> None:
         if state.domain[0].size != state.dim:

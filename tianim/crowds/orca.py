@@ -101,8 +101,10 @@ class ORCA(PedestrianModel):
         return self.neighbour_dist
 
     def _values(self) -> dict:
-        return {"radius": self.radius, "time_horizon": self.time_horizon, "max_speed": self.max_speed,
-                "neighbour_dist ** 2": self.neighbour_dist ** 2}
+        return {"radius": self.radius, "time_horizon": self.time_horizon, "max_speed": self.max_speed}
+
+    def _squared(self) -> dict:
+        return {"neighbour_dist": self.neighbour_dist}
 
     def _prm(self, f, dt) -> np.ndarray:
         approach = dt if self.approach_time is None else self.approach_time
@@ -148,6 +150,7 @@ def circle_scenario(n, circle_radius, batch=1, dtype=np.float64):
     Returns ``(agents, goals (B, N, 2))``."""
     n = check_int("n", n, lo=1)
     R = check_finite_scalar("circle_radius", circle_radius, lo=0.0, lo_open=True)
+    batch = check_int("batch", batch, lo=1)
     ang = 2 * np.pi * np.arange(n) / n
     start = R * np.stack([np.cos(ang), np.sin(ang)], axis=1)
     return Agents(np.broadcast_to(start, (batch, n, 2)).copy(), dtype=dtype), np.broadcast_to(-start, (batch, n, 2)).copy()

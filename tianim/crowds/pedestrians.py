@@ -67,18 +67,27 @@ class PedestrianModel(CrowdModel):
                 np.broadcast_to(src, shape)
             except ValueError:
                 raise ValueError(f"{name} has shape {src.shape}; it does not broadcast to the agents' {shape}") from None
-        self._fits(agents, {"goals": g, "pref_speed": sp, **self._values()})
+        self._fits(agents.x.dtype, {"goals": g, "pref_speed": sp, **self._values()}, squared=self._squared())
         search = self._search()
         goal = np.broadcast_to(g, (B, N, 2))
         lo, hi = self.domain if self.domain is not None else (
             np.minimum(agents.x.min(axis=(0, 1)), goal.min(axis=(0, 1))) - search,
             np.maximum(agents.x.max(axis=(0, 1)), goal.max(axis=(0, 1))) + search)
-        st = CrowdState._make(agents, [0] * B, g, sp, (lo, hi))
+        span = float(np.max(np.asarray(hi) - np.asarray(lo)))
+        if not span < 1e12:
+            raise ValueError(f"the agents and goals span {span:.3g} m, too far for the automatic grid box; give "
+                             f"{type(self).__name__}(domain=(lower, upper)) around where the agents walk (agents and "
+                             "goals outside it are fine: outside agents are clamped into border cells, exactly)")
+        st = CrowdState._make(agents, [0] * B, g, sp, (lo, hi), self.METHOD)
         st._record_arrivals(self.arrival_radius)  # agents that start on their goals
         return st
 
     def _values(self) -> dict:
         """The model's parameters by argument name (checked against the agents' dtype)."""
+        return {}
+
+    def _squared(self) -> dict:
+        """The lengths the kernels square, by argument name."""
         return {}
 
     def _search(self) -> float:

@@ -75,7 +75,10 @@ class SocialForce(PedestrianModel):
 
     def _values(self) -> dict:
         return {"tau": self.tau, "V0": self.V0, "sigma": self.sigma, "step_time": self.step_time, "U0": self.U0,
-                "R": self.R, "cutoff ** 2": self.cutoff ** 2}
+                "R": self.R}
+
+    def _squared(self) -> dict:
+        return {"cutoff": self.cutoff}
 
     def _make_work(self, state: CrowdState) -> dict:
         B, N, _ = state.x.shape

@@ -54,13 +54,18 @@ class CrowdModel:
     def _check(self, state: CrowdState) -> None:
         """Model-specific checks of a state before a step (shapes the model needs, positions in range)."""
 
-    def _fits(self, agents, values: dict) -> None:
-        """A ValueError naming the argument when one of ``values`` overflows the agents' dtype."""
-        big = np.finfo(agents.x.dtype).max
+    def _fits(self, dtype, values: dict, squared: dict = None) -> None:
+        """A ValueError naming the argument when one of ``values`` (or the square of one of ``squared``,
+        a radius the kernels square) overflows ``dtype``."""
+        big = float(np.finfo(dtype).max)
         for name, v in values.items():
             if np.any(np.abs(np.asarray(v, np.float64)) > big):
-                raise ValueError(f"{name}={fmt(v)} does not fit in the agents' {agents.x.dtype} (|value| <= "
+                raise ValueError(f"{name}={fmt(v)} does not fit in the agents' {np.dtype(dtype).name} (|value| <= "
                                  f"{big:.3g}); give a smaller value or use float64 agents")
+        for name, v in (squared or {}).items():
+            if abs(float(v)) > big ** 0.5:
+                raise ValueError(f"{name}={fmt(v)} is too large for the agents' {np.dtype(dtype).name}: its square "
+                                 f"must fit (|value| <= {big ** 0.5:.3g}); give a smaller value or use float64 agents")
 
 
 class CrowdSolver:
@@ -116,6 +121,9 @@ class CrowdSolver:
         check_state(state, model.DIM)
         if dt > float(np.finfo(state.x.dtype).max):
             raise ValueError(f"dt={dt!r} does not fit in the state's {state.x.dtype}; give a smaller dt")
+        if getattr(state, "kind", model.METHOD) != model.METHOD:
+            raise TypeError(f"state was made for a {state.kind!r} model, not this {type(model).__name__}; make one "
+                            f"with {type(model).__name__}.state(agents)")
         model._check(state)
         key = (type(model).__name__,) + model._work_key(state)
         work = self._work.get(key)

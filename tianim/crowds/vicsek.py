@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt
+from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt, real_dtype
 from tianim.crowds.agents import Agents, CrowdState, check_agents, seed_list
 from tianim.crowds.solver import CrowdModel
 from tianim.stepping import draw
@@ -66,6 +66,7 @@ class Vicsek(CrowdModel):
     def agents(self, n, batch=1, seed=0, dtype=np.float64) -> Agents:
         """N agents per copy uniform in the box with uniform random headings (copy b from ``default_rng(seed + b)``)."""
         n = check_int("n", n, lo=1)
+        self._fits(real_dtype(dtype), {"box": self.box, "speed": self.speed})
         a = Agents.random(n, (0, 0), (self.box, self.box), speed=self.speed, batch=batch, seed=seed, dtype=dtype)
         a.x[...] = np.minimum(a.x, np.nextafter(a.dtype(self.box), a.dtype(0)))
         return a
@@ -77,10 +78,10 @@ class Vicsek(CrowdModel):
         B = agents.batch
         if not (self.noise.ndim == 0 or self.noise.size == B):
             raise ValueError(f"noise has {self.noise.size} values but the agents have batch={B}; give one per copy")
-        self._fits(agents, {"box": self.box, "speed": self.speed})
+        self._fits(agents.x.dtype, {"box": self.box, "speed": self.speed})
         self._check(agents)
         seeds = seed_list(self.seed, self.seeds if seeds is None else seeds, B)
-        return CrowdState._make(agents, seeds, np.zeros(2), 0.0, ((0.0, 0.0), (self.box, self.box)))
+        return CrowdState._make(agents, seeds, np.zeros(2), 0.0, ((0.0, 0.0), (self.box, self.box)), self.METHOD)
 
     def _check(self, state) -> None:
         if np.any(state.x < 0) or np.any(state.x >= self.box):
