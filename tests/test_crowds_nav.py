@@ -34,19 +34,20 @@ def _episode_stats(policy, episodes=20):
 
 
 def test_scripted_baseline_beats_random_actions_by_a_wide_margin():
-    """Measured on seeds 100..119: the VO baseline succeeds in >= 60% of episodes (~80% measured),
-    uniform random actions in none (the goal is 8 m away, 25 s)."""
+    """Seeds 100..119: the VO baseline succeeds in >= 60% of episodes (over seeds 0..499: 76 %, 95 %
+    interval 72-80 %, the README's figure), uniform random actions in none (the goal is 8 m away, 25 s)."""
     ok, bad, times = _episode_stats(make_baseline("tianim/CrowdNav-v0", gym.make("tianim/CrowdNav-v0")))
     ok_r, _, _ = _episode_stats(None)
     assert ok >= 0.6 and ok_r <= 0.05, (ok, bad, ok_r)
     assert all(8.0 <= t <= 25.0 for t in times)  # 8 m at <= 1 m/s takes >= 8 s
 
 
-def test_same_seed_same_episode_and_copy_k_equals_single_env_seeded_seed_plus_k():
+@pytest.mark.parametrize("env_id", ["tianim/CrowdNav-v0", "tianim/CrowdNav-v1"])
+def test_same_seed_same_episode_and_copy_k_equals_single_env_seeded_seed_plus_k(env_id):
     policy = CrowdNavVO()
-    vec = gym.make_vec("tianim/CrowdNav-v0", num_envs=3)
+    vec = gym.make_vec(env_id, num_envs=3)
     obs_v, _ = vec.reset(seed=7)
-    singles = [gym.make("tianim/CrowdNav-v0") for _ in range(3)]
+    singles = [gym.make(env_id) for _ in range(3)]
     obs_s = [e.reset(seed=7 + k)[0] for k, e in enumerate(singles)]
     done = [False] * 3
     for _ in range(60):
@@ -59,7 +60,7 @@ def test_same_seed_same_episode_and_copy_k_equals_single_env_seeded_seed_plus_k(
             assert np.array_equal(o, obs_v[k]) and r == r_v[k] and term == term_v[k]
             assert info["success"] == info_v["success"][k] and info["collision"] == info_v["collision"][k]
             done[k] = term or trunc
-    a, b = gym.make("tianim/CrowdNav-v0"), gym.make("tianim/CrowdNav-v0")
+    a, b = gym.make(env_id), gym.make(env_id)
     oa, ob = a.reset(seed=3)[0], b.reset(seed=3)[0]
     for _ in range(20):
         oa, ob = a.step(policy(oa))[0], b.step(policy(ob))[0]
