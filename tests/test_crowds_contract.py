@@ -50,6 +50,11 @@ def test_a_copy_stepped_by_the_same_solver_gives_the_same_bits(kind):
         solver.step(model, b, 0.05, 2)
     assert same(a.snapshot(), b.snapshot())
     assert not np.array_equal(a.x, agents.x)  # it moved
+    c = model.state(agents)
+    d = c.copy()
+    solver.step(model, c, 0.05, 5)  # the form: all of c's steps, then all of d's
+    solver.step(model, d, 0.05, 5)
+    assert same(c.snapshot(), d.snapshot())
 
 
 @pytest.mark.parametrize("kind", MODELS)

@@ -16,6 +16,8 @@ The crowd side of the one contract (:mod:`tianim.stepping`, docs/architecture.md
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt, real_dtype
@@ -257,24 +259,40 @@ class CrowdState(Agents):
         return new.sum(axis=1)
 
 
+def _all_finite(*arrays) -> bool:
+    """True when every entry is finite (one sum per array first; the exact test only when a sum is not)."""
+    with np.errstate(invalid="ignore", over="ignore"):  # inf - inf in a sum: the exact test decides
+        for a in arrays:
+            if a.size and not math.isfinite(a.sum()) and not np.all(np.isfinite(a)):
+                return False
+    return True
+
+
 def check_agents(agents, dim=None, name="agents") -> Agents:
     """``agents`` if it is an :class:`Agents` of dimension ``dim`` with consistent, finite arrays, else a clear error."""
     if not isinstance(agents, Agents):
         raise TypeError(f"{name}={fmt(agents)} must be a tianim.crowds.Agents, got {type(agents).__name__}")
     if dim is not None and agents.dim != dim:
         raise ValueError(f"{name} are {agents.dim}D but this model is {dim}D; build agents of dimension {dim}")
+    x = agents.x
     for a_name in ("x", "v", "heading"):
         a = getattr(agents, a_name)
-        if a.shape != agents.x.shape or a.dtype != agents.x.dtype or not a.flags.c_contiguous:
+        if a.shape != x.shape or a.dtype != x.dtype or not a.flags.c_contiguous:
             raise ValueError(f"{name}.{a_name} has shape {a.shape}, dtype {a.dtype}; expected a C-contiguous "
-                             f"{agents.x.shape} {agents.x.dtype} array (assign into it, x[...] = ..., not over it)")
-        if not np.all(np.isfinite(a)):
-            bad = np.argwhere(~np.isfinite(a))[0]
-            raise ValueError(f"{name}.{a_name}{[int(i) for i in bad]} is not finite; give finite values")
+                             f"{x.shape} {x.dtype} array (assign into it, x[...] = ..., not over it)")
+    if not _all_finite(x, agents.v, agents.heading):
+        for a_name in ("x", "v", "heading"):
+            a = getattr(agents, a_name)
+            if not np.all(np.isfinite(a)):
+                bad = np.argwhere(~np.isfinite(a))[0]
+                raise ValueError(f"{name}.{a_name}{[int(i) for i in bad]} is not finite; give finite values")
     t = agents.t
-    if not (isinstance(t, np.ndarray) and t.shape == (agents.batch,) and t.dtype == np.float64 and np.all(np.isfinite(t))):
+    if not (isinstance(t, np.ndarray) and t.shape == (agents.batch,) and t.dtype == np.float64 and _all_finite(t)):
         raise ValueError(f"{name}.t must be a finite ({agents.batch},) float64 array of times [s]")
     return agents
+
+
+_U64, _BOOL, _F64, _I32 = np.dtype(np.uint64), np.dtype(np.bool_), np.dtype(np.float64), np.dtype(np.int32)
 
 
 def check_state(state, dim=None) -> CrowdState:
@@ -285,19 +303,19 @@ def check_state(state, dim=None) -> CrowdState:
     check_agents(state, dim, name="state")
     B, N, D = state.x.shape
     f = state.x.dtype
-    want = {"rng": ((B, 6), np.uint64), "wander": ((B, N, D), f), "goal": ((B, N, D), f), "pref_speed": ((B, N), f),
-            "active": ((B, N), np.bool_), "arrival_time": ((B, N), np.float64), "closest": ((B, N), f),
-            "ticks": ((B,), np.int32)}
-    for name, (shape, dt) in want.items():
+    want = (("rng", (B, 6), _U64), ("wander", (B, N, D), f), ("goal", (B, N, D), f), ("pref_speed", (B, N), f),
+            ("active", (B, N), _BOOL), ("arrival_time", (B, N), _F64), ("closest", (B, N), f), ("ticks", (B,), _I32))
+    for name, shape, dt in want:
         a = getattr(state, name)
         if not isinstance(a, np.ndarray) or a.shape != shape or a.dtype != dt or not a.flags.c_contiguous:
             raise ValueError(f"state.{name} must be a C-contiguous {shape} {np.dtype(dt).name} array "
                              "(assign into it, state.goal[...] = ..., not over it)")
-    for name in ("wander", "goal", "pref_speed"):
-        a = getattr(state, name)
-        if not np.all(np.isfinite(a)):
-            bad = np.argwhere(~np.isfinite(a))[0]
-            raise ValueError(f"state.{name}{[int(i) for i in bad]} is not finite; give finite values")
-    if np.any(state.pref_speed < 0):
+    if not _all_finite(state.wander, state.goal, state.pref_speed):
+        for name in ("wander", "goal", "pref_speed"):
+            a = getattr(state, name)
+            if not np.all(np.isfinite(a)):
+                bad = np.argwhere(~np.isfinite(a))[0]
+                raise ValueError(f"state.{name}{[int(i) for i in bad]} is not finite; give finite values")
+    if state.pref_speed.size and state.pref_speed.min() < 0:
         raise ValueError("state.pref_speed holds negative values; preferred speeds must be >= 0 [m/s]")
     return state

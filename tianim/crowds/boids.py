@@ -235,7 +235,6 @@ class Boids(CrowdModel):
             except ValueError:
                 raise ValueError(f"{name} has shape {g.shape}; the agents need (D,), (N, D) or (B, N, D) = {(B, N, D)}") from None
         f = agents.x.dtype
-        f = agents.x.dtype
         radii = {f"{c.__name__.lower()}.radius": bh.radius for c, bh in self.behaviours.items()
                  if c in (Separation, Alignment, Cohesion)}
         self._fits(f, {self._prm_arg[k]: v for k, v in self._prm.items() if k in self._prm_arg}, squared=radii)
@@ -251,7 +250,7 @@ class Boids(CrowdModel):
 
     def _work_key(self, state: CrowdState) -> tuple:
         lo, hi = state.domain
-        return state.x.shape + (state.x.dtype.str, tuple(lo), tuple(hi), self.radius)
+        return state.x.shape + (state.x.dtype.str, lo.tobytes(), hi.tobytes(), self.radius)
 
     def _make_work(self, state: CrowdState) -> dict:
         """Grid, tables and work buffers for the state's shape, dtype and grid box."""

@@ -107,7 +107,7 @@ class PedestrianModel(CrowdModel):
 
     def _work_key(self, state: CrowdState) -> tuple:
         lo, hi = state.domain
-        return state.x.shape + (state.x.dtype.str, tuple(lo), tuple(hi), self._search(), self.grid_neighbours,
+        return state.x.shape + (state.x.dtype.str, lo.tobytes(), hi.tobytes(), self._search(), self.grid_neighbours,
                                 type(self).CELL_DIVISOR, type(self).CELLS_PER_AGENT)
 
     @staticmethod

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from tianim._checks import check_finite_scalar, check_int, fmt
-from tianim.crowds.agents import CrowdState, check_state
+from tianim.crowds.agents import CrowdState, _all_finite, check_state
 from tianim.stepping import StepStats
 
 
@@ -138,8 +138,8 @@ class CrowdSolver:
         except BaseException:
             _put_back(state, snap)
             raise
-        bad = ~(np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2)))
-        if bad.any():
+        if not _all_finite(state.x, state.v):
+            bad = ~(np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2)))
             _put_back(state, snap)
             from tianim.physics.watchdog import DivergenceError
 

@@ -85,7 +85,7 @@ class Vicsek(CrowdModel):
 
     def _check(self, state) -> None:
         if np.any(state.x < 0) or np.any(state.x >= self.box):
-            raise ValueError(f"agents.x has positions outside the periodic box [0, {self.box:g}); wrap them "
+            raise ValueError(f"x has positions outside the periodic box [0, {self.box:g}); wrap them "
                              "(x % box) or use Vicsek.agents(...)")
         if not (self.noise.ndim == 0 or self.noise.size == state.batch):
             raise ValueError(f"noise has {self.noise.size} values but the state has batch={state.batch}; "
