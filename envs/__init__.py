@@ -7,6 +7,7 @@
 | tianim/RopeSwing-v0   | :class:`envs.rope_swing.RopeSwingEnv` | :class:`envs.rope_swing.RopeSwingVectorEnv` |
 | tianim/ClothFold-v0   | :class:`envs.cloth_fold.ClothFoldEnv` | :class:`envs.cloth_fold.ClothFoldVectorEnv` |
 | tianim/CrowdNav-v0    | :class:`envs.crowd_nav.CrowdNavEnv` | :class:`envs.crowd_nav.CrowdNavVectorEnv` |
+| tianim/CrowdNav-v1    | :class:`envs.crowd_nav.CrowdNavV1Env` | :class:`envs.crowd_nav.CrowdNavV1VectorEnv` |
 | tianim/ClothFold-v1   | :class:`envs.cloth_fold_v1.ClothFoldV1Env` | :class:`envs.cloth_fold_v1.ClothFoldV1VectorEnv` |
 | tianim/ClothFlatten-v0 | :class:`envs.cloth_flatten.ClothFlattenEnv` | :class:`envs.cloth_flatten.ClothFlattenVectorEnv` |
 | tianim/RopeFlatten-v0 | :class:`envs.rope_flatten.RopeFlattenEnv` | :class:`envs.rope_flatten.RopeFlattenVectorEnv` |
@@ -32,6 +33,7 @@ _ENVS = {
     "RopeSwing-v0": ("rope_swing", "RopeSwingEnv", "RopeSwingVectorEnv", 200),
     "ClothFold-v0": ("cloth_fold", "ClothFoldEnv", "ClothFoldVectorEnv", 100),
     "CrowdNav-v0": ("crowd_nav", "CrowdNavEnv", "CrowdNavVectorEnv", 100),
+    "CrowdNav-v1": ("crowd_nav", "CrowdNavV1Env", "CrowdNavV1VectorEnv", 97),  # the original's time limit
     "ClothFold-v1": ("cloth_fold_v1", "ClothFoldV1Env", "ClothFoldV1VectorEnv", 100),  # SoftGym's ClothFold
     "ClothFlatten-v0": ("cloth_flatten", "ClothFlattenEnv", "ClothFlattenVectorEnv", 100),  # SoftGym's
     "RopeFlatten-v0": ("rope_flatten", "RopeFlattenEnv", "RopeFlattenVectorEnv", 75),  # SoftGym's

@@ -332,7 +332,7 @@ def make_baseline(env_id: str, env):
         return RopeSwingDamped()
     if env_id.endswith("ClothFold-v0"):
         return ClothFoldPickPlace()
-    if env_id.endswith("CrowdNav-v0"):
+    if env_id.endswith(("CrowdNav-v0", "CrowdNav-v1")):
         return CrowdNavVO()
     if env_id.endswith("ClothFold-v1"):
         return ClothFoldCorners()
@@ -341,7 +341,7 @@ def make_baseline(env_id: str, env):
     if env_id.endswith("RopeFlatten-v0"):
         return RopeFlattenEnds()
     raise ValueError(f"env_id={env_id!r} has no scripted baseline; known: tianim/ArmReach-v0, ArmReach-v1, RopeSwing-v0, "
-                     "ClothFold-v0, CrowdNav-v0, ClothFold-v1, ClothFlatten-v0, RopeFlatten-v0")
+                     "ClothFold-v0, CrowdNav-v0, CrowdNav-v1, ClothFold-v1, ClothFlatten-v0, RopeFlatten-v0")
 
 
 def evaluate(env, policy, episodes: int, seed: int = 0) -> np.ndarray:

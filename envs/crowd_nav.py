@@ -1,4 +1,8 @@
-"""CrowdNav-v0: a robot reaches its goal through a crowd of ORCA pedestrians (Chen et al. 2019).
+"""CrowdNav-v0 and CrowdNav-v1: a robot reaches its goal through a crowd of ORCA pedestrians (Chen et al. 2019).
+
+This docstring describes CrowdNav-v0; CrowdNav-v1 follows the original CrowdNav (``crowd_sim.py``,
+``policy/orca.py``, ``env.config`` of github.com/vita-epfl/CrowdNav) where v0 differs: see
+"Version History" at the end.
 
 ## Description
 
@@ -47,7 +51,29 @@ and masked out by ``_time_to_goal`` unless success).
 
 Time step 0.25 s (CrowdNav's), one ORCA step per env step; all copies of ``make_vec`` step in one
 kernel launch. The single env and the batch run the same code (``CrowdNavSim``), so copy k of a
-batch equals a single env seeded seed + k.
+batch equals a single env seeded seed + k. The humans are one ``tianim.crowds.CrowdState``; a copy
+is reset by restoring the rows of a fresh one-copy state, and rolled back by ``snapshot(copies)`` /
+``restore(snap, copies)``.
+
+## Version History
+
+* v1: the original CrowdNav's rules (``crowd_sim.py`` ``step``, ``policy/orca.py``), each pinned by a
+  test in ``tests/test_crowds_nav.py``:
+
+  - collisions and discomfort from the humans' velocities at the *start* of the step (v0: the
+    velocities ORCA gives them during the step);
+  - the time limit: the step that starts at t >= time_limit - 1 = 24 s (the 97th) ends the episode
+    (truncated, reward 0, neither success nor collision, whatever happens in it); v0 truncates after
+    100 steps (25 s) and scores that step as any other;
+  - the humans' ORCA: time horizon 5 s (v0: 2 s), neighbour distance 10 m (v0: max_speed tau + 2 r (1 + safety) = 2.75 m), 10 neighbours,
+    radius 0.31 m (the humans' 0.3 m + 0.01 m; v0: 0.3 m with a 0.25 safety factor), no
+    perturbation (v0: 0.1), preferred velocity the unit vector to the goal, or the offset itself
+    within 1 m (``approach_time=1``; v0: capped at |goal - x| / dt).
+
+  Kept from v0 (deliberately): the robot is invisible to the humans, as in CrowdNav's default
+  ``env.config``; the humans' start rule (the same rejection test, drawn from ``np_random`` instead of
+  NumPy's global generator); the 24-entry observation (CrowdNav hands policies joint states instead).
+* v0: the first version (above).
 """
 
 from __future__ import annotations
@@ -56,7 +82,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.vector import AutoresetMode
 
-from tianim.crowds import ORCA, Agents
+from tianim.crowds import ORCA, Agents, CrowdSolver
 
 from ._batched import SimEnv, SimVectorEnv, check_action
 
@@ -65,6 +91,9 @@ RADIUS = 0.3
 CIRCLE = 4.0
 DT = 0.25
 MAX_EPISODE_STEPS = 100
+TIME_LIMIT = 25.0  # CrowdNav's env.config [s]
+#: v1: the step that starts at t >= TIME_LIMIT - 1 ends the episode (crowd_sim.py): the 97th
+MAX_EPISODE_STEPS_V1 = int(round((TIME_LIMIT - 1) / DT)) + 1
 V_PREF = 1.0
 START, GOAL = np.array([0.0, -CIRCLE]), np.array([0.0, CIRCLE])
 DISCOMFORT = 0.2
@@ -102,31 +131,38 @@ class CrowdNavSim:
         self.robot = np.zeros((batch, 2))
         self.robot_v = np.zeros((batch, 2))
         self.t = np.zeros(batch)
-        self.humans = Agents(np.zeros((batch, N_HUMANS, 2)), dtype=np.float64)
-        self.crowd = ORCA(goals=np.zeros((batch, N_HUMANS, 2)), pref_speed=V_PREF, radius=RADIUS, time_horizon=2.0,
-                          max_speed=V_PREF, arrival_radius=0.05, domain=DOMAIN)
-        self.crowd.prepare(self.humans)
+        self.crowd = self.humans_model()
+        self.humans = self.crowd.state(Agents(np.zeros((batch, N_HUMANS, 2)), dtype=np.float64))
+        self.solver = CrowdSolver()
         self.success = np.zeros(batch, bool)
         self.collision = np.zeros(batch, bool)
         self.diverged = np.zeros(batch, bool)  # SimVectorEnv's name for "episode terminated"
 
+    @staticmethod
+    def humans_model() -> ORCA:
+        """The humans' ORCA (v0: time horizon 2 s, tianim's defaults otherwise)."""
+        return ORCA(goals=(0.0, 0.0), pref_speed=V_PREF, radius=RADIUS, time_horizon=2.0, max_speed=V_PREF,
+                    arrival_radius=0.05, domain=DOMAIN)
+
+    def robot_velocity(self, actions: np.ndarray) -> np.ndarray:
+        """Robot velocity (B, 2) [m/s]: ``actions * V_PREF``, the length capped at V_PREF."""
+        a = actions.astype(np.float64)
+        n = np.linalg.norm(a, axis=1, keepdims=True)
+        return V_PREF * np.where(n > 1, a / np.maximum(n, 1e-300), a)
+
     def reset(self, k: int, rng: np.random.Generator) -> None:
         h = sample_humans(rng)
-        self.humans.x[k], self.humans.v[k], self.humans.t[k] = h, 0.0, 0.0
-        self.humans.heading[k] = -h / np.linalg.norm(h, axis=1, keepdims=True)
-        self.crowd.goals[k] = -h
-        self.crowd.reset_copy(k, self.humans)
+        start = Agents(h, heading=-h, dtype=np.float64)  # at rest, facing their goals, t = 0
+        self.humans.restore(self.crowd.state(start, goals=-h).snapshot(), copies=[k])
         self.robot[k], self.robot_v[k], self.t[k] = START, 0.0, 0.0
         self.success[k] = self.collision[k] = self.diverged[k] = False
 
     def step(self, actions: np.ndarray) -> np.ndarray:
         """Robot velocity ``actions * V_PREF`` (length capped at V_PREF), one ORCA step of the humans;
         returns the reward (B,) float64 and sets ``success``, ``collision``."""
-        a = actions.astype(np.float64)
-        n = np.linalg.norm(a, axis=1, keepdims=True)
-        v = V_PREF * np.where(n > 1, a / np.maximum(n, 1e-300), a)
+        v = self.robot_velocity(actions)
         rel0 = self.humans.x - self.robot[:, None, :]
-        self.crowd.step(self.humans, DT)
+        self.solver.step(self.crowd, self.humans, DT)
         rel_v = self.humans.v - v[:, None, :]
         d = closest_approach(rel0, rel_v, DT) - 2 * RADIUS  # surface gaps (B, H)
         dmin = d.min(axis=1)
@@ -148,17 +184,11 @@ class CrowdNavSim:
         return spaces.Box(-1.0, 1.0, (2,), np.float32), spaces.Box(-OBS_HIGH, OBS_HIGH, dtype=np.float32)
 
     def save(self, mask):
-        h = self.humans
-        c = self.crowd
-        return (self.robot[mask].copy(), self.robot_v[mask].copy(), self.t[mask].copy(), h.x[mask].copy(),
-                h.v[mask].copy(), h.heading[mask].copy(), h.t[mask].copy(), c.arrival_time[mask].copy(),
-                c.ticks[mask].copy(), c.closest[mask].copy())
+        return (self.robot[mask].copy(), self.robot_v[mask].copy(), self.t[mask].copy(), self.humans.snapshot(mask))
 
     def restore(self, mask, saved):
-        h = self.humans
-        c = self.crowd
-        (self.robot[mask], self.robot_v[mask], self.t[mask], h.x[mask], h.v[mask], h.heading[mask], h.t[mask],
-         c.arrival_time[mask], c.ticks[mask], c.closest[mask]) = saved
+        self.robot[mask], self.robot_v[mask], self.t[mask], humans = saved
+        self.humans.restore(humans, mask)
         self.success[mask] = self.collision[mask] = self.diverged[mask] = False
 
     def frame(self, k: int) -> np.ndarray:
@@ -179,6 +209,38 @@ class CrowdNavSim:
         hum = np.concatenate([rel, self.humans.v], axis=2).reshape(self.batch, -1)
         obs = np.concatenate([GOAL - self.robot, self.robot_v, hum], axis=1)
         return np.clip(obs, -OBS_HIGH, OBS_HIGH).astype(np.float32)
+
+
+class CrowdNavV1Sim(CrowdNavSim):
+    """CrowdNav-v1's batched task: the original CrowdNav's rules (module docstring, Version History)."""
+
+    @staticmethod
+    def humans_model() -> ORCA:
+        """The humans' ORCA as ``policy/orca.py`` builds it: RVO2 with neighbour distance 10 m, 10
+        neighbours, time horizon 5 s, radius + 0.01 m, max speed v_pref, no perturbation, preferred
+        velocity ``offset / |offset|`` beyond 1 m, else ``offset`` (``approach_time=1``)."""
+        return ORCA(goals=(0.0, 0.0), pref_speed=V_PREF, radius=RADIUS + 0.01, time_horizon=5.0,
+                    neighbour_dist=10.0, max_neighbors=10, max_speed=V_PREF, safety=0.0, perturbation=0.0,
+                    approach_time=1.0, arrival_radius=0.05, domain=DOMAIN)
+
+    def step(self, actions: np.ndarray) -> np.ndarray:
+        """As ``crowd_sim.py``'s ``step``: the closest approach over the step with the humans' velocities
+        at its start, then the time-limit rule first, collision, goal, discomfort; then everyone moves."""
+        v = self.robot_velocity(actions)
+        rel0 = self.humans.x - self.robot[:, None, :]
+        rel_v = self.humans.v - v[:, None, :]  # human.vx - action.vx before the humans step
+        timeout = self.t >= TIME_LIMIT - 1  # global_time >= time_limit - 1, before the step
+        self.solver.step(self.crowd, self.humans, DT)
+        dmin = (closest_approach(rel0, rel_v, DT) - 2 * RADIUS).min(axis=1)
+        self.robot += DT * v
+        self.robot_v = v
+        self.t += DT
+        self.collision = ~timeout & (dmin < 0)
+        self.success = ~timeout & ~self.collision & (np.linalg.norm(self.robot - GOAL, axis=1) < RADIUS)
+        self.diverged = self.collision | self.success
+        reward = np.where(dmin < DISCOMFORT, DISCOMFORT_FACTOR * DT * (dmin - DISCOMFORT), 0.0)
+        reward = np.where(self.collision, COLLISION_PENALTY, np.where(self.success, SUCCESS_REWARD, reward))
+        return np.where(timeout, 0.0, reward)
 
 
 class CrowdNavEnv(SimEnv):
@@ -215,3 +277,16 @@ class CrowdNavVectorEnv(SimVectorEnv):
         masks = {"_success": ~reset_mask, "_collision": ~reset_mask, "_time_to_goal": info["success"] & ~reset_mask}
         self._step_info = {**info, **masks}
         return obs, reward, terminated
+
+
+class CrowdNavV1Env(CrowdNavEnv):
+    """Single CrowdNav-v1 environment (the original CrowdNav's rules; module docstring)."""
+
+    sim_class = CrowdNavV1Sim
+
+
+class CrowdNavV1VectorEnv(CrowdNavVectorEnv):
+    """``num_envs`` CrowdNav-v1 copies; the crowds of all copies step in one ORCA launch."""
+
+    sim_class = CrowdNavV1Sim
+    default_max_episode_steps = MAX_EPISODE_STEPS_V1

@@ -7,9 +7,18 @@ import numpy as np
 import pytest
 from _threads import digests_by_thread_count
 
-from tianim.crowds import (Agents, Alignment, Avoid, Boids, Cohesion, Seek, Separation, Vicsek, Wall, Wander,
-                           density_speed, pair_distances, polarisation, polygon, time_to_goal)
+from tianim.crowds import (Agents, Alignment, Avoid, Boids, Cohesion, CrowdSolver, Seek, Separation, Vicsek, Wall,
+                           Wander, density_speed, pair_distances, polarisation, polygon, time_to_goal)
 from tianim.physics import Ground, Sphere
+
+S = CrowdSolver()  # one solver steps every model and state below (it holds buffers only)
+
+
+def run(model, agents, dt, steps=1):
+    """The state of ``agents`` under ``model`` after ``steps`` steps of ``dt``."""
+    state = model.state(agents)
+    S.step(model, state, dt, steps)
+    return state
 
 # --- Vicsek -------------------------------------------------------------------------------
 
@@ -20,11 +29,11 @@ def test_vicsek_order_parameter_falls_with_noise_at_density_4():
     n = 1000
     etas = np.array([0.5, 2.0, 3.5, 5.0])
     model = Vicsek(box=math.sqrt(n / 4), radius=1.0, speed=0.5, noise=etas, seed=3)
-    agents = model.agents(n, batch=len(etas), seed=1)
-    model.step(agents, 1.0, 200)
+    agents = model.state(model.agents(n, batch=len(etas), seed=1))
+    S.step(model, agents, 1.0, 200)
     phi = np.zeros(len(etas))
     for _ in range(20):
-        model.step(agents, 1.0, 10)
+        S.step(model, agents, 1.0, 10)
         phi += polarisation(agents.v) / 20
     assert phi[0] > 0.9 and phi[-1] < 0.15, phi
     assert np.all(np.diff(phi) < 0), phi
@@ -32,10 +41,10 @@ def test_vicsek_order_parameter_falls_with_noise_at_density_4():
 
 def test_vicsek_without_noise_an_aligned_flock_stays_aligned():
     model = Vicsek(box=10.0, radius=1.0, speed=0.3, noise=0.0)
-    agents = model.agents(400, seed=2)
+    agents = model.state(model.agents(400, seed=2))
     th = 0.7
     agents.heading[...] = [math.cos(th), math.sin(th)]
-    model.step(agents, 1.0, 50)
+    S.step(model, agents, 1.0, 50)
     assert polarisation(agents.v)[0] == pytest.approx(1.0, abs=1e-12)
     assert np.allclose(agents.heading, [math.cos(th), math.sin(th)], atol=1e-12)
     assert np.all((agents.x >= 0) & (agents.x < 10.0))
@@ -47,8 +56,7 @@ def test_vicsek_neighbours_wrap_around_the_periodic_box():
     model = Vicsek(box=8.0, radius=1.0, speed=0.0, noise=0.0)
     x = [[0.1, 4.0], [7.7, 4.0], [3.0, 1.0], [6.0, 1.0]]
     h = [[1.0, 0.0], [0.0, 1.0], [1.0, 0.0], [0.0, 1.0]]
-    a = Agents(x, heading=h, dtype=np.float64)
-    model.step(a, 1.0)
+    a = run(model, Agents(x, heading=h, dtype=np.float64), 1.0)
     s = math.sqrt(0.5)
     assert np.allclose(a.heading[0, :2], [[s, s], [s, s]], atol=1e-12)
     assert np.allclose(a.heading[0, 2:], [[1, 0], [0, 1]], atol=1e-12)
@@ -60,7 +68,7 @@ def _flock(n=300, box=12.0, seed=1, **kw):
     agents = Agents.random(n, (0, 0), (box, box), speed=1.0, seed=seed)
     model = Boids([Separation(2.0, radius=0.6), Alignment(1.0, radius=2.0), Cohesion(0.3, radius=2.0)],
                   max_speed=2.0, max_force=4.0, min_speed=0.5, **kw)
-    return agents, model
+    return model.state(agents), model
 
 
 def test_boids_polarisation_rises_and_separation_keeps_its_distance():
@@ -71,7 +79,7 @@ def test_boids_polarisation_rises_and_separation_keeps_its_distance():
     phi0 = polarisation(agents.v)[0]
     closest = []
     for k in range(300):
-        model.step(agents, 0.05)
+        S.step(model, agents, 0.05)
         if k >= 40:
             closest.append(pair_distances(agents.x, 0.15, search=0.6)[0][0])
     assert phi0 < 0.15
@@ -87,7 +95,7 @@ def test_field_of_view_hides_neighbours_behind():
     by exactly dt * min(max_force, |max_speed u_j - v_i|) (Reynolds steering, closed form)."""
     for fov, changes in ((math.pi, False), (2 * math.pi, True)):
         a = Agents([[0.0, 0.0], [-1.0, 0.0]], v=[[1.0, 0.0], [0.0, 1.0]], dtype=np.float64)
-        Boids([Alignment(1.0, radius=2.0, fov=fov)], max_speed=1.0, max_force=0.5).step(a, 0.1)
+        a = run(Boids([Alignment(1.0, radius=2.0, fov=fov)], max_speed=1.0, max_force=0.5), a, 0.1)
         if not changes:
             assert np.allclose(a.v[0, 0], [1.0, 0.0], atol=1e-15)
         else:
@@ -100,7 +108,7 @@ def test_field_of_view_hides_neighbours_behind():
 def test_seek_with_arrival_stops_at_the_goal():
     a = Agents([[0.0, 0.0, 0.0]], v=[[0.0, 0.0, 0.0]], dtype=np.float64)
     model = Boids([Seek(goal=(5.0, 2.0, -1.0), weight=1.0, slowing_radius=2.0)], max_speed=1.5, max_force=3.0)
-    model.step(a, 0.02, 1500)
+    a = run(model, a, 0.02, 1500)
     assert np.linalg.norm(a.x[0, 0] - [5.0, 2.0, -1.0]) < 0.02
     assert np.linalg.norm(a.v[0, 0]) < 0.02
 
@@ -122,8 +130,9 @@ def test_avoidance_keeps_agents_out_of_obstacles(dim):
     a = Agents(x, v=np.tile(np.eye(dim)[0], (60, 1)), dtype=np.float64)
     model = Boids([Separation(1.0, radius=0.3), Seek(goal=goal, slowing_radius=1.0),
                    Avoid(obstacles, weight=3.0, distance=1.0)], max_speed=1.5, max_force=3.0)
+    a = model.state(a)
     for _ in range(300):
-        model.step(a, 0.05)
+        S.step(model, a, 0.05)
         p = a.x[0]
         assert np.all(np.linalg.norm(p, axis=1) >= 1.0 - 1e-9)
         if dim == 2:
@@ -167,37 +176,38 @@ def _boids_all(batch, seeds):
     m = Boids([Separation(2.0, radius=0.5), Alignment(1.0, radius=1.5, fov=4.0), Cohesion(0.5, radius=1.5),
                Wander(0.5, 0.3), Avoid([Sphere((3.0, 3.0, 3.0), 1.0)])], max_speed=2.0, max_force=3.0, seeds=seeds,
               domain=((-2, -2, -2), (8, 8, 8)))  # the same cells (and neighbour order) batched or not
-    return a, m
+    return m.state(a), m
 
 
 def test_boids_and_vicsek_batch_equals_separate_runs_bit_for_bit():
     both, mb = _boids_all(2, [5, 9])
     single = [_boids_all(1, [s]) for s in (5, 9)]
-    mb.step(both, 0.05, 20)
+    S.step(mb, both, 0.05, 20)
     for a, m in single:
-        m.step(a, 0.05, 20)
+        S.step(m, a, 0.05, 20)
     for b in range(2):
         assert np.array_equal(both.x[b], single[b][0].x[0]) and np.array_equal(both.v[b], single[b][0].v[0])
     vb = Vicsek(6.0, noise=[1.0, 2.0], seeds=[3, 4])
-    ab = vb.agents(100, batch=2, seed=7)
-    vb.step(ab, 1.0, 30)
+    ab = vb.state(vb.agents(100, batch=2, seed=7))
+    S.step(vb, ab, 1.0, 30)
     for b, (eta, s) in enumerate(((1.0, 3), (2.0, 4))):
         v1 = Vicsek(6.0, noise=eta, seed=s)
-        a1 = v1.agents(100, seed=7 + b)
-        v1.step(a1, 1.0, 30)
+        a1 = v1.state(v1.agents(100, seed=7 + b))
+        S.step(v1, a1, 1.0, 30)
         assert np.array_equal(ab.x[b], a1.x[0]) and np.array_equal(ab.heading[b], a1.heading[0])
 
 
 _THREAD_SCRIPT = textwrap.dedent("""
     import hashlib, numpy as np
-    from tianim.crowds import Agents, Boids, Separation, Alignment, Cohesion, Wander, Vicsek
-    a = Agents.random(3000, (0, 0), (40, 40), speed=1.0, batch=2, seed=1)
+    from tianim.crowds import Agents, Boids, CrowdSolver, Separation, Alignment, Cohesion, Wander, Vicsek
+    S = CrowdSolver()
     m = Boids([Separation(2.0, radius=0.6), Alignment(1.0, radius=2.0), Cohesion(0.3, radius=2.0), Wander()],
               max_speed=2.0, max_force=4.0, seed=2)
-    m.step(a, 0.05, 20)
+    a = m.state(Agents.random(3000, (0, 0), (40, 40), speed=1.0, batch=2, seed=1))
+    S.step(m, a, 0.05, 20)
     v = Vicsek(20.0, noise=1.0, seed=3)
-    b = v.agents(1600, seed=4, dtype=np.float32)
-    v.step(b, 1.0, 20)
+    b = v.state(v.agents(1600, seed=4, dtype=np.float32))
+    S.step(v, b, 1.0, 20)
     print(hashlib.sha256(a.x.tobytes() + a.v.tobytes() + b.x.tobytes() + b.heading.tobytes()).hexdigest())
 """)
 
@@ -247,20 +257,38 @@ def test_bad_input_names_the_argument(make, exc, match):
 
 
 @pytest.mark.parametrize("call, exc, match", [
-    (lambda m, a: m.step(a, dt=0), ValueError, "dt"),
-    (lambda m, a: m.step(a, dt=0.1, steps=0), ValueError, "steps"),
-    (lambda m, a: m.step("agents", dt=0.1), TypeError, "agents"),
-    (lambda m, a: Boids([Avoid([Wall()])]).step(Agents(np.zeros((2, 3))), 0.1), ValueError, "Wall"),
-    (lambda m, a: Boids([Avoid(["rock"])]).step(a, 0.1), TypeError, r"obstacles\[0\]"),
-    (lambda m, a: Boids([Seek(goal=np.zeros((5, 2)))]).step(a, 0.1), ValueError, "seek.goal"),
-    (lambda m, a: Vicsek(4.0).step(Agents(np.zeros((2, 3))), 1.0), ValueError, "3D"),
-    (lambda m, a: Vicsek(4.0).step(Agents([[5.0, 1.0]]), 1.0), ValueError, "outside the periodic box"),
-    (lambda m, a: Vicsek(4.0, noise=[1.0, 2.0, 3.0]).step(Agents([[1.0, 1.0]]), 1.0), ValueError, "batch"),
+    (lambda m, a: S.step(m, a, dt=0), ValueError, "dt"),
+    (lambda m, a: S.step(m, a, dt=0.1, substeps=0), ValueError, "substeps"),
+    (lambda m, a: S.step(m, "agents", dt=0.1), TypeError, "state"),
+    (lambda m, a: S.step(m, Agents(a.x), dt=0.1), TypeError, r"model.state\(agents\)"),
+    (lambda m, a: S.step("boids", a, dt=0.1), TypeError, "model"),
+    (lambda m, a: Boids([Avoid([Wall()])]).state(Agents(np.zeros((2, 3)))), ValueError, "Wall"),
+    (lambda m, a: Boids([Avoid(["rock"])]), TypeError, r"obstacles\[0\]"),
+    (lambda m, a: Boids([Seek(goal=np.zeros((5, 2)))]).state(a), ValueError, "seek.goal"),
+    (lambda m, a: Vicsek(4.0).state(Agents(np.zeros((2, 3)))), ValueError, "3D"),
+    (lambda m, a: Vicsek(4.0).state(Agents([[5.0, 1.0]])), ValueError, "outside the periodic box"),
+    (lambda m, a: Vicsek(4.0, noise=[1.0, 2.0, 3.0]).state(Agents([[1.0, 1.0]])), ValueError, "batch"),
 ])
 def test_bad_step_raises_and_changes_nothing(call, exc, match):
     a, m = _flock(n=20)
-    m.step(a, 0.05)
-    x, v = a.x.copy(), a.v.copy()
+    S.step(m, a, 0.05)
+    snap = a.snapshot()
     with pytest.raises(exc, match=match):
         call(m, a)
-    assert np.array_equal(a.x, x) and np.array_equal(a.v, v)
+    assert all(np.array_equal(snap[k], getattr(a, k), equal_nan=True) for k in a.ARRAYS)
+
+
+def test_boids_overflow_raise_leaves_the_state_as_it_was_and_report_counts():
+    """Issue 21 item 8: on_overflow="raise" raised after the agents had been stepped. Now the call raises
+    with the state (positions, wander streams, times) exactly as before it; "report" counts the cut rows:
+    30 agents within 0.5 m all see the 29 others, so every row (30 per copy) is cut at K = 4."""
+    agents = Agents.random(30, (0, 0), (0.5, 0.5), speed=1.0, batch=2, seed=3)
+    rules = [Separation(1.0, radius=1.0), Wander(0.5, 0.3)]
+    strict = Boids(rules, max_neighbours=4, on_overflow="raise")
+    s = strict.state(agents)
+    before = s.snapshot()
+    with pytest.raises(RuntimeError, match="max_neighbours=4"):
+        S.step(strict, s, 0.05, 3)
+    assert all(np.array_equal(before[k], getattr(s, k), equal_nan=True) for k in s.ARRAYS)
+    stats = S.step(Boids(rules, max_neighbours=4, on_overflow="report"), s, 0.05, 1)
+    assert stats.neighbour_overflow.tolist() == [30, 30]

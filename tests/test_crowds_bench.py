@@ -3,6 +3,7 @@
 import numpy as np
 
 from tianim.bench._numpy_boids import numpy_boids_step
+from tianim.crowds import CrowdSolver
 from tianim.bench.crowds import DT, MAX_FORCE, MAX_SPEED, MIN_SPEED, _numpy_rules, check_boids_agreement, flock
 
 
@@ -14,7 +15,8 @@ def test_boids_bench_float32_tracks_the_float64_reference():
     """The timed float32 run stays within float32 rounding of the float64 reference over 3 steps."""
     agents, model = flock(300, np.float32)
     x, v, h = (a[0].astype(np.float64) for a in (agents.x, agents.v, agents.heading))
+    solver = CrowdSolver()
     for _ in range(3):
-        model.step(agents, DT)
+        solver.step(model, agents, DT)
         x, v, h = numpy_boids_step(x, v, h, DT, _numpy_rules(), MAX_SPEED, MAX_FORCE, MIN_SPEED)
     assert np.abs(agents.x[0] - x).max() < 1e-4

@@ -7,8 +7,10 @@ import numpy as np
 import pytest
 from _threads import digests_by_thread_count
 
-from tianim.crowds import ORCA, Agents, SocialForce, Wall, circle_scenario, pair_distances, time_to_goal
+from tianim.crowds import ORCA, Agents, CrowdSolver, SocialForce, Wall, circle_scenario, pair_distances, time_to_goal
 from tianim.physics import Sphere
+
+S = CrowdSolver()  # one solver steps every model and state below (it holds buffers only)
 
 # --- ORCA ---------------------------------------------------------------------------------
 
@@ -19,16 +21,17 @@ def test_orca_circle_scenario_no_overlap_everyone_arrives_in_bounded_time(n, R, 
     Stated tolerance: no centre distance below 0.99 x 2r at any step; all arrive within 4x free flow."""
     agents, goals = circle_scenario(n, R)
     model = ORCA(goals=goals, pref_speed=1.0, radius=r, time_horizon=2.0, max_speed=2.0, arrival_radius=0.05)
+    agents = model.state(agents)
     closest = np.inf
     for _ in range(1000):
-        model.step(agents, 0.1)
+        S.step(model, agents, 0.1)
         closest = min(closest, pair_distances(agents.x, r, search=4 * r)[0][0])
-        if model.arrived().all():
+        if agents.arrived().all():
             break
     free_flow = 2 * R / 1.0
     assert closest >= 0.99 * 2 * r, closest
-    assert model.arrived().all()
-    assert time_to_goal(model.arrival_time)[0] < 4 * free_flow
+    assert agents.arrived().all()
+    assert time_to_goal(agents.arrival_time)[0] < 4 * free_flow
     assert np.allclose(agents.x, goals, atol=0.05 + 1e-9)
 
 
@@ -37,8 +40,9 @@ def test_orca_corridor_10_m_at_1_m_per_s_takes_10_s():
     dt = 0.1
     agents = Agents([[0.0, 0.0]], dtype=np.float64)
     model = ORCA(goals=(10.0, 0.0), pref_speed=1.0, radius=0.2, arrival_radius=0.01)
-    model.step(agents, dt, 120)
-    assert abs(model.arrival_time[0, 0] - 10.0) <= dt
+    agents = model.state(agents)
+    S.step(model, agents, dt, 120)
+    assert abs(agents.arrival_time[0, 0] - 10.0) <= dt
     assert np.allclose(agents.x[0, 0], [10.0, 0.0], atol=0.01)
 
 
@@ -47,17 +51,19 @@ def test_orca_is_reciprocal_for_a_symmetric_pair():
     exact mirror images (v_a = -v_b), they never overlap, and both pass."""
     agents = Agents([[-4.0, 0.05], [4.0, -0.05]], v=[[1.0, 0.0], [-1.0, 0.0]], dtype=np.float64)
     model = ORCA(goals=[(4.0, 0.05), (-4.0, -0.05)], pref_speed=1.0, radius=0.5, safety=0.0, perturbation=0.0)
+    agents = model.state(agents)
     for _ in range(120):
-        model.step(agents, 0.1)
+        S.step(model, agents, 0.1)
         assert np.allclose(agents.v[0, 0], -agents.v[0, 1], atol=1e-12)
         assert np.linalg.norm(agents.x[0, 0] - agents.x[0, 1]) >= 1.0 - 1e-6
-    assert model.arrived().all()
+    assert agents.arrived().all()
 
 
 def test_orca_without_neighbours_takes_the_preferred_velocity_capped_at_max_speed():
     agents = Agents([[0.0, 0.0], [50.0, 0.0]], dtype=np.float64)
     model = ORCA(goals=[(0.0, 30.0), (80.0, 0.0)], pref_speed=[1.5, 3.0], max_speed=2.0, perturbation=0.0)
-    model.step(agents, 0.5)
+    agents = model.state(agents)
+    S.step(model, agents, 0.5)
     assert np.allclose(agents.v[0], [[0.0, 1.5], [2.0, 0.0]], atol=1e-12)
     assert np.allclose(agents.heading[0], [[0.0, 1.0], [1.0, 0.0]], atol=1e-12)
 
@@ -70,9 +76,10 @@ def test_social_force_lone_pedestrian_relaxes_with_time_constant_tau():
     tau, v0, dt = 0.5, 1.3, 0.01
     agents = Agents([[0.0, 0.0]], v=[[0.0, 0.5]], dtype=np.float64)
     model = SocialForce(goals=(1e9, 0.0), pref_speed=v0, tau=tau, max_ratio=10.0)  # e = +x to 1e-9
+    agents = model.state(agents)
     want0 = np.array([v0, 0.0])
     for n in (1, 10, 100, 200):
-        model.step(agents, dt, n - int(round(agents.t[0] / dt)))
+        S.step(model, agents, dt, n - int(round(agents.t[0] / dt)))
         discrete = want0 + (np.array([0.0, 0.5]) - want0) * (1 - dt / tau) ** n
         continuous = want0 + (np.array([0.0, 0.5]) - want0) * math.exp(-n * dt / tau)
         assert np.allclose(agents.v[0, 0], discrete, rtol=0, atol=1e-8), (n, agents.v[0, 0], discrete)
@@ -95,7 +102,8 @@ def test_social_force_repulsion_is_minus_the_gradient_of_the_elliptical_potentia
     model = SocialForce(goals=[(1e4, 0.0), (xb[0] + 1e4 * (vb[0] or 1e-9), xb[1] + 1e4 * vb[1])],
                         pref_speed=[1.0, float(np.linalg.norm(vb))], max_ratio=100.0, fov=2 * math.pi)
     eb = np.array(vb) / np.linalg.norm(vb) if np.linalg.norm(vb) > 0 else np.array([1.0, 0.0])
-    model.step(agents, dt)
+    agents = model.state(agents)
+    S.step(model, agents, dt)
     acc = (agents.v[0, 0] - va) / dt  # the relaxation term is zero: v_a = v0 e_a
     h = 1e-6
     grad = np.array([(_potential(np.array([h, 0]), np.array(xb), np.linalg.norm(vb), eb)
@@ -111,7 +119,8 @@ def test_social_force_field_of_view_weakens_forces_from_behind():
     for xb in ((-1.0, 0.0), (1.0, 0.0)):
         agents = Agents([[0.0, 0.0], list(xb)], v=[[1.0, 0.0], [0.0, 0.0]], dtype=np.float64)
         model = SocialForce(goals=[(1e4, 0.0), xb], pref_speed=[1.0, 0.0], max_ratio=100.0)
-        model.step(agents, 1e-4)
+        agents = model.state(agents)
+        S.step(model, agents, 1e-4)
         accs.append((agents.v[0, 0] - [1.0, 0.0]) / 1e-4)
     assert accs[0][0] == pytest.approx(-0.5 * accs[1][0], rel=1e-9)
 
@@ -120,13 +129,14 @@ def test_social_force_two_approaching_pedestrians_repel_and_walls_push_back():
     agents = Agents([[0.0, 0.0], [6.0, 0.1]], v=[[1.0, 0.0], [-1.0, 0.0]], dtype=np.float64)
     model = SocialForce(goals=[(10.0, 0.0), (-4.0, 0.1)], pref_speed=1.0, obstacles=[Wall((-5, 1.5), (11, 1.5), 0.0),
                                                                                        Sphere((3.0, -3.0), 0.5)])
+    agents = model.state(agents)
     gaps = []
     for _ in range(300):
-        model.step(agents, 0.05)
+        S.step(model, agents, 0.05)
         gaps.append(np.linalg.norm(agents.x[0, 0] - agents.x[0, 1]))
     lateral = agents.x[0, 0, 1] - agents.x[0, 1, 1]
     assert min(gaps) > 0.4  # they swerved: a straight pass would come within 0.1 m
-    assert model.arrived().all() and np.all(agents.x[0, :, 1] < 1.5)
+    assert agents.arrived().all() and np.all(agents.x[0, :, 1] < 1.5)
     assert abs(lateral) < 0.5  # back on their lines after passing
 
 
@@ -137,18 +147,20 @@ def _ped(batch, model_cls, seed):
     x = rng.uniform(-5, 5, (batch, 80, 2))
     g = -x + rng.normal(0, 0.5, x.shape)
     kw = dict(radius=0.25) if model_cls is ORCA else {}
-    return Agents(x, dtype=np.float64), model_cls(goals=g, pref_speed=1.0, domain=((-8, -8), (8, 8)), **kw), x, g
+    model = model_cls(goals=g, pref_speed=1.0, domain=((-8, -8), (8, 8)), **kw)
+    return model.state(Agents(x, dtype=np.float64)), model, x, g
 
 
 @pytest.mark.parametrize("model_cls", [ORCA, SocialForce])
 def test_pedestrians_batch_equals_separate_runs_bit_for_bit(model_cls):
     agents, model, x, g = _ped(3, model_cls, 1)
-    model.step(agents, 0.05, 60)
+    S.step(model, agents, 0.05, 60)
     for b in range(3):
         a1 = Agents(x[b:b + 1], dtype=np.float64)
         kw = dict(radius=0.25) if model_cls is ORCA else {}
         m1 = model_cls(goals=g[b], pref_speed=1.0, domain=((-8, -8), (8, 8)), **kw)
-        m1.step(a1, 0.05, 60)
+        a1 = m1.state(a1)
+        S.step(m1, a1, 0.05, 60)
         assert np.array_equal(agents.x[b], a1.x[0]) and np.array_equal(agents.v[b], a1.v[0])
 
 
@@ -161,9 +173,10 @@ def test_orca_copy_kernel_equals_agent_kernel_and_any_chunking_bit_for_bit():
         g[:, ::4] = 0.8 * a.x[:, ::4]  # a quarter have near goals: they arrive within the 9 steps
         m = ORCA(goals=g, radius=0.2, pref_speed=1.0, arrival_radius=0.3, path="copy" if copy_kernel else "agent",
                  steps_per_launch=2)  # (a cheaper variant to compile than 4)
+        a = m.state(a)
         for steps in calls:
-            m.step(a, 0.25, steps)
-        return a.x, a.v, a.heading, a.t, m.arrival_time, m.closest, m.ticks
+            S.step(m, a, 0.25, steps)
+        return a.x, a.v, a.heading, a.t, a.arrival_time, a.closest, a.ticks
 
     ref = run(True, [9])
     assert np.isfinite(ref[4]).any()  # some arrived: the arrival times are compared too
@@ -182,8 +195,9 @@ def test_orca_takes_the_max_neighbors_nearest_within_neighbour_dist(copy_kernel)
     agents = Agents(x, dtype=np.float64)
     K, dist = 7, 1.6
     model = ORCA(goals=-x, radius=0.1, neighbour_dist=dist, max_neighbors=K, path="copy" if copy_kernel else "agent")
-    model.step(agents, 0.05)
-    w = model._work
+    agents, solver = model.state(agents), CrowdSolver()
+    solver.step(model, agents, 0.05)
+    (w,) = solver._work.values()
     for b in range(2):
         for i in range(300):
             d = x[b] - x[b, i]
@@ -192,22 +206,26 @@ def test_orca_takes_the_max_neighbors_nearest_within_neighbour_dist(copy_kernel)
             m = len(want)
             assert w["ni"][b, i, :m].tolist() == [j for _, j in want]
             assert np.array_equal(w["nd"][b, i, :m], [q for q, _ in want])
-            assert model.closest[b, i] == (np.sqrt(want[0][0]) if m else np.inf)
+            assert agents.closest[b, i] == (np.sqrt(want[0][0]) if m else np.inf)
 
 
 _THREAD_SCRIPT = textwrap.dedent("""
     import hashlib, numpy as np
-    from tianim.crowds import ORCA, SocialForce, Agents, circle_scenario
+    from tianim.crowds import ORCA, SocialForce, Agents, CrowdSolver, circle_scenario
+    S = CrowdSolver()
     a, g = circle_scenario(400, 20.0, batch=2, dtype=np.float32)
     m = ORCA(goals=g, radius=0.12, pref_speed=1.0)
-    m.step(a, 0.1, 60)
+    a = m.state(a)
+    S.step(m, a, 0.1, 60)
     a2, g2 = circle_scenario(400, 20.0, batch=2, dtype=np.float32)
-    ORCA(goals=g2, radius=0.12, pref_speed=1.0, path="agent").step(a2, 0.1, 3)  # the agent-parallel kernel too
+    m2 = ORCA(goals=g2, radius=0.12, pref_speed=1.0, path="agent")  # the agent-parallel kernel too
+    a2 = m2.state(a2)
+    S.step(m2, a2, 0.1, 3)
     rng = np.random.default_rng(0)
     x = rng.uniform(-10, 10, (2, 2000, 2))
-    s = Agents(x, dtype=np.float32)
     f = SocialForce(goals=-x)
-    f.step(s, 0.05, 30)
+    s = f.state(Agents(x, dtype=np.float32))
+    S.step(f, s, 0.05, 30)
     print(hashlib.sha256(a.x.tobytes() + a.v.tobytes() + a2.x.tobytes() + s.x.tobytes() + s.v.tobytes()).hexdigest())
 """)
 
@@ -251,11 +269,11 @@ def test_bad_input_names_the_argument(make, exc, match):
 
 @pytest.mark.parametrize("model_cls", [ORCA, SocialForce])
 @pytest.mark.parametrize("call, exc, match", [
-    (lambda m: m.step(Agents(np.zeros((3, 2))), dt=-0.1), ValueError, "dt"),
-    (lambda m: m.step(Agents(np.zeros((3, 2))), dt=0.1, steps=1.5), TypeError, "steps"),
-    (lambda m: m.step(Agents(np.zeros((3, 3))), dt=0.1), ValueError, "3D"),
-    (lambda m: m.step(np.zeros((3, 2)), dt=0.1), TypeError, "agents"),
-    (lambda m: m.step(Agents(np.zeros((5, 2))), dt=0.1), ValueError, "goals has shape"),
+    (lambda m: S.step(m, m.state(Agents(np.zeros((3, 2)))), dt=-0.1), ValueError, "dt"),
+    (lambda m: S.step(m, m.state(Agents(np.zeros((3, 2)))), dt=0.1, substeps=1.5), TypeError, "substeps"),
+    (lambda m: m.state(Agents(np.zeros((3, 3)))), ValueError, "3D"),
+    (lambda m: m.state(np.zeros((3, 2))), TypeError, "agents"),
+    (lambda m: m.state(Agents(np.zeros((5, 2)))), ValueError, "goals has shape"),
 ])
 def test_bad_step_raises_before_changing_anything(model_cls, call, exc, match):
     model = model_cls(goals=np.ones((3, 2)))

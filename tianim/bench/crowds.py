@@ -32,6 +32,7 @@ import numpy as np
 
 from tianim.bench._numpy_boids import numpy_boids_step
 from tianim.bench.common import median_time, parser, print_table, write_json
+from tianim.crowds.solver import CrowdSolver
 
 #: The benchmark flock's rules: (weight, radius [m], full field of view [rad]).
 RULES = {"sep": (2.0, 0.6, 1.5 * math.pi), "ali": (1.0, 2.0, 1.5 * math.pi), "coh": (0.3, 2.0, 1.5 * math.pi)}
@@ -39,7 +40,7 @@ MAX_SPEED, MAX_FORCE, MIN_SPEED, DT = 2.0, 4.0, 0.5, 0.05
 
 
 def flock(n, dtype=np.float32, seed=1):
-    """(agents, model): N boids uniform in a square of side sqrt(N) m (1 agent/m^2)."""
+    """(state, model): N boids uniform in a square of side sqrt(N) m (1 agent/m^2)."""
     from tianim.crowds import Agents, Alignment, Boids, Cohesion, Separation
 
     side = math.sqrt(n)
@@ -48,7 +49,7 @@ def flock(n, dtype=np.float32, seed=1):
     model = Boids([Separation(ws, rs, fs), Alignment(wa, ra, fa), Cohesion(wc, rc, fc)], max_speed=MAX_SPEED,
                   max_force=MAX_FORCE, min_speed=MIN_SPEED, domain=((-5, -5), (side + 5, side + 5)),
                   max_neighbours=128)
-    return agents, model
+    return model.state(agents), model
 
 
 def _numpy_rules():
@@ -60,8 +61,9 @@ def check_boids_agreement(n=400, steps=5, tol=1e-9) -> float:
     agents, model = flock(n, np.float64)
     x, v, h = agents.x[0].copy(), agents.v[0].copy(), agents.heading[0].copy()
     rules = _numpy_rules()
+    solver = CrowdSolver()
     for _ in range(steps):
-        model.step(agents, DT)
+        solver.step(model, agents, DT)
         x, v, h = numpy_boids_step(x, v, h, DT, rules, MAX_SPEED, MAX_FORCE, MIN_SPEED)
     err = float(np.abs(agents.x[0] - x).max())
     if not err <= tol:
@@ -71,8 +73,9 @@ def check_boids_agreement(n=400, steps=5, tol=1e-9) -> float:
 
 def run_boids(n, repeats):
     agents, model = flock(n)
-    model.step(agents, DT, 10)  # compile (every launch variant the timed call uses), warm
-    t_ti = median_time(lambda: model.step(agents, DT, 10), repeats=repeats, warmup=0) / 10
+    solver = CrowdSolver()
+    solver.step(model, agents, DT, 10)  # compile (every launch variant the timed call uses), warm
+    t_ti = median_time(lambda: solver.step(model, agents, DT, 10), repeats=repeats, warmup=0) / 10
     x, v, h = (a[0].astype(np.float64) for a in (agents.x, agents.v, agents.heading))
     rules = _numpy_rules()
     state = [x, v, h]
@@ -117,16 +120,17 @@ def _pyrvo_set_pref(sim, x, goals):
 def check_orca_agreement(n, R, steps=150, tol=1e-3) -> float:
     """Max |x_tianim - x_pyrvo| [m] over ``steps`` steps of the circle scenario with tianim set to
     RVO2 exactly (safety 0, no perturbation); raises above ``tol``."""
-    from tianim.crowds import ORCA, circle_scenario
+    from tianim.crowds import ORCA, CrowdSolver, circle_scenario
 
     agents, goals = circle_scenario(n, R, dtype=np.float32)
     model = ORCA(goals=goals, pref_speed=1.0, safety=0.0, perturbation=0.0, **ORCA_SETUP)
+    agents, solver = model.state(agents), CrowdSolver()
     sim = _pyrvo_sim(agents.x[0])
     err = 0.0
     for _ in range(steps):
         _pyrvo_set_pref(sim, _pyrvo_positions(sim, n), goals[0])
         sim.do_step()
-        model.step(agents, ORCA_DT)
+        solver.step(model, agents, ORCA_DT)
         err = max(err, float(np.abs(_pyrvo_positions(sim, n) - agents.x[0]).max()))
     if not err <= tol:
         raise AssertionError(f"tianim ORCA (RVO2 settings) and pyrvo disagree by {err:.3g} m (tol {tol:g})")
@@ -135,26 +139,26 @@ def check_orca_agreement(n, R, steps=150, tol=1e-3) -> float:
 
 def run_orca(n, R, max_steps=6000, chunk=4):
     """tianim's ORCA on the circle until everyone is within one radius of the goal, ``chunk`` steps per
-    call; the closest approach is the model's own per-step record (``ORCA.closest``) plus a final check."""
-    from tianim.crowds import ORCA, circle_scenario, pair_distances, time_to_goal
+    call; the closest approach is the kernel's own per-step record (``state.closest``) plus a final check."""
+    from tianim.crowds import ORCA, CrowdSolver, circle_scenario, pair_distances, time_to_goal
 
     agents, goals = circle_scenario(n, R, dtype=np.float32)
     r = ORCA_SETUP["radius"]
-    warm = agents.copy()
-    ORCA(goals=goals, pref_speed=1.0, arrival_radius=r, **ORCA_SETUP).step(warm, ORCA_DT, chunk)  # compile
-    model = ORCA(goals=goals, pref_speed=1.0, arrival_radius=r, **ORCA_SETUP)
+    model, solver = ORCA(goals=goals, pref_speed=1.0, arrival_radius=r, **ORCA_SETUP), CrowdSolver()
+    agents = model.state(agents)
+    solver.step(model, agents.copy(), ORCA_DT, chunk)  # compile and warm (on a copy: the run starts at t = 0)
     total, steps = 0.0, 0
     while steps < max_steps:
         t0 = time.perf_counter()
-        model.step(agents, ORCA_DT, chunk)
+        solver.step(model, agents, ORCA_DT, chunk)
         total += time.perf_counter() - t0
         steps += chunk
-        if model.arrived().all():
+        if agents.arrived().all():
             break
-    closest = min(float(model.closest.min()), float(pair_distances(agents.x, r, search=4 * r)[0][0]))
-    return {"model": "tianim", "steps": steps, "time_s": float(time_to_goal(model.arrival_time)[0]),
+    closest = min(float(agents.closest.min()), float(pair_distances(agents.x, r, search=4 * r)[0][0]))
+    return {"model": "tianim", "steps": steps, "time_s": float(time_to_goal(agents.arrival_time)[0]),
             "ms_per_step": 1e3 * total / steps, "min_distance_over_2r": closest / (2 * r),
-            "all_arrived": bool(model.arrived().all())}
+            "all_arrived": bool(agents.arrived().all())}
 
 
 def run_pyrvo(n, R, max_steps=6000):
@@ -220,8 +224,9 @@ def main(argv=None) -> int:
     print_table(orca_rows)
     mesa_s, why = run_mesa()
     agents, model = flock(200)
-    model.step(agents, DT, 100)  # compile (every launch variant the timed call uses), warm
-    ti_s = median_time(lambda: model.step(agents, DT, 100), repeats=repeats, warmup=0)
+    solver = CrowdSolver()
+    solver.step(model, agents, DT, 100)  # compile (every launch variant the timed call uses), warm
+    ti_s = median_time(lambda: solver.step(model, agents, DT, 100), repeats=repeats, warmup=0)
     print(f"tianim boids, the same size (200 agents x 100 steps, its own rules): {ti_s:.3g} s "
           f"({200 * 100 / ti_s:.3g} agent-steps/s)")
     if why:

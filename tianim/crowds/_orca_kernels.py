@@ -146,7 +146,7 @@ def _agent_step(real_name: str):
         dist = off.norm()
         pref = vec2(0, 0)
         if dist > 0 and target[b, i, 3] != 0:
-            pref = off * (ti.min(target[b, i, 2], dist / dt) / dist)
+            pref = off * (ti.min(target[b, i, 2], dist / prm[7]) / dist)  # prm[7]: approach time (dt by default)
         if prm[6] > 0:
             h = ti.cast(i, ti.u32) * ti.u32(2654435761) ^ (ti.cast(tick, ti.u32) * ti.u32(2246822519) + ti.u32(374761393))
             h = (h ^ (h >> 15)) * ti.u32(2246822519)
@@ -245,12 +245,12 @@ def orca_kernels(real_name: str, steps: int = 1):
         line]; arrival[b, i] = t0[b] + dt + ... + dt (s + 1 times) where |goal - x_new| <= arrival radius for the first
         time, after step s of the launch; closest[b, i] = min(closest, distance to the nearest neighbour
         at the start of each step). prm = [radius (half the combined radius, incl. safety), time horizon,
-        dt, max_speed, (unused), arrival radius, perturbation]. As RVO2's examples do against the
+        dt, max_speed, (unused), arrival radius, perturbation, approach time]. As RVO2's examples do against the
         deadlocks of perfectly symmetric scenes, the preferred velocity gets a perturbation of that
         fraction of its magnitude, in a direction hashed from (agent, tick), tick0[b] + s the copy's step
         count since its reset: the same in every copy, batched or not, and for any thread count.
-        The preferred velocity points at the goal at the preferred speed, capped at |goal - x| / dt so
-        that an agent lands on its goal; inactive agents (active = 0) prefer rest.
+        The preferred velocity points at the goal at the preferred speed, capped at |goal - x| / approach
+        time (dt by default: an agent lands on its goal); inactive agents (active = 0) prefer rest.
         """
         for s in ti.static(range(steps)):  # unrolled: each step's loops are parallel top-level loops
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):

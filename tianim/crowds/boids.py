@@ -4,10 +4,10 @@ Usage::
 
     agents = Agents.random(1000, (0, 0), (20, 20), speed=1.0, seed=1)
     flock = Boids([Separation(1.5, radius=0.6), Alignment(1.0, radius=1.5), Cohesion(1.0, radius=1.5)],
-                  max_speed=2.0, max_force=2.0)
-    for _ in range(100):
-        flock.step(agents, dt=0.05)
-    polarisation(agents.v)                      # (B,) order parameter, rises toward 1
+                  max_speed=2.0, max_force=2.0)           # the model: read-only
+    state = flock.state(agents)                           # CrowdState: everything that changes
+    CrowdSolver().step(flock, state, dt=0.05, substeps=100)
+    polarisation(state.v)                                 # (B,) order parameter, rises toward 1
 
 Rules (one step of dt, every agent at once from the old state; :mod:`tianim.crowds._boids_kernels`)
 --------------------------------------------------------------------------------------------------
@@ -26,8 +26,9 @@ i's heading and ``x_j - x_i`` is at most ``fov / 2`` (``fov`` the full field-of-
   part (h turned +90 degrees when the obstacle is dead ahead), so agents go round obstacles
   instead of stalling in front of them; after the move an agent inside an obstacle
   is put back on its surface and loses its inward normal velocity (agents never end inside);
-* wander: a unit direction w doing a random walk ``w <- normalize(w + jitter xi)``, xi standard
-  normal per step, steering ``max_force w`` (no cap).
+* wander: a unit direction w (``state.wander``, starting at the heading) doing a random walk
+  ``w <- normalize(w + jitter xi)``, xi standard normal per step drawn from the copy's stream
+  ``state.rng``, steering ``max_force w`` (no cap).
 
 Then ``a = sum_k weight_k s_k``, ``v += dt a``, ``|v|`` clamped to ``[min_speed, max_speed]``,
 ``x += dt v``, heading = v / |v|. Neighbours: one fused kernel launch per :data:`STEPS_PER_LAUNCH`
@@ -45,8 +46,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from tianim._checks import as_float_array, check_choice, check_finite_scalar, check_int, fmt
-from tianim.crowds.agents import Agents, check_agents, seed_list
-from tianim.crowds.obstacles import obstacle_tables
+from tianim.crowds.agents import Agents, CrowdState, check_agents, check_domain, seed_list
+from tianim.crowds.obstacles import check_obstacle_types, obstacle_tables
+from tianim.crowds.solver import CrowdModel
+from tianim.stepping import draw
 
 
 @dataclass(frozen=True)
@@ -105,21 +108,13 @@ class Wander:
 BEHAVIOURS = (Separation, Alignment, Cohesion, Seek, Avoid, Wander)
 
 
-@dataclass
-class BoidsStats:
-    """What one :meth:`Boids.step` call did: steps taken, and neighbour rows cut at max_neighbours (B,)."""
-
-    steps: int
-    neighbour_overflow: np.ndarray
-
-
 def _fov_cos(name, fov):
     fov = check_finite_scalar(f"{name}.fov", fov, lo=0.0, hi=2 * math.pi, lo_open=True)
     return -1.0 if fov >= 2 * math.pi else math.cos(fov / 2)
 
 
-class Boids:
-    """Reynolds' boids for B copies of N agents (see the module docstring for the rules).
+class Boids(CrowdModel):
+    """Reynolds' boids (see the module docstring for the rules): a read-only model.
 
     Parameters
     ----------
@@ -129,15 +124,22 @@ class Boids:
     max_speed, max_force, min_speed : float
         Speed cap [m/s], steering cap per behaviour [m/s^2], minimum speed [m/s] (birds keep flying).
     domain : (lower, upper), optional
-        Box [m] of the neighbour grid; default: the agents' bounding box at the first step, padded
+        Box [m] of the neighbour grid; default: the agents' bounding box when the state is made, padded
         by the largest radius (agents that leave it are clamped into border cells: exact, slower).
         Give it explicitly when copy b of a batch must equal a single run bit for bit: the cells
         fix the order in which neighbour sums are added.
     max_neighbours : int
         Neighbours kept per agent (the grid's K); rows with more use the first K in the grid's order,
-        count them in ``BoidsStats.neighbour_overflow`` and, with ``on_overflow="warn"``, warn.
-    seed, seeds : wander noise: copy b draws from ``np.random.default_rng(seeds[b])``.
+        count them in ``stats.neighbour_overflow`` and, with ``on_overflow="warn"``, warn; with
+        ``"raise"`` the step raises RuntimeError and the state is left as it was before the call.
+    seed, seeds : the default wander streams of :meth:`state`: copy b draws from
+        ``np.random.default_rng(seeds[b])`` (``seeds`` defaults to seed, seed + 1, ...).
+
+    Step it with :class:`tianim.crowds.CrowdSolver` on ``state = boids.state(agents)``.
     """
+
+    METHOD = "boids"
+    WRITES = ("x", "v", "heading", "t", "ticks", "rng", "wander")
 
     def __init__(self, behaviours, max_speed=2.0, max_force=1.0, min_speed=0.0, domain=None,
                  max_neighbours=64, on_overflow="warn", seed=0, seeds=None):
@@ -157,114 +159,121 @@ class Boids:
         self.max_neighbours = check_int("max_neighbours", max_neighbours, lo=1, hi=4096)
         self.on_overflow = check_choice("on_overflow", on_overflow, ("warn", "raise", "report"))
         prm = dict(max_speed=self.max_speed, max_force=self.max_force, min_speed=self.min_speed)
-        self.radius = 0.0
+        names = dict(max_speed="max_speed", max_force="max_force", min_speed="min_speed")
+        radius = 0.0
         for cls, key in ((Separation, "sep"), (Alignment, "ali"), (Cohesion, "coh")):
             bh = self.behaviours.get(cls)
             name = cls.__name__.lower()
             w = 0.0 if bh is None else check_finite_scalar(f"{name}.weight", bh.weight, lo=0.0)
             r = 0.0 if bh is None else check_finite_scalar(f"{name}.radius", bh.radius, lo=0.0, lo_open=True)
             prm[key + "_w"], prm[key + "_r2"] = w, r * r if w > 0 else -1.0
+            names[key + "_w"] = f"{name}.weight"
             prm[key + "_cos"] = -1.0 if bh is None else _fov_cos(name, bh.fov)
             if w > 0:
-                self.radius = max(self.radius, r)
-        self._goal = None
+                radius = max(radius, r)
+        self.radius = radius
+        goal = None
         seek = self.behaviours.get(Seek)
         prm["seek_w"], prm["slowing_radius"] = 0.0, 1.0
         if seek is not None:
             prm["seek_w"] = check_finite_scalar("seek.weight", seek.weight, lo=0.0)
             prm["slowing_radius"] = check_finite_scalar("seek.slowing_radius", seek.slowing_radius, lo=0.0, lo_open=True)
+            names["seek_w"], names["slowing_radius"] = "seek.weight", "seek.slowing_radius"
             if seek.goal is None:
                 raise ValueError("seek.goal=None; give the goal position(s) [m]: (D,), (N, D) or (B, N, D)")
-            self._goal = as_float_array("seek.goal", seek.goal)
-            if self._goal.ndim not in (1, 2, 3) or self._goal.shape[-1] not in (2, 3):
-                raise ValueError(f"seek.goal has shape {self._goal.shape}; expected (D,), (N, D) or (B, N, D), D = 2 or 3")
+            goal = as_float_array("seek.goal", seek.goal)
+            if goal.ndim not in (1, 2, 3) or goal.shape[-1] not in (2, 3):
+                raise ValueError(f"seek.goal has shape {goal.shape}; expected (D,), (N, D) or (B, N, D), D = 2 or 3")
+        self.goal = goal  # the default seek goal(s) of state(), or None
         avoid = self.behaviours.get(Avoid, Avoid())
         prm["avoid_w"] = check_finite_scalar("avoid.weight", avoid.weight, lo=0.0) if Avoid in self.behaviours else 0.0
         prm["avoid_distance"] = check_finite_scalar("avoid.distance", avoid.distance, lo=0.0, lo_open=True)
-        self._obstacles = list(avoid.obstacles)
+        names["avoid_w"], names["avoid_distance"] = "avoid.weight", "avoid.distance"
+        if not isinstance(avoid.obstacles, (list, tuple)):
+            raise TypeError(f"avoid.obstacles={fmt(avoid.obstacles)} must be a list of tianim.physics.Sphere/Ground "
+                            "or crowds.Wall (wrap a single obstacle in a list)")
+        self.obstacles = tuple(avoid.obstacles)
+        check_obstacle_types("avoid.obstacles", self.obstacles)
         wander = self.behaviours.get(Wander)
         prm["wander_w"] = 0.0 if wander is None else check_finite_scalar("wander.weight", wander.weight, lo=0.0)
         prm["wander_jitter"] = 0.0 if wander is None else check_finite_scalar("wander.jitter", wander.jitter, lo=0.0)
+        names["wander_w"], names["wander_jitter"] = "wander.weight", "wander.jitter"
         self._prm = prm
-        self._seed, self._seeds = check_int("seed", seed, lo=0, hi=None), seeds
-        self.domain = None if domain is None else self._check_domain(domain)
-        self._setup = None
-        self.neighbour_overflow = None
-
-    @staticmethod
-    def _check_domain(domain):
-        try:
-            lo, hi = domain
-        except (TypeError, ValueError):
-            raise ValueError(f"domain={fmt(domain)} must be a (lower, upper) pair of corners [m]") from None
-        lo, hi = as_float_array("domain lower", lo, ndim=1), as_float_array("domain upper", hi, ndim=1)
-        if lo.size not in (2, 3) or hi.shape != lo.shape or np.any(hi <= lo):
-            raise ValueError(f"domain={fmt(domain)} must be two corners of 2 or 3 coordinates with upper > lower")
-        return lo, hi
+        self._prm_arg = names
+        self.seed, self.seeds = check_int("seed", seed, lo=0, hi=None), seeds
+        self.domain = check_domain(domain)
+        if goal is not None and self.domain is not None and goal.shape[-1] != self.domain[0].size:
+            raise ValueError(f"seek.goal is {goal.shape[-1]}D but domain={fmt(domain)} is {self.domain[0].size}D; "
+                             "give both in the agents' dimension")
+        self._freeze()
 
     def __repr__(self) -> str:
         names = ", ".join(c.__name__ for c in self.behaviours)
         return f"Boids([{names}], max_speed={self.max_speed:g}, max_force={self.max_force:g})"
 
-    def _prepare(self, agents: Agents):
-        """Grid, tables and work buffers for the agents' shape and dtype (made once, then reused)."""
+    def state(self, agents: Agents, seeds=None, goal=None) -> CrowdState:
+        """The :class:`~tianim.crowds.CrowdState` of ``agents`` (copied) for this model.
+
+        ``seeds`` (B ints): the wander streams (default: the model's ``seed``/``seeds``); ``goal``: the seek
+        goal(s) (D,), (N, D) or (B, N, D) [m] (default: the Seek behaviour's). The grid box is fixed here
+        (``domain``, or the agents' padded bounding box)."""
+        check_agents(agents)
         B, N, D = agents.x.shape
-        key = (B, N, D, agents.x.dtype)
-        if self._setup is not None and self._setup["key"] == key:
-            return self._setup
-        f = agents.x.dtype
         if self.domain is not None and self.domain[0].size != D:
-            raise ValueError(f"domain is {self.domain[0].size}D but the agents are {D}D")
-        coll, walls = obstacle_tables(self._obstacles, D)
-        goal = np.zeros((B, N, D), f)
-        if self._goal is not None:
+            raise ValueError(f"domain is {self.domain[0].size}D (lower={fmt(self.domain[0])}) but the agents are {D}D; "
+                             f"give a domain of {D}D corners")
+        if self.obstacles:
+            obstacle_tables(list(self.obstacles), D)
+        seeds = seed_list(self.seed, self.seeds if seeds is None else seeds, B)
+        g = self.goal if goal is None else as_float_array("goal", goal)
+        name = "seek.goal" if goal is None else "goal"
+        if g is not None:
+            if g.ndim not in (1, 2, 3) or g.shape[-1] != D:
+                raise ValueError(f"{name} has shape {g.shape}; the {D}D agents need (D,), (N, D) or (B, N, D) = {(B, N, D)}")
             try:
-                goal[...] = self._goal
+                np.broadcast_to(g, (B, N, D))
             except ValueError:
-                raise ValueError(f"seek.goal has shape {self._goal.shape}; the agents need (D,), (N, D) or "
-                                 f"(B, N, D) = {(B, N, D)}") from None
+                raise ValueError(f"{name} has shape {g.shape}; the agents need (D,), (N, D) or (B, N, D) = {(B, N, D)}") from None
+        f = agents.x.dtype
+        radii = {f"{c.__name__.lower()}.radius": bh.radius for c, bh in self.behaviours.items()
+                 if c in (Separation, Alignment, Cohesion)}
+        self._fits(f, {self._prm_arg[k]: v for k, v in self._prm.items() if k in self._prm_arg}, squared=radii)
+        if g is not None:
+            self._fits(f, {name: g})
+        pad = self.radius if self.radius > 0 else 1.0
+        box = self.domain if self.domain is not None else (agents.x.min(axis=(0, 1)) - pad, agents.x.max(axis=(0, 1)) + pad)
+        return CrowdState._make(agents, seeds, np.zeros(D, f) if g is None else g, 0.0, box, self.METHOD)
+
+    def _check(self, state: CrowdState) -> None:
+        if state.domain[0].size != state.dim:
+            raise ValueError(f"state's grid box is {state.domain[0].size}D but its agents are {state.dim}D")
+
+    def _work_key(self, state: CrowdState) -> tuple:
+        lo, hi = state.domain
+        return state.x.shape + (state.x.dtype.str, lo.tobytes(), hi.tobytes(), self.radius)
+
+    def _make_work(self, state: CrowdState) -> dict:
+        """Grid, tables and work buffers for the state's shape, dtype and grid box."""
         from tianim.spatial import NeighbourGrid
 
-        pad = self.radius if self.radius > 0 else 1.0
-        lo, hi = self.domain if self.domain is not None else (
-            agents.x.min(axis=(0, 1)) - pad, agents.x.max(axis=(0, 1)) + pad)
+        B, N, D = state.x.shape
+        f = state.x.dtype
+        lo, hi = state.domain
         # no neighbour behaviour: one cell, never scanned (the kernel's radius is -1)
         h = self.radius / CELLS_PER_RADIUS if self.radius > 0 else float(np.max(np.asarray(hi) - np.asarray(lo)))
         grid = NeighbourGrid(lo, hi, h, N, batch=B, max_neighbours=1, dtype=f)
-        prm = np.array([self._prm.get(k, 0.0) for k in _prm_names()], f)
-        seeds = seed_list(self._seed, self._seeds, B)
-        self._setup = dict(key=key, grid=grid, coll=coll.astype(f), walls=walls.astype(f).reshape(-1, 5), goal=goal,
-                           prm=prm, rngs=[np.random.default_rng(s) for s in seeds],
-                           ws=agents.heading.copy(), noise=np.zeros((STEPS_PER_LAUNCH, B, N, D), f),
-                           vs=np.zeros((B, N, D), f), over=np.zeros((B, N), np.int32))
-        self.neighbour_overflow = np.zeros(B, np.int64)
-        return self._setup
+        return dict(grid=grid, noise=np.zeros((STEPS_PER_LAUNCH, B, N, D), f), vs=np.zeros((B, N, D), f),
+                    over=np.zeros((B, N), np.int32))
 
-    def set_goal(self, goal) -> None:
-        """Move the seek goal(s) [m]: (D,), (N, D) or (B, N, D) (a moving target); needs :class:`Seek`."""
-        if Seek not in self.behaviours:
-            raise ValueError("set_goal needs a Seek behaviour; add Seek(goal=...) to the behaviours")
-        g = as_float_array("goal", goal)
-        if self._setup is not None:
-            try:
-                self._setup["goal"][...] = g
-            except ValueError:
-                raise ValueError(f"goal has shape {g.shape}; it does not broadcast to the agents' "
-                                 f"{self._setup['goal'].shape}") from None
-        if g.ndim not in (1, 2, 3) or g.shape[-1] not in (2, 3):
-            raise ValueError(f"goal has shape {g.shape}; expected (D,), (N, D) or (B, N, D), D = 2 or 3")
-        self._goal = g
-
-    def step(self, agents: Agents, dt, steps=1) -> BoidsStats:
-        """Advance ``agents`` in place by ``steps`` steps of ``dt`` [s]; returns :class:`BoidsStats`."""
-        dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
-        steps = check_int("steps", steps, lo=1)
-        check_agents(agents)
-        s = self._prepare(agents)
+    def _advance(self, state: CrowdState, dt, steps, s) -> dict:
         from tianim.crowds._boids_kernels import boids_kernels
 
-        name = np.dtype(agents.x.dtype).name
-        s["prm"][3] = dt
+        f = state.x.dtype
+        name = np.dtype(f).name
+        prm = np.array([self._prm.get(k, 0.0) for k in _prm_names()], f)
+        prm[3] = dt
+        coll, walls = obstacle_tables(list(self.obstacles), state.dim)
+        coll, walls = coll.astype(f), walls.astype(f).reshape(-1, 5)
         geom, dims, cell, start, order, xs = s["grid"].kernel_buffers
         r = self.radius if self.radius > 0 else -1.0
         s["over"].fill(0)
@@ -272,25 +281,26 @@ class Boids:
         while left > 0:
             chunk = STEPS_PER_LAUNCH if left >= STEPS_PER_LAUNCH else 1  # two compiled variants at most
             if self._prm["wander_w"] > 0:
-                for b, rng in enumerate(s["rngs"]):
-                    for k in range(chunk):
-                        s["noise"][k, b] = rng.standard_normal(s["noise"].shape[2:])
-            boids_kernels(name, agents.dim, chunk)(
-                agents.x, agents.v, agents.heading, s["goal"], s["coll"], s["walls"], s["ws"], s["noise"], s["prm"],
+                for b in range(state.batch):
+                    with draw(state.rng, b) as rng:
+                        for k in range(chunk):
+                            s["noise"][k, b] = rng.standard_normal(s["noise"].shape[2:])
+            boids_kernels(name, state.dim, chunk)(
+                state.x, state.v, state.heading, state.goal, coll, walls, state.wander, s["noise"], prm,
                 geom, dims, cell, start, order, xs, s["vs"], s["over"], r, self.max_neighbours)
             left -= chunk
             for _ in range(chunk):
-                agents.t += dt
+                state.t += dt
+            state.ticks += chunk
         over = s["over"].sum(axis=1, dtype=np.int64)
         if over.any():
-            self.neighbour_overflow += over
             msg = (f"{int(over.sum())} agent rows had more than max_neighbours={self.max_neighbours} neighbours "
                    "(the first ones in grid order were used); give a larger max_neighbours")
             if self.on_overflow == "raise":
-                raise RuntimeError(msg)
+                raise RuntimeError(msg + "; the state is as before the call")
             if self.on_overflow == "warn":
-                warnings.warn(msg, RuntimeWarning, stacklevel=2)
-        return BoidsStats(steps, over)
+                warnings.warn(msg, RuntimeWarning, stacklevel=3)
+        return {"neighbour_overflow": over}
 
 
 #: Grid cells per neighbour radius: the 5 x 5 cells of r / 2 scan about 25 r^2 / 4 of area, 3 x 3 cells of r scan 9 r^2.

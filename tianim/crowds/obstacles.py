@@ -38,6 +38,19 @@ def polygon(vertices, half_thickness=0.05) -> list:
     return [Wall(tuple(v[k]), tuple(v[(k + 1) % len(v)]), half_thickness) for k in range(len(v))]
 
 
+def check_obstacle_types(name: str, obstacles) -> None:
+    """A TypeError naming ``name`` unless ``obstacles`` is a list/tuple of Sphere, Ground or Wall."""
+    from tianim.physics.model import Ground, Sphere
+
+    if not isinstance(obstacles, (list, tuple)):
+        raise TypeError(f"{name}={fmt(obstacles)} must be a list of tianim.physics.Sphere/Ground or crowds.Wall "
+                        "(wrap a single obstacle in a list)")
+    for k, o in enumerate(obstacles):
+        if not isinstance(o, (Wall, Ground, Sphere)):
+            raise TypeError(f"{name}[{k}]={fmt(o)} is not an obstacle; use tianim.physics.Sphere, Ground or "
+                            "tianim.crowds.Wall")
+
+
 def obstacle_tables(obstacles, dim: int) -> tuple[np.ndarray, np.ndarray]:
     """``(colliders (C, 7), walls (W, 5))`` float64 tables of ``obstacles`` for the kernels."""
     from tianim.kernels.colliders import COLLIDER_ROW, Ground, Sphere, collider_table as _collider_table

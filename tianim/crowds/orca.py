@@ -4,8 +4,9 @@ Usage::
 
     agents = Agents(start, dtype=np.float64)                 # (B, N, 2) positions [m]
     model = ORCA(goals=goal, pref_speed=1.0, radius=0.3, max_speed=2.0)
-    model.step(agents, dt=0.1, steps=100)
-    model.arrival_time                                        # (B, N) [s], nan until arrived
+    state = model.state(agents)
+    CrowdSolver().step(model, state, dt=0.1, substeps=100)
+    state.arrival_time                                        # (B, N) [s], nan until arrived
 
 Each step (RVO2's ``doStep``): every agent takes its preferred velocity toward its goal (its
 ``pref_speed``, capped at ``|goal - x| / dt`` so that it lands on the goal), selects its
@@ -33,7 +34,7 @@ from __future__ import annotations
 import numpy as np
 
 from tianim._checks import check_choice, check_finite_scalar, check_int
-from tianim.crowds.agents import Agents
+from tianim.crowds.agents import Agents, CrowdState
 from tianim.crowds.pedestrians import PedestrianModel
 
 
@@ -48,34 +49,39 @@ COPY_KERNEL_MAX_AGENTS = 1024
 
 
 class ORCA(PedestrianModel):
-    """ORCA for B copies of N 2D agents of equal ``radius`` [m] (see the module docstring).
+    """ORCA for B copies of N 2D agents of equal ``radius`` [m] (see the module docstring): a read-only model.
 
-    ``goals`` (2,), (N, 2) or (B, N, 2) [m]; ``pref_speed`` [m/s] scalar, (N,) or (B, N);
-    ``time_horizon`` tau [s]; ``neighbour_dist`` [m] (default ``max_speed * tau + 2 radius``, the
-    farthest an agent can matter within tau); ``max_neighbors`` per agent (RVO2's default 10);
-    ``arrival_radius`` [m]; ``domain`` the (lower, upper) box of the grid (default: the agents'
-    and goals' bounding box at the first step; outside agents are clamped, exact but slower);
-    ``grid_neighbours`` and ``skin`` are checked but no longer used (the grid is rebuilt in the kernel
-    before every step and never stores neighbour lists: nothing can overflow; ``neighbour_overflow`` stays 0);
-    After the first step, ``closest`` (B, N) holds each agent's smallest distance [m] to its nearest
-    neighbour at the start of any step so far (inf if none came within ``neighbour_dist``; write inf
-    to reset): the no-overlap metric without an extra query; ``ticks`` (B,) int32 the steps of each
-    copy since its :meth:`reset_copy` (the perturbation's hash input: save and restore it with a copy).
+    ``goals`` (2,), (N, 2) or (B, N, 2) [m] and ``pref_speed`` [m/s] scalar, (N,) or (B, N): the
+    defaults of :meth:`state`; ``time_horizon`` tau [s]; ``neighbour_dist`` [m] (default ``max_speed *
+    tau + 2 radius``, the farthest an agent can matter within tau); ``max_neighbors`` per agent (RVO2's
+    default 10); ``arrival_radius`` [m]; ``domain`` the (lower, upper) box of the grid (default: the
+    agents' and goals' bounding box when the state is made; outside agents are clamped, exact but
+    slower); ``grid_neighbours`` and ``skin`` are checked but no longer used (the grid is rebuilt in the
+    kernel before every step and never stores neighbour lists: nothing can overflow).
+    The state's ``closest`` (B, N) holds each agent's smallest distance [m] to its nearest neighbour at
+    the start of any step so far (inf if none came within ``neighbour_dist``): the no-overlap metric
+    without an extra query; ``ticks`` (B,) the steps of each copy (the perturbation's hash input).
     ``perturbation`` (default 0.1) the fraction of its magnitude added to each preferred velocity in a
     direction hashed from (agent, step) (RVO2's examples add 1e-4 m/s of random noise; symmetric
     circles of 20-64 agents with a 2 s horizon jam for good in a ring at 0.01 and all cross at 0.1;
-    agents at rest on their goals are not disturbed). ``path``: ``"copy"`` (the copy-parallel kernel),
-    ``"agent"`` (agent-parallel, ``steps_per_launch`` unrolled steps a launch, default
-    :data:`MAX_STEPS_PER_LAUNCH`) or ``"auto"`` (copy up to :data:`COPY_KERNEL_MAX_AGENTS`); bit-identical.
+    agents at rest on their goals are not disturbed). ``approach_time`` [s] (default None: the step dt)
+    caps the preferred speed at ``|goal - x| / approach_time``: with dt an agent lands on its goal in
+    one step; RVO2's Circle example and CrowdNav use 1 s (unit speed beyond 1 m, then the offset itself).
+    ``path``: ``"copy"`` (the copy-parallel kernel), ``"agent"`` (agent-parallel, ``steps_per_launch``
+    unrolled steps a launch, default :data:`MAX_STEPS_PER_LAUNCH`) or ``"auto"`` (copy up to
+    :data:`COPY_KERNEL_MAX_AGENTS`); bit-identical.
     """
 
+    METHOD = "orca"
+    WRITES = ("x", "v", "heading", "t", "ticks", "arrival_time", "closest")
     #: Cells of neighbour_dist / 2 (up to 16 per agent): the nearest-K scan prunes at cell granularity.
     CELL_DIVISOR = 2.0
     CELLS_PER_AGENT = 16
 
     def __init__(self, goals, pref_speed=1.0, radius=0.5, time_horizon=2.0, neighbour_dist=None,
                  max_neighbors=10, max_speed=2.0, safety=0.25, arrival_radius=1e-3, domain=None,
-                 grid_neighbours=256, skin=None, perturbation=0.1, path="auto", steps_per_launch=None):
+                 grid_neighbours=256, skin=None, perturbation=0.1, approach_time=None, path="auto",
+                 steps_per_launch=None):
         super().__init__(goals, pref_speed, arrival_radius, domain, grid_neighbours)
         self.path = check_choice("path", path, ("auto", "copy", "agent"))
         self.steps_per_launch = MAX_STEPS_PER_LAUNCH if steps_per_launch is None else check_int(
@@ -90,9 +96,9 @@ class ORCA(PedestrianModel):
             "neighbour_dist", neighbour_dist, lo=0.0, lo_open=True)
         self.perturbation = check_finite_scalar("perturbation", perturbation, lo=0.0)
         self.skin = 0.2 * self.neighbour_dist if skin is None else check_finite_scalar("skin", skin, lo=0.0)
-        self._work = None
-        self.v_pref = None  # (B, N, 2) the preferred velocities of the last step [m/s]
-        self.neighbour_overflow = 0
+        self.approach_time = None if approach_time is None else check_finite_scalar(
+            "approach_time", approach_time, lo=0.0, lo_open=True)
+        self._freeze()
 
     def __repr__(self) -> str:
         return (f"ORCA(radius={self.radius:g}, time_horizon={self.time_horizon:g}, max_speed={self.max_speed:g}, "
@@ -101,47 +107,38 @@ class ORCA(PedestrianModel):
     def _search(self) -> float:
         return self.neighbour_dist
 
-    def reset_copy(self, b: int, agents: Agents):
-        """Forget copy b's arrivals, closest approach and step count (after editing it)."""
-        super().reset_copy(b, agents)
-        if self._work is not None:
-            self.closest[b] = np.inf
-            self.ticks[b] = 0
+    def _values(self) -> dict:
+        return {"radius": self.radius, "time_horizon": self.time_horizon, "max_speed": self.max_speed}
 
-    def prepare(self, agents: Agents) -> None:
-        """Goal arrays (see :class:`~tianim.crowds.pedestrians.PedestrianModel`) and ORCA's work
-        arrays, ``closest`` and ``ticks`` for ``agents``' shape (the first :meth:`step` does it otherwise)."""
-        super().prepare(agents)
-        B, N, _ = agents.x.shape
-        f = agents.x.dtype
+    def _squared(self) -> dict:
+        return {"neighbour_dist": self.neighbour_dist}
+
+    def _prm(self, f, dt) -> np.ndarray:
+        approach = dt if self.approach_time is None else self.approach_time
+        return np.array([self.radius * (1 + self.safety), self.time_horizon, dt, self.max_speed,
+                         self.neighbour_dist ** 2, self.arrival_radius, self.perturbation, approach], f)
+
+    def _work_key(self, state: CrowdState) -> tuple:
+        return super()._work_key(state) + (self.max_neighbors,)
+
+    def _make_work(self, state: CrowdState) -> dict:
+        B, N, _ = state.x.shape
+        f = state.x.dtype
         K = self.max_neighbors
-        if self._work is None or self._work["key"] != (B, N, f):
-            out = np.zeros((B, N, 6), f)  # [x_new, v_new, v_pref]
-            prm = np.array([self.radius * (1 + self.safety), self.time_horizon, 0.0, self.max_speed,
-                            self.neighbour_dist ** 2, self.arrival_radius, self.perturbation], f)  # prm[2] = dt
-            self._work = dict(key=(B, N, f), work=np.zeros((B, N, K, 8), f), out=out, prm=prm,
-                              nd=np.zeros((B, N, K), f), ni=np.zeros((B, N, K), np.int32))
-            self.v_pref = out[..., 4:6]
-            self.closest = np.full((B, N), np.inf, f)
-            self.ticks = np.zeros(B, np.int32)  # steps per copy since its reset (the perturbation's hash)
+        return dict(grid=self._grid(state), work=np.zeros((B, N, K, 8), f), out=np.zeros((B, N, 6), f),
+                    nd=np.zeros((B, N, K), f), ni=np.zeros((B, N, K), np.int32), target=np.zeros((B, N, 4), f))
 
-    def step(self, agents: Agents, dt, steps=1) -> None:
-        """Advance 2D ``agents`` in place by ``steps`` steps of ``dt`` [s], recording arrivals."""
-        dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
-        steps = check_int("steps", steps, lo=1)
-        self.prepare(agents)
-        f = agents.x.dtype
-        w = self._work
-        prm = w["prm"]
-        prm[2] = dt
-        geom, dims, cell, start, order, xs = self.grid.kernel_buffers
+    def _advance(self, state: CrowdState, dt, steps, w) -> dict:
+        f = state.x.dtype
+        prm = self._prm(f, dt)
+        geom, dims, cell, start, order, xs = w["grid"].kernel_buffers
         name = np.dtype(f).name
-        args = (agents.x, agents.v, agents.heading, self.target, prm, w["work"], w["nd"], w["ni"], w["out"],
-                self.arrival_time, agents.t, self.ticks, self.closest, geom, dims, cell, start, order, xs,
+        args = (state.x, state.v, state.heading, self._target(state, w["target"]), prm, w["work"], w["nd"], w["ni"],
+                w["out"], state.arrival_time, state.t, state.ticks, state.closest, geom, dims, cell, start, order, xs,
                 self.neighbour_dist)
         from tianim.crowds._orca_kernels import orca_copy_kernels, orca_kernels
 
-        copy = self.path == "copy" or (self.path == "auto" and agents.x.shape[1] <= COPY_KERNEL_MAX_AGENTS)
+        copy = self.path == "copy" or (self.path == "auto" and state.n <= COPY_KERNEL_MAX_AGENTS)
         k = self.steps_per_launch  # agent path: k unrolled steps a launch; copy path: all steps in one launch
         chunks = [steps] if copy else [k] * (steps // k) + [1] * (steps % k)
         for chunk in chunks:
@@ -149,9 +146,10 @@ class ORCA(PedestrianModel):
                 orca_copy_kernels(name)(*args, chunk)
             else:
                 orca_kernels(name, chunk)(*args)  # two compiled variants at most
-            self.ticks += chunk
+            state.ticks += chunk
             for _ in range(chunk):  # step by step: the same times for any chunking
-                agents.t += dt
+                state.t += dt
+        return {}
 
 
 def circle_scenario(n, circle_radius, batch=1, dtype=np.float64):
@@ -159,6 +157,7 @@ def circle_scenario(n, circle_radius, batch=1, dtype=np.float64):
     Returns ``(agents, goals (B, N, 2))``."""
     n = check_int("n", n, lo=1)
     R = check_finite_scalar("circle_radius", circle_radius, lo=0.0, lo_open=True)
+    batch = check_int("batch", batch, lo=1)
     ang = 2 * np.pi * np.arange(n) / n
     start = R * np.stack([np.cos(ang), np.sin(ang)], axis=1)
     return Agents(np.broadcast_to(start, (batch, n, 2)).copy(), dtype=dtype), np.broadcast_to(-start, (batch, n, 2)).copy()

@@ -1,12 +1,13 @@
-"""What the pedestrian models (ORCA, social force) share: goals, preferred speeds, arrival times.
+"""What the pedestrian models (ORCA, social force) share: default goals and preferred speeds, the
+grid box, arrival times.
 
-A pedestrian model holds, for B copies of N agents, ``goals`` (B, N, 2) [m], ``pref_speed``
-(B, N) [m/s] and ``arrival_time`` (B, N) [s] (``nan`` until the agent first comes within
-``arrival_radius`` of its goal, then the time of the end of that step). The arrays are made at
-the first :meth:`step` from the ``goals`` / ``pref_speed`` given to the constructor (broadcast
-to (B, N, 2) / (B, N)) and may be written in place afterwards (an environment resetting a copy);
-``goals`` and ``pref_speed`` are views into one (B, N, 4) array ``target`` (the 4th column is
-``active``: 0 makes an agent prefer rest, e.g. one that has left the scene).
+A pedestrian model holds the *defaults* of the per-copy targets: ``goals`` (2,), (N, 2) or (B, N, 2)
+[m] and ``pref_speed`` (scalar, (N,) or (B, N)) [m/s], read-only. ``model.state(agents)`` broadcasts
+them into the state's ``goal`` (B, N, 2), ``pref_speed`` (B, N) and ``active`` (B, N) arrays (write
+those in place to retarget a copy; ``active`` False makes an agent prefer rest, e.g. one that has
+left the scene) and records the agents that start on their goals in ``arrival_time`` (B, N) [s]
+(``nan`` until the agent first comes within ``arrival_radius`` of its goal, then the time of the
+end of that step).
 """
 
 from __future__ import annotations
@@ -14,95 +15,105 @@ from __future__ import annotations
 import numpy as np
 
 from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt
-from tianim.crowds.agents import Agents, check_agents
+from tianim.crowds.agents import Agents, CrowdState, check_agents, check_domain
+from tianim.crowds.solver import CrowdModel
 
 
-class PedestrianModel:
-    """Base of :class:`tianim.crowds.ORCA` and :class:`tianim.crowds.SocialForce` (goals and arrivals)."""
+def _goals(name, value):
+    if value is None:
+        raise ValueError(f"{name}=None; give the goal positions [m]: (2,), (N, 2) or (B, N, 2)")
+    g = as_float_array(name, value)
+    if g.ndim not in (1, 2, 3) or g.shape[-1] != 2:
+        raise ValueError(f"{name} has shape {g.shape}; expected (2,), (N, 2) or (B, N, 2) (2D agents)")
+    return g
 
+
+def _speeds(name, value):
+    s = as_float_array(name, value)
+    if s.ndim > 2 or np.any(s < 0):
+        raise ValueError(f"{name}={fmt(value)} must be >= 0 [m/s]: a scalar, (N,) or (B, N)")
+    return s
+
+
+class PedestrianModel(CrowdModel):
+    """Base of :class:`tianim.crowds.ORCA` and :class:`tianim.crowds.SocialForce` (goals, grid box, arrivals)."""
+
+    DIM = 2
     #: The grid's cell size is the search radius / CELL_DIVISOR, or larger where the box would have
     #: more than CELLS_PER_AGENT cells per agent.
     CELL_DIVISOR = 1.0
     CELLS_PER_AGENT = 4
 
     def __init__(self, goals, pref_speed, arrival_radius, domain, grid_neighbours):
-        if goals is None:
-            raise ValueError("goals=None; give the goal positions [m]: (2,), (N, 2) or (B, N, 2)")
-        self._goal_spec = as_float_array("goals", goals)
-        if self._goal_spec.ndim not in (1, 2, 3) or self._goal_spec.shape[-1] != 2:
-            raise ValueError(f"goals has shape {self._goal_spec.shape}; expected (2,), (N, 2) or (B, N, 2) (2D agents)")
-        self._speed_spec = as_float_array("pref_speed", pref_speed)
-        if np.any(self._speed_spec < 0):
-            raise ValueError(f"pref_speed={fmt(pref_speed)} must be >= 0 [m/s]")
+        self.goals = _goals("goals", goals)
+        self.pref_speed = _speeds("pref_speed", pref_speed)
         self.arrival_radius = check_finite_scalar("arrival_radius", arrival_radius, lo=0.0)
         self.grid_neighbours = check_int("grid_neighbours", grid_neighbours, lo=1, hi=4096)
-        self.domain = None
-        if domain is not None:
-            try:
-                lo, hi = domain
-            except (TypeError, ValueError):
-                raise ValueError(f"domain={fmt(domain)} must be a (lower, upper) pair of 2D corners [m]") from None
-            lo, hi = as_float_array("domain lower", lo, shape=(2,)), as_float_array("domain upper", hi, shape=(2,))
-            if np.any(hi <= lo):
-                raise ValueError(f"domain={fmt(domain)} must have upper > lower on both axes")
-            self.domain = (lo, hi)
-        self._shape = None
-        self.goals = self.pref_speed = self.arrival_time = None
+        self.domain = check_domain(domain, dim=2)
 
-    def _setup_goals(self, agents: Agents, search: float):
-        """Goal arrays and the neighbour grid for the agents' shape (made at the first step)."""
+    def state(self, agents: Agents, goals=None, pref_speed=None) -> CrowdState:
+        """The :class:`~tianim.crowds.CrowdState` of 2D ``agents`` (copied) for this model.
+
+        ``goals`` (2,), (N, 2) or (B, N, 2) [m] and ``pref_speed`` [m/s] override the model's defaults
+        for this state. The grid box is fixed here (``domain``, or the agents' and goals' bounding box
+        padded by the search radius); agents already within ``arrival_radius`` of their goals are
+        recorded as arrived at the agents' ``t``."""
         check_agents(agents, dim=2)
         B, N, _ = agents.x.shape
-        key = (B, N, agents.x.dtype)
-        if self._shape == key:
-            return
-        f = agents.x.dtype
-        self.target = np.zeros((B, N, 4), f)  # [goal_x, goal_y, pref_speed, active]: one kernel argument
-        self.target[..., 3] = 1
-        goals, speed = self.target[..., :2], self.target[..., 2]
-        for name, dst, src in (("goals", goals, self._goal_spec), ("pref_speed", speed, self._speed_spec)):
+        g = self.goals if goals is None else _goals("goals", goals)
+        sp = self.pref_speed if pref_speed is None else _speeds("pref_speed", pref_speed)
+        for name, src, shape in (("goals", g, (B, N, 2)), ("pref_speed", sp, (B, N))):
             try:
-                dst[...] = src
+                np.broadcast_to(src, shape)
             except ValueError:
-                raise ValueError(f"{name} has shape {src.shape}; it does not broadcast to the agents' "
-                                 f"{dst.shape}") from None
-        from tianim.spatial import NeighbourGrid
-
+                raise ValueError(f"{name} has shape {src.shape}; it does not broadcast to the agents' {shape}") from None
+        self._fits(agents.x.dtype, {"goals": g, "pref_speed": sp, **self._values()}, squared=self._squared())
+        search = self._search()
+        goal = np.broadcast_to(g, (B, N, 2))
         lo, hi = self.domain if self.domain is not None else (
-            np.minimum(agents.x.min(axis=(0, 1)), goals.min(axis=(0, 1))) - search,
-            np.maximum(agents.x.max(axis=(0, 1)), goals.max(axis=(0, 1))) + search)
-        cells = float(np.prod(np.asarray(hi) - np.asarray(lo)))
-        # cells of search / CELL_DIVISOR, but at most CELLS_PER_AGENT per agent: the serial build is O(N + cells)
-        h = max(search / self.CELL_DIVISOR, (cells / (self.CELLS_PER_AGENT * N)) ** 0.5)
-        self.grid = NeighbourGrid(lo, hi, h, N, batch=B, max_neighbours=self.grid_neighbours, dtype=f)
-        self.goals, self.pref_speed = goals, speed
-        self.arrival_time = np.full((B, N), np.nan)
-        self._shape = key
-        self._record_arrivals(agents)  # agents that start on their goals
+            np.minimum(agents.x.min(axis=(0, 1)), goal.min(axis=(0, 1))) - search,
+            np.maximum(agents.x.max(axis=(0, 1)), goal.max(axis=(0, 1))) + search)
+        span = float(np.max(np.asarray(hi) - np.asarray(lo)))
+        if not span < 1e12:
+            raise ValueError(f"the agents and goals span {span:.3g} m, too far for the automatic grid box; give "
+                             f"{type(self).__name__}(domain=(lower, upper)) around where the agents walk (agents and "
+                             "goals outside it are fine: outside agents are clamped into border cells, exactly)")
+        st = CrowdState._make(agents, [0] * B, g, sp, (lo, hi), self.METHOD)
+        st._record_arrivals(self.arrival_radius)  # agents that start on their goals
+        return st
 
-    def prepare(self, agents: Agents) -> None:
-        """Make ``goals``, ``pref_speed``, ``target`` and ``arrival_time`` for ``agents``' shape now
-        (the first :meth:`step` does it otherwise), e.g. to edit goals per copy before stepping."""
-        self._setup_goals(agents, self._search())
+    def _values(self) -> dict:
+        """The model's parameters by argument name (checked against the agents' dtype)."""
+        return {}
+
+    def _squared(self) -> dict:
+        """The lengths the kernels square, by argument name."""
+        return {}
 
     def _search(self) -> float:
         """The neighbour search radius [m] of the model (sizes the grid's cells and margins)."""
         raise NotImplementedError
 
-    def _record_arrivals(self, agents: Agents):
-        d = np.linalg.norm(self.goals - agents.x, axis=2)
-        new = np.isnan(self.arrival_time) & (d <= self.arrival_radius)
-        if new.any():
-            self.arrival_time[new] = np.broadcast_to(agents.t[:, None], new.shape)[new]
+    def _grid(self, state: CrowdState):
+        """The neighbour grid over the state's box, cells of the search radius / CELL_DIVISOR (or coarser)."""
+        from tianim.spatial import NeighbourGrid
 
-    def reset_copy(self, b: int, agents: Agents):
-        """Forget copy b's arrivals and re-record those already at their goals (after editing it)."""
-        self.arrival_time[b] = np.nan
-        d = np.linalg.norm(self.goals[b] - agents.x[b], axis=1)
-        self.arrival_time[b, d <= self.arrival_radius] = agents.t[b]
+        B, N, _ = state.x.shape
+        lo, hi = state.domain
+        cells = float(np.prod(np.asarray(hi) - np.asarray(lo)))
+        # cells of search / CELL_DIVISOR, but at most CELLS_PER_AGENT per agent: the serial build is O(N + cells)
+        h = max(self._search() / self.CELL_DIVISOR, (cells / (self.CELLS_PER_AGENT * N)) ** 0.5)
+        return NeighbourGrid(lo, hi, h, N, batch=B, max_neighbours=self.grid_neighbours, dtype=state.x.dtype)
 
-    def arrived(self) -> np.ndarray:
-        """(B, N) bool: agents that have reached their goal (known from the first :meth:`step` on)."""
-        if self.arrival_time is None:
-            raise RuntimeError("arrived() before the first step: the model learns the agents' shape in step()")
-        return ~np.isnan(self.arrival_time)
+    def _work_key(self, state: CrowdState) -> tuple:
+        lo, hi = state.domain
+        return state.x.shape + (state.x.dtype.str, lo.tobytes(), hi.tobytes(), self._search(), self.grid_neighbours,
+                                type(self).CELL_DIVISOR, type(self).CELLS_PER_AGENT)
+
+    @staticmethod
+    def _target(state: CrowdState, out: np.ndarray) -> np.ndarray:
+        """Pack ``[goal_x, goal_y, pref_speed, active]`` (B, N, 4) for the kernels (one argument)."""
+        out[..., :2] = state.goal
+        out[..., 2] = state.pref_speed
+        out[..., 3] = state.active
+        return out

@@ -16,26 +16,34 @@ agents are built once and queried at their 9 periodic images ``x + (s_x, s_y) L`
 (images outside the box are clamped into border cells, which the grid handles exactly); for
 r < L / 2 every neighbour appears under exactly one image. Sums run over the images in a fixed
 order: bit-identical for any thread count. ``eta`` may differ per copy: a batch scans the noise.
+The noise of copy b is drawn from its stream ``state.rng[b]`` (:class:`tianim.crowds.CrowdState`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt
-from tianim.crowds.agents import Agents, check_agents, seed_list
+from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt, real_dtype
+from tianim.crowds.agents import Agents, CrowdState, check_agents, seed_list
+from tianim.crowds.solver import CrowdModel
+from tianim.stepping import draw
 
 #: The periodic images (s_x, s_y) in the order their neighbour sums are added.
 IMAGES = tuple((sx, sy) for sy in (0, -1, 1) for sx in (0, -1, 1))
 
 
-class Vicsek:
-    """The Vicsek model for B copies of N agents in the periodic box [0, ``box``)^2 [m].
+class Vicsek(CrowdModel):
+    """The Vicsek model for B copies of N agents in the periodic box [0, ``box``)^2 [m]: a read-only model.
 
     ``radius`` r [m] (< box / 2), ``speed`` v0 [m/s], ``noise`` eta [rad] (a scalar or one per copy,
-    in [0, 2 pi]), ``seed``/``seeds`` for the noise (copy b draws from ``default_rng(seeds[b])``),
-    ``max_neighbours`` per image query (raises when exceeded).
+    in [0, 2 pi]), ``seed``/``seeds`` the default noise streams of :meth:`state` (copy b draws from
+    ``default_rng(seeds[b])``), ``max_neighbours`` per image query (raises when exceeded, the state
+    left as before the call). Step it with :class:`tianim.crowds.CrowdSolver`.
     """
+
+    METHOD = "vicsek"
+    WRITES = ("x", "v", "heading", "t", "ticks", "rng")
+    DIM = 2
 
     def __init__(self, box, radius=1.0, speed=0.03, noise=0.5, seed=0, seeds=None, max_neighbours=512):
         self.box = check_finite_scalar("box", box, lo=0.0, lo_open=True)
@@ -49,8 +57,8 @@ class Vicsek:
             raise ValueError(f"noise={fmt(noise)} must be a scalar or one value per copy, each in [0, 2 pi] rad")
         self.noise = eta
         self.max_neighbours = check_int("max_neighbours", max_neighbours, lo=1, hi=4096)
-        self._seed, self._seeds = check_int("seed", seed, lo=0, hi=None), seeds
-        self._setup = None
+        self.seed, self.seeds = check_int("seed", seed, lo=0, hi=None), seeds
+        self._freeze()
 
     def __repr__(self) -> str:
         return f"Vicsek(box={self.box:g}, radius={self.radius:g}, speed={self.speed:g}, noise={fmt(self.noise)})"
@@ -58,51 +66,61 @@ class Vicsek:
     def agents(self, n, batch=1, seed=0, dtype=np.float64) -> Agents:
         """N agents per copy uniform in the box with uniform random headings (copy b from ``default_rng(seed + b)``)."""
         n = check_int("n", n, lo=1)
+        self._fits(real_dtype(dtype), {"box": self.box, "speed": self.speed})
         a = Agents.random(n, (0, 0), (self.box, self.box), speed=self.speed, batch=batch, seed=seed, dtype=dtype)
         a.x[...] = np.minimum(a.x, np.nextafter(a.dtype(self.box), a.dtype(0)))
         return a
 
-    def _prepare(self, agents):
-        B, N, _ = agents.x.shape
-        key = (B, N, agents.x.dtype)
-        if self._setup is not None and self._setup["key"] == key:
-            return self._setup
+    def state(self, agents: Agents, seeds=None) -> CrowdState:
+        """The :class:`~tianim.crowds.CrowdState` of 2D ``agents`` (copied; positions in [0, box)) for this
+        model; ``seeds`` (B ints) the noise streams (default: the model's ``seed``/``seeds``)."""
+        check_agents(agents, dim=2)
+        B = agents.batch
+        if not (self.noise.ndim == 0 or self.noise.size == B):
+            raise ValueError(f"noise has {self.noise.size} values but the agents have batch={B}; give one per copy")
+        self._fits(agents.x.dtype, {"box": self.box, "speed": self.speed})
+        self._check(agents)
+        seeds = seed_list(self.seed, self.seeds if seeds is None else seeds, B)
+        return CrowdState._make(agents, seeds, np.zeros(2), 0.0, ((0.0, 0.0), (self.box, self.box)), self.METHOD)
+
+    def _check(self, state) -> None:
+        if np.any(state.x < 0) or np.any(state.x >= self.box):
+            raise ValueError(f"x has positions outside the periodic box [0, {self.box:g}); wrap them "
+                             "(x % box) or use Vicsek.agents(...)")
+        if not (self.noise.ndim == 0 or self.noise.size == state.batch):
+            raise ValueError(f"noise has {self.noise.size} values but the state has batch={state.batch}; "
+                             "give one per copy")
+
+    def _work_key(self, state: CrowdState) -> tuple:
+        return state.x.shape + (state.x.dtype.str, self.box, self.radius, self.max_neighbours)
+
+    def _make_work(self, state: CrowdState) -> dict:
         from tianim.spatial import NeighbourGrid
 
-        f = agents.x.dtype
-        eta = np.broadcast_to(self.noise, (B,)) if self.noise.ndim == 0 or self.noise.size == B else None
-        if eta is None:
-            raise ValueError(f"noise has {self.noise.size} values but the agents have batch={B}; give one per copy")
+        B, N, _ = state.x.shape
+        f = state.x.dtype
         cells = max(1, int(self.box // self.radius))
         grid = NeighbourGrid((0, 0), (self.box, self.box), self.box / cells, N, batch=B,
                              max_neighbours=self.max_neighbours, dtype=f)
-        seeds = seed_list(self._seed, self._seeds, B)
-        self._setup = dict(key=key, grid=grid, eta=np.ascontiguousarray(eta, f),
-                           rngs=[np.random.default_rng(s) for s in seeds], acc=np.zeros_like(agents.x),
-                           u=np.zeros((B, N), f), shifted=np.zeros_like(agents.x))
-        return self._setup
+        return dict(grid=grid, acc=np.zeros_like(state.x), u=np.zeros((B, N), f), shifted=np.zeros_like(state.x))
 
-    def step(self, agents: Agents, dt=1.0, steps=1) -> None:
-        """Advance 2D ``agents`` (positions in [0, box)) in place by ``steps`` steps of ``dt`` [s]."""
-        dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
-        steps = check_int("steps", steps, lo=1)
-        check_agents(agents, dim=2)
-        if np.any(agents.x < 0) or np.any(agents.x >= self.box):
-            raise ValueError(f"agents.x has positions outside the periodic box [0, {self.box:g}); wrap them "
-                             "(x % box) or use Vicsek.agents(...)")
-        s = self._prepare(agents)
+    def _advance(self, state: CrowdState, dt, steps, s) -> dict:
         from tianim.crowds._vicsek_kernels import vicsek_kernels
 
-        accumulate, update = vicsek_kernels(np.dtype(agents.x.dtype).name)
-        f = agents.x.dtype.type
+        accumulate, update = vicsek_kernels(np.dtype(state.x.dtype).name)
+        f = state.x.dtype
+        eta = np.ascontiguousarray(np.broadcast_to(self.noise, (state.batch,)), f)
         grid, sh = s["grid"], s["shifted"]
         for _ in range(steps):
-            grid.build(agents.x, check=False)
+            grid.build(state.x, check=False)
             for k, (sx, sy) in enumerate(IMAGES):
-                np.add(agents.x, np.array([sx * self.box, sy * self.box], f), out=sh)
+                np.add(state.x, np.array([sx * self.box, sy * self.box], f.type), out=sh)
                 nb = grid.query(self.radius, points=sh)
-                accumulate(nb.indices, nb.counts, agents.heading, s["acc"], int(k == 0))
-            for b, rng in enumerate(s["rngs"]):
-                s["u"][b] = rng.random(agents.n)
-            update(agents.x, agents.v, agents.heading, s["acc"], s["u"], s["eta"], self.speed, dt, self.box)
-            agents.t += dt
+                accumulate(nb.indices, nb.counts, state.heading, s["acc"], int(k == 0))
+            for b in range(state.batch):
+                with draw(state.rng, b) as rng:
+                    s["u"][b] = rng.random(state.n)
+            update(state.x, state.v, state.heading, s["acc"], s["u"], eta, self.speed, dt, self.box)
+            state.t += dt
+            state.ticks += 1
+        return {}

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim.crowds import ORCA, circle_scenario, pair_distances
+from tianim.crowds import ORCA, CrowdSolver, circle_scenario, pair_distances
 from tianim.render import Canvas2D
 
 TITLE = "pedestrians on a circle cross to their antipodes with ORCA"
@@ -32,6 +32,7 @@ def frames(width: int, height: int, n_frames: int, fps: float):
     model = ORCA(goals=goals, pref_speed=1.2, radius=RADIUS, time_horizon=2.0, max_speed=2.0, arrival_radius=0.05)
     to_goal = goals - agents.x
     agents.heading[...] = to_goal / np.linalg.norm(to_goal, axis=2, keepdims=True)  # facing their goals
+    agents, solver = model.state(agents), CrowdSolver()
     colours = hues(N)
     canvas = Canvas2D(width, height, extent=(-R - 1, R + 1, -R - 1, R + 1), background="white")
     small = min(width, height) < 200
@@ -45,11 +46,11 @@ def frames(width: int, height: int, n_frames: int, fps: float):
             canvas.discs(goals[0], RADIUS * 0.45, color="white", outline="grey", outline_width=1.0)
             canvas.discs(x, RADIUS, color=colours, outline="dark", outline_width=1.0)
             canvas.triangles(x, h, size=1.4 * RADIUS, color="white")
-            arrived = 0 if model.arrival_time is None else int(model.arrived().sum())
+            arrived = int(agents.arrived().sum())
             near = f"{closest:.2f}" if np.isfinite(closest) else "-"
             text = f"t = {agents.t[0]:4.1f} s   closest / 2r = {near}   arrived {arrived}/{N}"
             canvas.text((10, 10), text, size=14, units="px")
         yield canvas.image()
         for _ in range(STEPS_PER_FRAME):
-            model.step(agents, DT)
+            solver.step(model, agents, DT)
             closest = min(closest, float(pair_distances(agents.x, RADIUS)[0][0]) / (2 * RADIUS))

@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from tianim.crowds import Agents, Alignment, Avoid, Boids, Cohesion, Seek, Separation, Wander
+from tianim.crowds import Agents, Alignment, Avoid, Boids, Cohesion, CrowdSolver, Seek, Separation, Wander
 from tianim.physics import Ground, Sphere
 from tianim.render import Scene3D
 
@@ -25,7 +25,7 @@ LAP = 12.0  # seconds per lap of the goal
 
 
 def make_flock(seed: int = 0):
-    """(agents, model) of the demo."""
+    """(state, model) of the demo."""
     agents = Agents.random(N, (-4.0, 0.8, 1.8), (4.0, 2.8, 3.4), speed=1.5, seed=seed)  # a strip in front
     fov = 1.5 * math.pi
     model = Boids([Separation(2.5, radius=0.35, fov=fov), Alignment(1.0, radius=1.0, fov=fov),
@@ -33,7 +33,7 @@ def make_flock(seed: int = 0):
                    Avoid([*PILLARS, FLOOR, CEILING], weight=3.0, distance=0.6), Wander(0.3, 0.3)],
                   max_speed=3.0, max_force=6.0, min_speed=1.0, domain=((-6, -1, -6), (6, 5, 6)), max_neighbours=192,
                   seed=seed)
-    return agents, model
+    return model.state(agents), model
 
 
 def goal_at(t):
@@ -44,6 +44,7 @@ def goal_at(t):
 def frames(width: int, height: int, n_frames: int, fps: float, substeps: int = 2):
     """Yield (height, width, 3) uint8 frames; the flock advances 1 / fps per frame."""
     agents, model = make_flock()
+    solver = CrowdSolver()
     scene = Scene3D(width, height)
     size = 0.22 if min(width, height) >= 200 else 0.35
     scene.particles(np.array([[-3.6, 0.3, -2.6], [3.6, 3.0, 2.6]]), 0.01)  # the course, for framing
@@ -59,5 +60,5 @@ def frames(width: int, height: int, n_frames: int, fps: float, substeps: int = 2
         scene.cones(agents.x[0], agents.heading[0], length=size, color=col, segments=6)
         yield scene.render()
         for _ in range(substeps):
-            model.set_goal(goal_at(agents.t[0]))
-            model.step(agents, dt)
+            agents.goal[...] = goal_at(agents.t[0])  # a moving target: the goal lives in the state
+            solver.step(model, agents, dt)

@@ -105,7 +105,7 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), n_colliders: i
 
     @ti.func
     def collide(xi, vi, coll: ti.template(), modes: ti.template(), g_norm, h, prad):
-        """Collider response of tianim.physics.contact (restitution, Coulomb friction as an impulse,
+        """Collider response of tianim.kernels.contact (restitution, Coulomb friction as an impulse,
         e = 0 below the resting speed 2 |g| h; the position follows the friction's tangential velocity
         change over the substep), plus the modes: returns (x, v, event, hit), hit = 1
         when the particle bounced with a normal speed above the resting speed (resting contact is no

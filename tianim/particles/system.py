@@ -36,7 +36,7 @@ A step (t0, t1]
 ---------------
 1. ``substeps`` symplectic-Euler steps of h = dt (the substep; the step covers ``substeps * dt``)
    (``v += h a``, ``x += h v``) with a = gravity + forces (+ DEM contact), then the colliders, each
-   in a mode: ``"bounce"`` (restitution and Coulomb friction, as :mod:`tianim.physics.contact`),
+   in a mode: ``"bounce"`` (restitution and Coulomb friction, as :mod:`tianim.kernels.contact`),
    ``"stick"`` (the particle stops there for the rest of its life) or ``"kill"``. A particle dies
    when its age reaches its lifetime (to within one substep).
 2. With ``granular=Granular(...)``: soft-sphere contact between particles through a
