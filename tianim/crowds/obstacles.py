@@ -4,7 +4,7 @@ The shapes are the colliders of :mod:`tianim.physics` (one concept in one place)
 :class:`tianim.physics.Sphere` (a sphere in 3D, a circle in 2D) and :class:`tianim.physics.Ground`
 (a plane ``n . x = height`` in 3D, a line in 2D; agents stay on the side the normal points to),
 plus :class:`Wall`, a 2D segment of some half-thickness, and :func:`polygon`, a closed chain of walls.
-Their signed distance and outward normal come from :func:`tianim.physics.contact.contact_parts`
+Their signed distance and outward normal come from :func:`tianim.kernels.contact.contact_parts`
 (spheres, planes) and :func:`wall_surface` (segments); restitution and friction are ignored.
 """
 
