@@ -6,6 +6,7 @@ import json
 from tianim.bench import backends
 
 
+@pytest.mark.slow
 def test_runs_a_bench_on_each_installed_package(tmp_path, capsys):
     out = tmp_path / "b.json"
     assert backends.main(["rope", "--quick", "--json", str(out)]) == 0

@@ -7,6 +7,7 @@ from tianim import _ti
 from tianim.bench import render
 
 
+@pytest.mark.slow
 def test_quick_render_bench_reports_every_key(tmp_path, capsys):
     out = tmp_path / "r.json"
     assert render.main(["--quick", "--json", str(out)]) == 0

@@ -164,6 +164,7 @@ def test_pedestrians_batch_equals_separate_runs_bit_for_bit(model_cls):
         assert np.array_equal(agents.x[b], a1.x[0]) and np.array_equal(agents.v[b], a1.v[0])
 
 
+@pytest.mark.slow
 def test_orca_copy_kernel_equals_agent_kernel_and_any_chunking_bit_for_bit():
     """The copy-parallel kernel (small crowds, all steps in one launch) and the agent-parallel one
     (2 unrolled steps per launch here, then single steps) give the same bits, for 9 steps in one call

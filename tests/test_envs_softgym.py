@@ -329,6 +329,7 @@ def test_lifecycle_errors(env_id):
         venv.step(np.zeros((3, 8), np.float32))
 
 
+@pytest.mark.slow
 def test_env_bench_summary_keys_at_a_tiny_size(tmp_path):
     import json
 

@@ -287,6 +287,7 @@ def test_finite_actions_outside_the_box_are_clipped_in_float64_first():
 
 
 # ------------------------------------------------------------------ the per-N bench
+@pytest.mark.slow
 def test_env_bench_per_n_profile_keys_at_a_tiny_size(tmp_path):
     """``--only-vec --quick``: every vector env of VEC_PROFILE at N = 1, 2 (copy 0 checked equal to a
     single env before timing); the fraction is the ratio of the two rates it reports."""

@@ -24,6 +24,7 @@ def test_numpy_reference_agrees_with_tianim_through_ground_bounces():
     assert np.all(xr[:, 1] >= 0)
 
 
+@pytest.mark.slow
 def test_quick_bench_runs_its_checks_and_writes_the_summary(tmp_path):
     out = tmp_path / "p.json"
     assert bench.main(["--quick", "--json", str(out)]) == 0

@@ -35,6 +35,7 @@ def test_batch_equals_separate_runs_bit_for_bit(method):
         assert np.array_equal(s.x[0], batch.x[b]) and np.array_equal(s.v[0], batch.v[b])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", tp.EXPLICIT_METHODS)
 def test_layouts_are_bit_identical(method):
     """The serial and frame layouts loop over substeps at run time; the substep layout runs a fixed number

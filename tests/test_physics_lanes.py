@@ -38,6 +38,7 @@ def lanes_mode(request):
     return request.param
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("scene", sorted(SCENES))
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_lanes_equal_the_substep_layout_bit_for_bit(scene, dtype, lanes_mode):
@@ -87,6 +88,7 @@ def test_lanes_refused_where_it_cannot_run():
     assert np.array_equal(s.x, before)
 
 
+@pytest.mark.slow
 def test_pool_growth_keeps_results(lanes_mode):
     model = tp.cloth(16, 16)
     old = lanes.MIN_CAPACITY

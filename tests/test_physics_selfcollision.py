@@ -130,6 +130,7 @@ def test_a_batch_rebuilds_only_its_stale_copies():
         assert np.array_equal(s.x[0], batch.x[k]) and np.array_equal(s.v[0], batch.v[k]), k
 
 
+@pytest.mark.slow
 def test_batch_equals_separate_runs_with_every_feature_on():
     model, _ = drop_scene()
     model = tp.cloth(N, N, size=(0.3, 0.3), total_mass=0.05, stiffness=(100.0, 30.0, 3.0), pins="none", plane="xy",
@@ -281,6 +282,7 @@ def test_bench_scene_agrees_at_a_tiny_size():
     assert row["selfcollision_cost_ratio"] > 0 and row["rebuilds_per_call"] >= 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("iterations,cap,per_launch", [(1, None, 1), (2, 0.5, 4), (3, None, 1)])
 def test_fused_symplectic_contact_launch_equals_the_two_launches(iterations, cap, per_launch):
     """Symplectic Euler with self-collision runs its substeps inside the contact launch (``per_launch`` of
@@ -310,6 +312,7 @@ def test_fused_symplectic_contact_launch_equals_the_two_launches(iterations, cap
     assert np.array_equal(out[True][0], out[False][0]) and np.array_equal(out[True][1], out[False][1])
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method, everything", [("symplectic_euler", False), ("verlet", True)])
 def test_serial_and_parallel_passes_are_bit_identical(method, everything):
     """The passes' Jacobi sweeps are one runtime loop on serial scenes (layout "serial") and one unrolled

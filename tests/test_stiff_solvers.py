@@ -173,6 +173,7 @@ def test_xpbd_large_stiff_grid_stays_bounded_and_converges_with_substeps():
     assert tp.max_strain(model, more)[0] < 0.7 * strains[-1]
 
 
+@pytest.mark.slow
 def test_xpbd_layouts_bit_identical():
     model = tp.cloth(6, 5, stiffness=(5e3, 2e3, 2e2), damping=(0.1, 0.1, 0.1), colliders=[tp.Ground(height=0.8)])
     a, b = model.state(batch=2), model.state(batch=2)
