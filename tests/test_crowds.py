@@ -5,7 +5,6 @@ import textwrap
 
 import numpy as np
 import pytest
-from _threads import digests_by_thread_count
 
 from tianim.crowds import (Agents, Alignment, Avoid, Boids, Cohesion, CrowdSolver, Seek, Separation, Vicsek, Wall,
                            Wander, density_speed, pair_distances, polarisation, polygon, time_to_goal)
@@ -212,10 +211,6 @@ _THREAD_SCRIPT = textwrap.dedent("""
 """)
 
 
-def test_bit_identical_with_one_and_two_threads():
-    digests = digests_by_thread_count(_THREAD_SCRIPT)
-    assert digests[0] == digests[1]
-
 
 # --- bad input ----------------------------------------------------------------------------
 
@@ -292,3 +287,7 @@ def test_boids_overflow_raise_leaves_the_state_as_it_was_and_report_counts():
     assert all(np.array_equal(before[k], getattr(s, k), equal_nan=True) for k in s.ARRAYS)
     stats = S.step(Boids(rules, max_neighbours=4, on_overflow="report"), s, 0.05, 1)
     assert stats.neighbour_overflow.tolist() == [30, 30]
+
+
+#: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
+DETERMINISM = {"crowds: boids, Vicsek": _THREAD_SCRIPT}

@@ -5,7 +5,6 @@ import textwrap
 
 import numpy as np
 import pytest
-from _threads import digests_by_thread_count
 
 from tianim.crowds import ORCA, Agents, CrowdSolver, SocialForce, Wall, circle_scenario, pair_distances, time_to_goal
 from tianim.physics import Sphere
@@ -231,10 +230,6 @@ _THREAD_SCRIPT = textwrap.dedent("""
 """)
 
 
-def test_pedestrians_bit_identical_with_one_and_two_threads():
-    digests = digests_by_thread_count(_THREAD_SCRIPT)
-    assert digests[0] == digests[1]
-
 
 # --- bad input ----------------------------------------------------------------------------
 
@@ -280,3 +275,7 @@ def test_bad_step_raises_before_changing_anything(model_cls, call, exc, match):
     model = model_cls(goals=np.ones((3, 2)))
     with pytest.raises(exc, match=match):
         call(model)
+
+
+#: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
+DETERMINISM = {"crowds: ORCA (both kernels), social force": _THREAD_SCRIPT}

@@ -15,7 +15,6 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import envs  # noqa: F401
-from _threads import digests_by_thread_count
 
 IDS = ("tianim/ClothFold-v1", "tianim/ClothFlatten-v0", "tianim/RopeFlatten-v0")
 R_CLOTH = 0.00625  # SoftGym's cloth particle radius (= spacing)
@@ -247,13 +246,11 @@ print(h.hexdigest())
 """
 
 
-@pytest.mark.parametrize("env_id", ["tianim/ClothFold-v1", "tianim/RopeFlatten-v0"])  # XPBD on a grid, on edges
-def test_same_seed_same_episode_with_1_and_2_threads(env_id):
-    one, two = digests_by_thread_count(_DIGEST.format(env_id=env_id))
-    assert one == two
+@pytest.mark.parametrize("env_id", ["tianim/ClothFold-v1", "tianim/RopeFlatten-v0"])
+def test_the_seed_matters(env_id):
     env = gym.make(env_id)
     first = env.reset(seed=9)[0]
-    assert not np.array_equal(first, env.reset(seed=10)[0])  # the seed matters
+    assert not np.array_equal(first, env.reset(seed=10)[0])
 
 
 # ------------------------------------------------------------------ scripted baselines
@@ -407,3 +404,7 @@ def test_energy_the_solver_creates_in_one_copy_ends_that_copy_alone(env_id):
     assert np.array_equal(obs_d[[0, 2]], obs_c[[0, 2]]) and np.array_equal(r_d[[0, 2]], r_c[[0, 2]])
     s_d, s_c = sim.state, calm.unwrapped._sim.state
     assert np.array_equal(s_d.x[[0, 2]], s_c.x[[0, 2]]) and np.array_equal(s_d.v[[0, 2]], s_c.v[[0, 2]])
+
+
+#: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
+DETERMINISM = {"envs: ClothFold-v1 (XPBD on a grid)": _DIGEST.format(env_id="tianim/ClothFold-v1"), "envs: RopeFlatten-v0 (XPBD on edges)": _DIGEST.format(env_id="tianim/RopeFlatten-v0")}

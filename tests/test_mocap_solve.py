@@ -124,10 +124,9 @@ def test_solve_bad_arguments_name_the_argument(capture):
 
 
 def test_fk_and_solve_are_bit_identical_across_threads_and_batching():
-    """FK of all frames at once equals FK frame by frame, bit for bit; the solve gives the same bits under
-    1 and 2 BLAS/Taichi threads (the solver's reductions run in a fixed order: einsum, not threaded BLAS)."""
-    from _threads import digests_by_thread_count
-
+    """FK of all frames at once equals FK frame by frame, bit for bit. (The solve gives the same bits for any
+    BLAS/Taichi thread count: its reductions run in a fixed order, einsum, not threaded BLAS; checked by
+    tests/test_determinism.py with _SOLVE_SCRIPT below.)"""
     from tianim.mocap import random_motion, random_skeleton
 
     sk = random_skeleton(12, seed=2, six_channel=0.3)
@@ -136,7 +135,9 @@ def test_fk_and_solve_are_bit_identical_across_threads_and_batching():
     single = [sk.fk(m[i:i + 1]) for i in range(len(m))]
     assert np.array_equal(pos, np.concatenate([s[0] for s in single]))
     assert np.array_equal(rot, np.concatenate([s[1] for s in single]))
-    script = """
+
+
+_SOLVE_SCRIPT = """
 import os
 os.environ["OPENBLAS_NUM_THREADS"] = os.environ["OMP_NUM_THREADS"] = os.environ["TIANIM_NUM_THREADS"]
 import hashlib
@@ -148,5 +149,7 @@ x = virtual_markers(sk, motion, j, l) + np.random.default_rng(0).normal(0, 0.002
 x[5:9, 3] = np.nan
 print(hashlib.sha256(solve_markers(sk, x, j, l, block=8).motion.tobytes()).hexdigest())
 """
-    one, two = digests_by_thread_count(script)
-    assert one == two
+
+
+#: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
+DETERMINISM = {"mocap: marker solve": _SOLVE_SCRIPT}

@@ -9,7 +9,6 @@ import pytest
 from tianim.particles import (BoxEmitter, CurlNoise, DiscEmitter, Drag, Granular, ParticleSystem, PointEmitter,
                               SphereEmitter, Vortex, Attractor, curl_noise)
 from tianim.physics import Ground
-from _threads import digests_by_thread_count
 
 
 def one_particle(v0, forces=(), colliders=(), gravity=(0, -9.81, 0), life=100.0):
@@ -175,10 +174,6 @@ _THREAD_SCRIPT = textwrap.dedent("""
 """)
 
 
-def test_bit_identical_with_one_and_two_threads():
-    digests = digests_by_thread_count(_THREAD_SCRIPT)
-    assert digests[0] == digests[1]
-
 
 def _pair(e):
     g = Granular(radius=0.05, mass=0.1, stiffness=1e3, restitution=e, friction=0.0)
@@ -282,3 +277,7 @@ def test_bad_step_changes_nothing():
         with pytest.raises(ValueError):
             ps.step(dt, sub)
     assert np.array_equal(ps.x, x) and np.array_equal(ps.t, t)
+
+
+#: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
+DETERMINISM = {"particles": _THREAD_SCRIPT}

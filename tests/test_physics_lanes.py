@@ -10,7 +10,6 @@ import tianim.physics as tp
 from tianim.physics import lanes
 from tianim.physics.reference import NumpyModel
 from tianim.runtime import compiled_kernel_count
-from _threads import digests_by_thread_count
 
 
 def loaded(model, batch, seed, dtype=np.float32):
@@ -125,6 +124,5 @@ _THREAD_SCRIPT = textwrap.dedent("""
 """)
 
 
-def test_lanes_bit_identical_with_one_and_two_threads():
-    digests = digests_by_thread_count(_THREAD_SCRIPT)
-    assert digests[0] == digests[1]
+#: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
+DETERMINISM = {"physics: lanes": _THREAD_SCRIPT}

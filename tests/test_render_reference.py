@@ -14,7 +14,6 @@ import pytest
 
 from tianim.render import Camera, Scene3D
 from tianim.render._shade3d import HEMI_MEAN
-from tests._threads import digests_by_thread_count
 
 W, H = 64, 48
 CAM = Camera(eye=(0.0, 0.0, 5.0), target=(0.0, 0.0, 0.0), fov=35.0)
@@ -204,6 +203,5 @@ print(h.hexdigest())
 """
 
 
-def test_images_do_not_depend_on_the_thread_count():
-    digests = digests_by_thread_count(_DETERMINISM_SCRIPT, threads=("1", "2", "3"))
-    assert digests[0] == digests[1] == digests[2]
+#: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
+DETERMINISM = {"render: Scene3D images": _DETERMINISM_SCRIPT}

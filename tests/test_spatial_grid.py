@@ -7,7 +7,6 @@ import pytest
 from scipy.spatial import cKDTree
 
 from tianim.spatial import NeighbourGrid, NeighbourOverflowError, neighbour_lists
-from _threads import digests_by_thread_count
 
 
 def kdtree_sets(x, r, queries=None, exclude_self=True):
@@ -123,10 +122,6 @@ _THREAD_SCRIPT = textwrap.dedent("""
                          + grid.order.tobytes() + grid.start.tobytes()).hexdigest())
 """)
 
-
-def test_bit_identical_with_one_and_two_threads():
-    digests = digests_by_thread_count(_THREAD_SCRIPT)
-    assert digests[0] == digests[1]
 
 
 def test_overflow_is_reported_never_silent():
@@ -348,18 +343,6 @@ def test_nearest_query_agrees_with_ckdtree_and_cell_size_does_not_matter():
     assert rows[0] == rows[1] == rows[2]
 
 
-def test_nearest_query_bit_identical_with_one_and_two_threads():
-    code = textwrap.dedent("""
-        import numpy as np
-        from tianim.spatial import NeighbourGrid
-        x = np.random.default_rng(2).random((2, 2000, 3)).astype(np.float32)
-        idx, d2, c = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.05, 2000, batch=2).build(x).query_nearest(12, 0.1)
-        out = [idx[b, i, :c[b, i]].tobytes() + d2[b, i, :c[b, i]].tobytes() for b in range(2) for i in range(2000)]
-        print(__import__("hashlib").sha256(b"".join(out) + c.tobytes()).hexdigest())
-    """)
-    one, two = digests_by_thread_count(code)
-    assert one == two
-
 
 def test_nearest_query_bad_input():
     grid = NeighbourGrid((0, 0), (1, 1), 0.1, 10, dtype=np.float64)
@@ -376,3 +359,17 @@ def test_nearest_query_bad_input():
         grid.query_nearest(3, 0.1, points=np.zeros((1, 4, 3)))
     with pytest.raises(TypeError, match="float64"):
         grid.query_nearest(3, 0.1, points=np.zeros((1, 4, 2), np.float32))
+
+
+_NEAREST_SCRIPT = textwrap.dedent("""
+        import numpy as np
+        from tianim.spatial import NeighbourGrid
+        x = np.random.default_rng(2).random((2, 2000, 3)).astype(np.float32)
+        idx, d2, c = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.05, 2000, batch=2).build(x).query_nearest(12, 0.1)
+        out = [idx[b, i, :c[b, i]].tobytes() + d2[b, i, :c[b, i]].tobytes() for b in range(2) for i in range(2000)]
+        print(__import__("hashlib").sha256(b"".join(out) + c.tobytes()).hexdigest())
+    """)
+
+
+#: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
+DETERMINISM = {"spatial: grid query": _THREAD_SCRIPT, "spatial: nearest-k query": _NEAREST_SCRIPT}
