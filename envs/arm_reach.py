@@ -60,6 +60,11 @@ floats (no kernel launch); ``gym.make_vec`` steps every copy in one Taichi
 kernel launch; both perform identical float64 operations, so observations agree
 bit for bit between a single env and copy ``k`` of a batch seeded alike.
 
+## Version History
+
+* v0 (this module, frozen): tianim's own arm. ArmReach-v1 (:mod:`envs.arm_reach_v1`) is
+  Reacher-v5's interface, ArmReach-v2 (:mod:`envs.arm_reach_v2`) its interface and dynamics.
+
 ## Arguments
 
 ``gym.make("tianim/ArmReach-v0", n_links=2, render_mode=None)``;

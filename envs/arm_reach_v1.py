@@ -8,7 +8,7 @@ tianim: a planar arm of ``n_links`` revolute joints (default 2, as Reacher; at m
 Reacher-v5 (observation order, target distribution, starting state drawn draw for
 draw, horizon in steps, reward and ``info`` keys); the dynamics are tianim's
 (:class:`~tianim.kinematics.PlanarChain` stepped by :mod:`tianim.kinematics.arm`),
-not MuJoCo's (see *Differences from Reacher-v5*). ArmReach-v0 is unchanged.
+not MuJoCo's (see *Differences from Reacher-v5*; ArmReach-v2 has Reacher's dynamics). ArmReach-v0 is unchanged.
 
 ## Action space
 
@@ -110,6 +110,13 @@ single env seeded with ``s + k`` bit for bit.
   ``rgb_array`` only, tianim's 2-D frame (Reacher: MuJoCo's 3-D views). No
   ``xml_file``, ``frame_skip`` or camera arguments; no ``reward_threshold``.
 * n links (n != 2) is tianim's extension; Reacher has two.
+
+## Version History
+
+* v2 (:mod:`envs.arm_reach_v2`): Reacher-v5's dynamics too (armature, damping, gear, soft elbow
+  range, RK4 at 0.01 s x 2); trajectories match MuJoCo's.
+* v1 (this module, frozen): Reacher-v5's interface on tianim's bare rigid chain.
+* v0 (:mod:`envs.arm_reach`, frozen): tianim's own 1 m arm.
 
 ## Arguments
 
@@ -228,21 +235,25 @@ class ArmReachV1Env(gym.Env):
     """Single ArmReach-v1 environment (see the module docstring)."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / DT)}
+    # the version's physics (ArmReach-v2 overrides them): arm, integrator, substep [s], substeps
+    make_arm = staticmethod(make_arm)
+    observation_space_for = staticmethod(observation_space)
+    METHOD, DT, SUBSTEPS = "semi_implicit_euler", DT, SUBSTEPS
 
     def __init__(self, n_links: int = 2, reward_dist_weight: float = 1.0, reward_control_weight: float = 1.0,
                  render_mode: str | None = None):
-        self.arm = make_arm(n_links)
+        self.arm = self.make_arm(n_links)
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode={render_mode!r}; choose one of {self.metadata['render_modes']} or None")
         self.render_mode = render_mode
         self.n_links = n = self.arm.n
         self.reward_dist_weight = _check_weight("reward_dist_weight", reward_dist_weight)
         self.reward_control_weight = _check_weight("reward_control_weight", reward_control_weight)
-        self._solver = tka.ArmSolver(path="scalar")   # launch-free: plain floats
+        self._solver = tka.ArmSolver(path="scalar", method=self.METHOD)   # launch-free: plain floats
         self.state = tka.ArmState(self.arm, 1)          # the arm's q, qd, tau, t (one copy)
         self._max_torque = self.arm.max_torque
         self.action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
-        self.observation_space = observation_space(n)
+        self.observation_space = self.observation_space_for(n)
         self._target = None    # (x, y) of this episode's target [m]
 
     def reset(self, *, seed=None, options=None):
@@ -270,7 +281,7 @@ class ArmReachV1Env(gym.Env):
             raise RuntimeError("call reset() before step()")
         a64 = check_action(action, self.action_space.shape).astype(np.float64)
         np.multiply(a64, self._max_torque, out=self.state.tau[0])
-        self._solver.step(self.arm, self.state, DT, SUBSTEPS)
+        self._solver.step(self.arm, self.state, self.DT, self.SUBSTEPS)
         obs, dist = self._observe()
         a = a64.tolist()
         ctrl = a[0] * a[0]
@@ -300,11 +311,14 @@ class ArmReachV1VectorEnv(BatchedEnv):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / DT),
                 "autoreset_mode": AutoresetMode.NEXT_STEP}
+    make_arm = staticmethod(make_arm)
+    observation_space_for = staticmethod(observation_space)
+    METHOD, DT, SUBSTEPS = "semi_implicit_euler", DT, SUBSTEPS
 
     def __init__(self, num_envs: int = 1, n_links: int = 2, reward_dist_weight: float = 1.0,
                  reward_control_weight: float = 1.0, max_episode_steps: int = MAX_EPISODE_STEPS,
                  render_mode: str | None = None, autoreset_mode=AutoresetMode.NEXT_STEP):
-        self.arm = make_arm(n_links)
+        self.arm = self.make_arm(n_links)
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode={render_mode!r}; choose 'rgb_array' or None")
         super().__init__(num_envs, max_episode_steps, autoreset_mode)
@@ -315,9 +329,9 @@ class ArmReachV1VectorEnv(BatchedEnv):
         self.n_links = n
         self.single_action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
         self.action_space = batch_space(self.single_action_space, b)
-        self.single_observation_space = observation_space(n)
+        self.single_observation_space = self.observation_space_for(n)
         self.observation_space = batch_space(self.single_observation_space, b)
-        self._solver = tka.ArmSolver()              # "auto": one kernel launch for more than a few copies
+        self._solver = tka.ArmSolver(method=self.METHOD)   # "auto": one kernel launch for more than a few copies
         self.state = tka.ArmState(self.arm, b)      # q, qd, tau, t, cos_q, sin_q, tip of every copy
         self.target = np.zeros((b, 2))
         self._step_info = {}
@@ -333,7 +347,7 @@ class ArmReachV1VectorEnv(BatchedEnv):
     def _launch(self, tau, active):
         """Step the copies with ``active`` (B,) != 0 under torques ``tau`` (B, n) [N m]."""
         self.state.tau[...] = tau
-        self._solver.step(self.arm, self.state, DT, SUBSTEPS, active)
+        self._solver.step(self.arm, self.state, self.DT, self.SUBSTEPS, active)
 
     def _obs(self):
         st = self.state

@@ -161,10 +161,13 @@ def test_sb3_checker_is_clean():
 
 
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
-def test_batch_copy_k_equals_single_env_seed_plus_k(mode):
-    n, horizon, seed = 4, 6, 21
-    venv = gym.make_vec(ID, num_envs=n, max_episode_steps=horizon, autoreset_mode=mode)
-    singles = [gym.make(ID, max_episode_steps=horizon) for _ in range(n)]
+@pytest.mark.parametrize("env_id", [ID, "tianim/ArmReach-v2"])
+def test_batch_copy_k_equals_single_env_seed_plus_k(mode, env_id):
+    """Copy k of make_vec (6 copies: the kernel path) equals a single env (the launch-free path) seeded seed + k."""
+    n, horizon, seed = 6, 6, 21
+    venv = gym.make_vec(env_id, num_envs=n, max_episode_steps=horizon, autoreset_mode=mode)
+    assert venv.unwrapped._solver.resolve_path(n) == "kernel"
+    singles = [gym.make(env_id, max_episode_steps=horizon) for _ in range(n)]
     vobs, _ = venv.reset(seed=seed)
     obs = [s.reset(seed=seed + k)[0] for k, s in enumerate(singles)]
     assert np.array_equal(vobs, np.array(obs))
@@ -199,7 +202,7 @@ def test_batch_copy_k_equals_single_env_seed_plus_k(mode):
             assert np.array_equal(vinfo["final_info"]["_reward_dist"], ended)
 
 
-@pytest.mark.parametrize("env_id", [ID, "tianim/ArmReach-v0"])
+@pytest.mark.parametrize("env_id", [ID, "tianim/ArmReach-v0", "tianim/ArmReach-v2"])
 def test_batch_steps_in_one_kernel_launch(env_id):
     """make_vec steps every copy through one ArmSolver on the kernel path (one launch per step)
     and the single env through the launch-free scalar path."""
@@ -210,8 +213,9 @@ def test_batch_steps_in_one_kernel_launch(env_id):
     venv.reset(seed=0)
     t0 = venv.unwrapped.state.t.copy()
     venv.step(np.zeros((64, venv.unwrapped.n_links), np.float32))
-    # frozen v0/v1 behaviour: each env step integrates SUBSTEPS substeps of DT (0.04 s, not 0.02 s)
-    np.testing.assert_allclose(venv.unwrapped.state.t - t0, v1.DT * v1.SUBSTEPS, rtol=1e-12)
+    # frozen v0/v1 behaviour: each env step integrates SUBSTEPS substeps of DT (0.04 s, not 0.02 s); v2: 0.02 s
+    expected = 0.02 if env_id.endswith("v2") else v1.DT * v1.SUBSTEPS
+    np.testing.assert_allclose(venv.unwrapped.state.t - t0, expected, rtol=1e-12)
 
 
 def test_v0_unchanged():
