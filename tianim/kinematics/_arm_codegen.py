@@ -7,12 +7,17 @@ is recorded, in order, as one line of Python, and the lines are compiled into a
 function of plain local floats. Because the recorded operations are the
 reference function's own, in its own order (operations on two constants are
 folded at trace time with the same IEEE arithmetic), the compiled function
-returns bit-identical results: the tests check it.
+returns bit-identical results: the tests check it. Two parts are written out as text
+rather than traced, because they branch on the state: the integrator's update (clamps,
+hard stops, the RK4 combination: :func:`._arm_scalar.step` / :func:`~._arm_scalar.step_rk4`)
+and the soft-limit branches of :func:`._arm_scalar._soft_limits` (their linear algebra, the
+column of ``M^-1``, is traced).
 
 Why ``exec``: this is the "generated from the one source" option for the single
 environment's fast path, not a second copy of the dynamics. Measured on this
-machine, two links, two substeps: 11.5 us per call interpreted against 1.4 us
-compiled (ArmReach-v0 steps in ~10 us in all); seven links: 46 against 22 us.
+machine (loaded), two links, two semi-implicit Euler substeps: ~5.5 us per call
+generated (the earlier fully inlined form: ~4.5 us); Reacher-v5's RK4 with its soft
+elbow limit: the single ArmReach-v2 step ~90 us against ~300 us interpreted.
 The generated source is kept on the function (``fn.source``) for inspection;
 its only inputs are floats from a validated chain (``repr`` of finite floats).
 """
@@ -96,54 +101,6 @@ class _Tape:
         return self._fn("sqrt", x)
 
 
-def compile_stepper(params: tuple, dt: float, substeps: int):
-    """A function ``f(q, qd, tau) -> (q, qd)`` (lists of n floats) equal to
-    ``_arm_scalar.step(params, q, qd, tau, dt, substeps)`` bit for bit, ~8x faster for
-    two links. Clamps at an infinite limit are left out (they never act)."""
-    n, lower, upper, tmax, vmax = params[0], params[5], params[6], params[8], params[9]
-    if params[12] is not None:
-        raise ValueError("compile_stepper traces hard-limit chains only; soft limits branch on the state "
-                         "(ArmSolver steps them with the interpreted reference)")
-    tape = _Tape()
-    qs = [_Sym(f"q{i}", tape) for i in range(n)]
-    vs = [_Sym(f"v{i}", tape) for i in range(n)]
-    us = [_Sym(f"u{i}", tape) for i in range(n)]
-    acc = scalar.accelerations(params, qs, vs, us, ops=tape)
-    body = list(tape.lines)
-    for i in range(n):
-        body.append(f"w = v{i} + {dt!r} * {_src(acc[i])}")
-        if math.isfinite(vmax):
-            body.append(f"if w > {vmax!r}: w = {vmax!r}")
-            body.append(f"if w < {-vmax!r}: w = {-vmax!r}")
-        body.append(f"p = q{i} + {dt!r} * w")
-        if math.isfinite(lower[i]):
-            body.append(f"if p < {lower[i]!r}:\n            p = {lower[i]!r}\n            if w < 0.0: w = 0.0")
-        if math.isfinite(upper[i]):
-            body.append(f"if p > {upper[i]!r}:\n            p = {upper[i]!r}\n            if w > 0.0: w = 0.0")
-        body.append(f"n_q{i} = p; n_v{i} = w")
-    # Write back after all joints are updated (the reference updates joint i after using acc[i] only).
-    body.append(", ".join(f"q{i}" for i in range(n)) + ", = " + ", ".join(f"n_q{i}" for i in range(n)) + ",")
-    body.append(", ".join(f"v{i}" for i in range(n)) + ", = " + ", ".join(f"n_v{i}" for i in range(n)) + ",")
-    args = ", ".join(f"q{i}" for i in range(n))
-    clamps = "".join(f"    if u{i} > {tmax[i]!r}: u{i} = {tmax[i]!r}\n    if u{i} < {-tmax[i]!r}: u{i} = {-tmax[i]!r}\n"
-                     for i in range(n) if math.isfinite(tmax[i]))
-    src = (
-        "def _stepper(q, qd, tau):\n"
-        f"    {args}, = q\n"
-        f"    {', '.join(f'v{i}' for i in range(n))}, = qd\n"
-        f"    {', '.join(f'u{i}' for i in range(n))}, = tau\n"
-        + clamps
-        + f"    for _ in range({int(substeps)}):\n"
-        + "".join(f"        {line}\n" for line in body)
-        + f"    return [{args}], [{', '.join(f'v{i}' for i in range(n))}]\n"
-    )
-    namespace = {"sin": math.sin, "cos": math.cos, "sqrt": math.sqrt}
-    exec(compile(src, f"<tianim.kinematics.arm stepper n={n}>", "exec"), namespace)
-    fn = namespace["_stepper"]
-    fn.source = src
-    return fn
-
-
 def _acc_source(params: tuple, dt: float) -> str:
     """Source of ``_acc(q0.., v0.., u0..) -> (a0, ..)``: :func:`._arm_scalar.accelerations` as
     straight-line code (the factor, the solve and, for soft limits, the column of ``M^-1`` of each
@@ -193,10 +150,12 @@ def _acc_source(params: tuple, dt: float) -> str:
             + f"    return {', '.join(f'a{k}' for k in range(n))},\n")
 
 
-def compile_stepper_general(params: tuple, dt: float, substeps: int, method: str):
-    """Like :func:`compile_stepper` for every chain (armature, soft limits) and both methods
-    (``"semi_implicit_euler"``: :func:`._arm_scalar.step`; ``"rk4"``: :func:`._arm_scalar.step_rk4`),
-    bit for bit: the accelerations are one generated function ``_acc`` called per stage."""
+def compile_stepper(params: tuple, dt: float, substeps: int, method: str = "semi_implicit_euler"):
+    """A function ``f(q, qd, tau) -> (q, qd)`` (lists of n floats) equal bit for bit to
+    ``_arm_scalar.step`` (``method="semi_implicit_euler"``) or ``_arm_scalar.step_rk4`` (``"rk4"``)
+    with ``params, dt, substeps``, for every chain (gravity, armature, hard or soft limits): the
+    accelerations are one generated function ``_acc`` called per stage; clamps at an infinite
+    limit are left out (they never act). ~2-5x faster than the interpreted reference."""
     n, lower, upper, tmax, vmax, soft = params[0], params[5], params[6], params[8], params[9], params[12]
     qn = [f"q{i}" for i in range(n)]
     vn = [f"v{i}" for i in range(n)]
