@@ -23,8 +23,8 @@ infinite actions raise ``ValueError``.
 
 ``Box(float32, (3 n + 4,))``, Reacher-v5's order: cos q (n), sin q (n), target x, y, joint
 rates (n), fingertip minus target x, y. Bounds: -1..1, -R..R (R = reach, 0.21 m for two links),
-unbounded rates (as Reacher: no speed limit; 200 N m against 1 N m s/rad damping gives up to
-about 200 rad/s), -2R..2R.
+-250..250 rad/s (no speed limit, as Reacher: 200 N m against 1 N m s/rad damping caps the rates
+near 200 rad/s; Reacher declares infinite bounds, which Gymnasium's checker warns about), -2R..2R.
 
 ## Rewards
 
@@ -64,8 +64,7 @@ operations, so copy ``k`` of a batch seeded ``s`` equals a single env seeded ``s
   accelerations; MuJoCo solves them jointly (Reacher has one limited joint: exact).
 * Reward on out-of-range actions: Reacher-v5 charges the raw action (MuJoCo clamps only the
   control); tianim clips first and charges the clipped action.
-* Spaces: float32 (Reacher: float64); finite bounds except the joint rates (Reacher: all
-  infinite). Render: ``rgb_array`` only, tianim's 2-D frame. No ``xml_file``, ``frame_skip`` or
+* Spaces: float32 (Reacher: float64); finite bounds (Reacher: infinite). Render: ``rgb_array`` only, tianim's 2-D frame. No ``xml_file``, ``frame_skip`` or
   camera arguments; no ``reward_threshold``. n != 2 links is tianim's extension (each extra
   link a 0.1 m capsule with Reacher's joint).
 
@@ -105,6 +104,7 @@ DAMPING = 1.0      # N m s/rad, <joint damping="1"/>
 GEAR = 200.0       # N m per unit ctrl, <motor gear="200.0" ctrlrange="-1.0 1.0"/>
 JOINT_LIMIT = 3.0  # rad, joint1 range="-3.0 3.0" (soft)
 SOLREF = (0.02, 1.0)   # MuJoCo's default joint solref (reacher.xml sets none)
+MAX_RATE = 250.0   # rad/s, the declared bound of the joint rates (200 N m / 1 N m s/rad caps them near 200)
 
 
 def make_arm(n_links: int) -> PlanarChain:
@@ -126,7 +126,7 @@ def _arm(n: int) -> PlanarChain:
 
 def observation_space(n: int) -> spaces.Box:
     r = v1.reach(n)
-    high = np.concatenate([np.ones(2 * n), np.full(2, r), np.full(n, np.inf), np.full(2, 2.0 * r)])
+    high = np.concatenate([np.ones(2 * n), np.full(2, r), np.full(n, MAX_RATE), np.full(2, 2.0 * r)])
     return spaces.Box(-high.astype(np.float32), high.astype(np.float32), dtype=np.float32)
 
 
