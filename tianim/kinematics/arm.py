@@ -205,6 +205,7 @@ class ArmSolver:
         self.scalar_max_batch = check_positive_int("scalar_max_batch", scalar_max_batch, lo=0)
         self._steppers = {}   # (id of chain, dt, substeps) -> (chain, dt, substeps, compiled function)
         self._work = {}       # (B, n) -> pre-step copies of q, qd and the active flags (kernel path)
+        self._kernels = {}    # id of chain -> (chain, its kernel variant)
         self._last_checked = None   # (model, state, its arrays) last validated, and their ids
         self._last_ids = None
 
@@ -385,12 +386,17 @@ class ArmSolver:
 
     def _kernel(self, model: PlanarChain):
         """The stepping kernel's variant for ``model`` and this solver's method (cached factory)."""
+        hit = self._kernels.get(id(model))
+        if hit is not None and hit[0] is model:
+            return hit[1]
         from tianim.kinematics._arm_kernel import arm_step_kernel
 
         n, p = model.n, _arm_scalar.packed(model)
-        return arm_step_kernel(n, bool(np.any(p[n * n:n * n + n] != 0.0)), bool(np.any(p[n * n + n:n * n + 2 * n] != 0.0)),
+        kernel = arm_step_kernel(n, bool(np.any(p[n * n:n * n + n] != 0.0)), bool(np.any(p[n * n + n:n * n + 2 * n] != 0.0)),
                                bool(np.any(model.armature != 0.0)), model.limit_solref is not None,
                                self.method == "rk4")
+        self._kernels[id(model)] = (model, kernel)
+        return kernel
 
     def observe(self, model: PlanarChain, state: ArmState) -> None:
         """Refresh ``state.cos_q``, ``state.sin_q`` and ``state.tip`` from ``state.q`` without stepping
