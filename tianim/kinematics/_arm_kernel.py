@@ -274,29 +274,28 @@ def _arm_step_kernel(n: int, gy_on: bool, gx_on: bool, arm_on: bool, soft_on: bo
                             qv[i] = pos
                             vv[i] = v
                     else:
+                        # the four stages in a runtime loop (one inlined copy of the accelerations,
+                        # a quarter of the code to compile); the operations are step_rk4's
                         half = 0.5 * dt
-                        a1 = accelerations(c, gy, gx, damp, ad, ao, sp, invw, lower, upper, qv, vv, tv, dt)
-                        q2 = ti.Vector.zero(f64, n)
-                        v2 = ti.Vector.zero(f64, n)
+                        kv = ti.Matrix.zero(f64, 4, n)   # stage rates: qd, v2, v3, v4
+                        ka = ti.Matrix.zero(f64, 4, n)   # stage accelerations: a1 .. a4
+                        qs = qv
+                        vs = vv
+                        for stage in range(4):
+                            a = accelerations(c, gy, gx, damp, ad, ao, sp, invw, lower, upper, qs, vs, tv, dt)
+                            coef = half
+                            if stage == 2:
+                                coef = dt
+                            vn = ti.Vector.zero(f64, n)
+                            for i in ti.static(range(n)):
+                                kv[stage, i] = vs[i]
+                                ka[stage, i] = a[i]
+                                qs[i] = qv[i] + coef * vs[i]
+                                vn[i] = vv[i] + coef * a[i]
+                            vs = vn
                         for i in ti.static(range(n)):
-                            q2[i] = qv[i] + half * vv[i]
-                            v2[i] = vv[i] + half * a1[i]
-                        a2 = accelerations(c, gy, gx, damp, ad, ao, sp, invw, lower, upper, q2, v2, tv, dt)
-                        q3 = ti.Vector.zero(f64, n)
-                        v3 = ti.Vector.zero(f64, n)
-                        for i in ti.static(range(n)):
-                            q3[i] = qv[i] + half * v2[i]
-                            v3[i] = vv[i] + half * a2[i]
-                        a3 = accelerations(c, gy, gx, damp, ad, ao, sp, invw, lower, upper, q3, v3, tv, dt)
-                        q4 = ti.Vector.zero(f64, n)
-                        v4 = ti.Vector.zero(f64, n)
-                        for i in ti.static(range(n)):
-                            q4[i] = qv[i] + dt * v3[i]
-                            v4[i] = vv[i] + dt * a3[i]
-                        a4 = accelerations(c, gy, gx, damp, ad, ao, sp, invw, lower, upper, q4, v4, tv, dt)
-                        for i in ti.static(range(n)):
-                            v = vv[i] + dt * ((a1[i] + 2.0 * a2[i] + 2.0 * a3[i] + a4[i]) / 6.0)
-                            pos = qv[i] + dt * ((vv[i] + 2.0 * v2[i] + 2.0 * v3[i] + v4[i]) / 6.0)
+                            v = vv[i] + dt * ((ka[0, i] + 2.0 * ka[1, i] + 2.0 * ka[2, i] + ka[3, i]) / 6.0)
+                            pos = qv[i] + dt * ((kv[0, i] + 2.0 * kv[1, i] + 2.0 * kv[2, i] + kv[3, i]) / 6.0)
                             pos, v = speed_and_stop(lower, upper, vmax, pos, v, i)
                             qv[i] = pos
                             vv[i] = v
