@@ -4,6 +4,7 @@
 |-----------------------|-------------------------------|------------------------------------|
 | tianim/ArmReach-v0    | :class:`envs.arm_reach.ArmReachEnv`   | :class:`envs.arm_reach.ArmReachVectorEnv`   |
 | tianim/ArmReach-v1    | :class:`envs.arm_reach_v1.ArmReachV1Env` | :class:`envs.arm_reach_v1.ArmReachV1VectorEnv` |
+| tianim/ArmReach-v2    | :class:`envs.arm_reach_v2.ArmReachV2Env` | :class:`envs.arm_reach_v2.ArmReachV2VectorEnv` |
 | tianim/RopeSwing-v0   | :class:`envs.rope_swing.RopeSwingEnv` | :class:`envs.rope_swing.RopeSwingVectorEnv` |
 | tianim/ClothFold-v0   | :class:`envs.cloth_fold.ClothFoldEnv` | :class:`envs.cloth_fold.ClothFoldVectorEnv` |
 | tianim/CrowdNav-v0    | :class:`envs.crowd_nav.CrowdNavEnv` | :class:`envs.crowd_nav.CrowdNavVectorEnv` |
@@ -30,6 +31,7 @@ from gymnasium.envs.registration import register, registry
 _ENVS = {
     "ArmReach-v0": ("arm_reach", "ArmReachEnv", "ArmReachVectorEnv", 100),
     "ArmReach-v1": ("arm_reach_v1", "ArmReachV1Env", "ArmReachV1VectorEnv", 50),  # Reacher-v5's interface
+    "ArmReach-v2": ("arm_reach_v2", "ArmReachV2Env", "ArmReachV2VectorEnv", 50),  # ... and its dynamics
     "RopeSwing-v0": ("rope_swing", "RopeSwingEnv", "RopeSwingVectorEnv", 200),
     "ClothFold-v0": ("cloth_fold", "ClothFoldEnv", "ClothFoldVectorEnv", 100),
     "CrowdNav-v0": ("crowd_nav", "CrowdNavEnv", "CrowdNavVectorEnv", 100),

@@ -44,19 +44,26 @@ resetting copy in one array expression and copy ``k`` equals a single env seeded
 
 ## Episode end
 
-Never terminates. Truncated after 100 steps (2 s) by ``TimeLimit`` (single
+Never terminates. Truncated after 100 steps (4 s simulated, see *Physics*) by ``TimeLimit`` (single
 env) or by the per-copy step counter (``gym.make_vec``).
 
 ## Physics (fixed for version 0)
 
-Control step 0.02 s (``render_fps`` 50) = 2 substeps of 0.01 s (Reacher-v5's
-integration step), semi-implicit Euler on float64 state. The step is set by
+Each env step integrates 2 substeps of ``DT`` = 0.02 s, i.e. 0.04 s of simulated time
+(``render_fps`` 50 and earlier versions of this text said "0.02 s = 2 substeps of 0.01 s"; the
+code has always stepped 2 x 0.02 s, and version 0 keeps it: ``state.t`` advances 0.04 s per
+step), semi-implicit Euler on float64 state. The step is set by
 accuracy, not stability: the only stiff-ish term, joint damping, is stable for
 ``dt < 2 I / b`` ~ 0.8 s; at the 20 rad/s speed limit a substep turns a joint by
-at most 0.2 rad. The single environment steps the arm in plain Python
+at most 0.4 rad. The single environment steps the arm in plain Python
 floats (no kernel launch); ``gym.make_vec`` steps every copy in one Taichi
 kernel launch; both perform identical float64 operations, so observations agree
 bit for bit between a single env and copy ``k`` of a batch seeded alike.
+
+## Version History
+
+* v0 (this module, frozen): tianim's own arm. ArmReach-v1 (:mod:`envs.arm_reach_v1`) is
+  Reacher-v5's interface, ArmReach-v2 (:mod:`envs.arm_reach_v2`) its interface and dynamics.
 
 ## Arguments
 
@@ -139,11 +146,12 @@ class ArmReachEnv(gym.Env):
         self.render_mode = render_mode
         self.n_links = n = self.arm.n
         self._observe_arm = tka.observer(self.arm)
-        self._stepper = tka.stepper(self.arm, DT, SUBSTEPS)
-        self._max_torque = self.arm.max_torque.tolist()
+        self._solver = tka.ArmSolver(path="scalar")   # launch-free: plain floats
+        self.state = tka.ArmState(self.arm, 1)          # the arm's q, qd, tau, t (one copy)
+        self._max_torque = self.arm.max_torque
         self.action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
         self.observation_space = observation_space(n)
-        self._state = None
+        self._target = None    # (x, y) of this episode's target [m], relative to the base
         self._renderer = None
         self._key = None       # Philox key of this env's episodes (its seed), and the episode number
         self._episode = 0
@@ -156,27 +164,32 @@ class ArmReachEnv(gym.Env):
         u = sample_starts([self._key], [self._episode], n)[0].tolist()
         self._episode += 1
         _, _, tx, ty = self._observe_arm(u[2 * n:])
-        self._state = (u[:n], u[n:2 * n], tx, ty)
+        st = self.state
+        st.q[0] = u[:n]
+        st.qd[0] = u[n:2 * n]
+        st.t[0] = 0.0
+        self._solver.observe(self.arm, st)
+        self._target = (tx, ty)
         obs, _dist = self._observe()
         return obs, {}
 
     def _observe(self):
-        q, qd, tx, ty = self._state
-        cq, sq, x, y = self._observe_arm(q)
+        st, (tx, ty) = self.state, self._target
+        x, y = st.tip[0].tolist()
         dx = x - tx
         dy = y - ty
-        obs = np.array(cq + sq + qd + [tx, ty, dx, dy], dtype=np.float32)
+        obs = np.array(st.cos_q[0].tolist() + st.sin_q[0].tolist() + st.qd[0].tolist() + [tx, ty, dx, dy],
+                       dtype=np.float32)
         return obs, math.sqrt(dx * dx + dy * dy)
 
     def step(self, action):
-        if self._state is None:
+        if self._target is None:
             raise RuntimeError("call reset() before step()")
-        a = check_action(action, self.action_space.shape).astype(np.float64).tolist()
-        q, qd, tx, ty = self._state
-        tau = [a[i] * self._max_torque[i] for i in range(self.n_links)]
-        q, qd = self._stepper(q, qd, tau)
-        self._state = (q, qd, tx, ty)
+        a64 = check_action(action, self.action_space.shape).astype(np.float64)
+        np.multiply(a64, self._max_torque, out=self.state.tau[0])
+        self._solver.step(self.arm, self.state, DT, SUBSTEPS)
         obs, dist = self._observe()
+        a = a64.tolist()
         ctrl = a[0] * a[0]
         for i in range(1, self.n_links):
             ctrl = ctrl + a[i] * a[i]
@@ -186,15 +199,14 @@ class ArmReachEnv(gym.Env):
     def render(self):
         if self.render_mode is None:
             return no_render_mode(self)
-        if self._state is None:
+        if self._target is None:
             return None
         from ._render import arm_frame
 
-        q, _qd, tx, ty = self._state
-        return arm_frame(self.arm, q, (tx, ty))
+        return arm_frame(self.arm, self.state.q[0].tolist(), self._target)
 
     def close(self):
-        self._state = None
+        self._target = None
         self._renderer = None
 
 
@@ -218,13 +230,10 @@ class ArmReachVectorEnv(BatchedEnv):
         self.action_space = batch_space(self.single_action_space, b)
         self.single_observation_space = observation_space(n)
         self.observation_space = batch_space(self.single_observation_space, b)
-        self.q = np.zeros((b, n))
-        self.qd = np.zeros((b, n))
+        self._solver = tka.ArmSolver()              # "auto": one kernel launch for more than a few copies
+        self.state = tka.ArmState(self.arm, b)      # q, qd, tau, t, cos_q, sin_q, tip of every copy
+        self._targets = tka.ArmState(self.arm, b)   # work state: target angles -> target tips
         self.target = np.zeros((b, 2))
-        self._cos = np.zeros((b, n))
-        self._sin = np.zeros((b, n))
-        self._tip = np.zeros((b, 2))
-        self._zero_tau = np.zeros((b, n))
         self._obs_buf = np.empty((b, 3 * n + 4), np.float32)
         self._rel = np.empty((b, 2))
 
@@ -232,22 +241,24 @@ class ArmReachVectorEnv(BatchedEnv):
         n = self.n_links
         u = sample_starts(self._keys[idx], self._episodes[idx], n)
         self._episodes[idx] += np.uint64(1)
-        self.q[idx] = u[:, :n]
-        self.qd[idx] = u[:, n:2 * n]
-        # the target: the tip at the target angles, from the arm kernel without stepping (active 0)
-        angles = np.ascontiguousarray(u[:, 2 * n:])
-        tip = np.empty((idx.size, 2))
-        zero = np.zeros_like(angles)
-        tka.step_batch(self.arm, angles, zero, zero, DT, SUBSTEPS, np.zeros(idx.size, np.int32), tip=tip)
-        self.target[idx] = tip
+        st = self.state
+        st.q[idx] = u[:, :n]
+        st.qd[idx] = u[:, n:2 * n]
+        st.t[idx] = 0.0
+        # the target: the tip at the target angles (forward kinematics of the work state, no step)
+        self._targets.q[idx] = u[:, 2 * n:]
+        self._solver.observe(self.arm, self._targets)
+        self.target[idx] = self._targets.tip[idx]
 
     def _launch(self, tau, active):
-        tka.step_batch(self.arm, self.q, self.qd, tau, DT, SUBSTEPS, active, self._cos, self._sin, self._tip)
+        """Step the copies with ``active`` (B,) != 0 under torques ``tau`` (B, n) [N m]."""
+        self.state.tau[...] = tau
+        self._solver.step(self.arm, self.state, DT, SUBSTEPS, active)
 
     def _obs(self):
-        n, obs, rel = self.n_links, self._obs_buf, self._rel
-        np.subtract(self._tip, self.target, out=rel)
-        for col, part in ((0, self._cos), (n, self._sin), (2 * n, self.qd), (3 * n, self.target), (3 * n + 2, rel)):
+        n, obs, rel, st = self.n_links, self._obs_buf, self._rel, self.state
+        np.subtract(st.tip, self.target, out=rel)
+        for col, part in ((0, st.cos_q), (n, st.sin_q), (2 * n, st.qd), (3 * n, self.target), (3 * n + 2, rel)):
             obs[:, col:col + part.shape[1]] = part     # float64 -> float32 on assignment, no temporaries
         dist = np.sqrt(rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1])
         return obs.copy(), dist
@@ -263,7 +274,7 @@ class ArmReachVectorEnv(BatchedEnv):
         return obs, -dist - CTRL_COST * ctrl, np.zeros(self.num_envs, bool)
 
     def _observe_all(self):
-        self._launch(self._zero_tau, np.zeros(self.num_envs, np.int32))
+        self._solver.observe(self.arm, self.state)
         return self._obs()[0]
 
     def render(self):
@@ -271,4 +282,4 @@ class ArmReachVectorEnv(BatchedEnv):
             return no_render_mode(self)
         from ._render import arm_frame
 
-        return tuple(arm_frame(self.arm, self.q[k].tolist(), self.target[k]) for k in range(self.num_envs))
+        return tuple(arm_frame(self.arm, self.state.q[k].tolist(), self.target[k]) for k in range(self.num_envs))

@@ -6,9 +6,9 @@ Reacher-v5 (``gymnasium/envs/mujoco/reacher_v5.py``, Gymnasium 1.x) re-created o
 tianim: a planar arm of ``n_links`` revolute joints (default 2, as Reacher; at most
 7, tianim's extension) moves its fingertip to a target. The interface follows
 Reacher-v5 (observation order, target distribution, starting state drawn draw for
-draw, horizon, control step, reward and ``info`` keys); the dynamics are tianim's
+draw, horizon in steps, reward and ``info`` keys); the dynamics are tianim's
 (:class:`~tianim.kinematics.PlanarChain` stepped by :mod:`tianim.kinematics.arm`),
-not MuJoCo's (see *Differences from Reacher-v5*). ArmReach-v0 is unchanged.
+not MuJoCo's (see *Differences from Reacher-v5*; ArmReach-v2 has Reacher's dynamics). ArmReach-v0 is unchanged.
 
 ## Action space
 
@@ -65,12 +65,14 @@ Reacher-v5's for the same seed, bit for bit.
 
 ## Episode end
 
-Never terminates. Truncated after 50 steps (1 s) by ``TimeLimit`` (single env) or
+Never terminates. Truncated after 50 steps (2 s simulated, see *Physics*) by ``TimeLimit`` (single env) or
 by the per-copy step counter (``gym.make_vec``), as Reacher-v5.
 
 ## Physics (fixed for version 1)
 
-Control step 0.02 s = ``frame_skip`` 2 x 0.01 s (Reacher-v5's). Links 0 .. n-2
+Each env step integrates 2 substeps of ``DT`` = 0.02 s, i.e. 0.04 s of simulated time
+(Reacher-v5: ``frame_skip`` 2 x 0.01 s = 0.02 s; earlier versions of this text claimed
+Reacher's; version 1 keeps what its code has always done, ArmReach-v2 steps 2 x 0.01 s). Links 0 .. n-2
 are Reacher's link capsules (length 0.1 m, radius 0.01 m, density 1000 kg/m^3);
 the last link is the capsule plus Reacher's fingertip sphere (radius 0.01 m) at
 0.11 m, whose centre is the tip. Masses and inertias follow from those geoms as
@@ -98,6 +100,8 @@ single env seeded with ``s + k`` bit for bit.
   and centripetal terms of the same order as the inertial ones), with motors and
   damping scaled to the links' inertia as above, integrated by semi-implicit
   Euler. Trajectories under the same actions therefore differ.
+* Time step: 2 x 0.02 s per env step (Reacher-v5: 2 x 0.01 s), so an episode of 50 steps
+  is 2 s of simulated time (Reacher-v5: 1 s).
 * Joint limit: Reacher's ``joint1`` range is a soft MuJoCo constraint; tianim's
   stop is hard and inelastic. Joint speeds: unbounded in Reacher, 50 rad/s here.
 * Reward on out-of-range actions: Reacher-v5 charges the raw action (MuJoCo clamps
@@ -106,6 +110,13 @@ single env seeded with ``s + k`` bit for bit.
   ``rgb_array`` only, tianim's 2-D frame (Reacher: MuJoCo's 3-D views). No
   ``xml_file``, ``frame_skip`` or camera arguments; no ``reward_threshold``.
 * n links (n != 2) is tianim's extension; Reacher has two.
+
+## Version History
+
+* v2 (:mod:`envs.arm_reach_v2`): Reacher-v5's dynamics too (armature, damping, gear, soft elbow
+  range, RK4 at 0.01 s x 2); trajectories match MuJoCo's.
+* v1 (this module, frozen): Reacher-v5's interface on tianim's bare rigid chain.
+* v0 (:mod:`envs.arm_reach`, frozen): tianim's own 1 m arm.
 
 ## Arguments
 
@@ -224,45 +235,55 @@ class ArmReachV1Env(gym.Env):
     """Single ArmReach-v1 environment (see the module docstring)."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / DT)}
+    # the version's physics (ArmReach-v2 overrides them): arm, integrator, substep [s], substeps
+    make_arm = staticmethod(make_arm)
+    observation_space_for = staticmethod(observation_space)
+    METHOD, DT, SUBSTEPS = "semi_implicit_euler", DT, SUBSTEPS
 
     def __init__(self, n_links: int = 2, reward_dist_weight: float = 1.0, reward_control_weight: float = 1.0,
                  render_mode: str | None = None):
-        self.arm = make_arm(n_links)
+        self.arm = self.make_arm(n_links)
         if render_mode not in (None, *self.metadata["render_modes"]):
             raise ValueError(f"render_mode={render_mode!r}; choose one of {self.metadata['render_modes']} or None")
         self.render_mode = render_mode
         self.n_links = n = self.arm.n
         self.reward_dist_weight = _check_weight("reward_dist_weight", reward_dist_weight)
         self.reward_control_weight = _check_weight("reward_control_weight", reward_control_weight)
-        self._observe_arm = tka.observer(self.arm)
-        self._stepper = tka.stepper(self.arm, DT, SUBSTEPS)
-        self._max_torque = self.arm.max_torque.tolist()
+        self._solver = tka.ArmSolver(path="scalar", method=self.METHOD)   # launch-free: plain floats
+        self.state = tka.ArmState(self.arm, 1)          # the arm's q, qd, tau, t (one copy)
+        self._max_torque = self.arm.max_torque
         self.action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
-        self.observation_space = observation_space(n)
-        self._state = None
+        self.observation_space = self.observation_space_for(n)
+        self._target = None    # (x, y) of this episode's target [m]
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
-        self._state = sample_start(self.np_random, self.n_links)
+        q, qd, tx, ty = sample_start(self.np_random, self.n_links)
+        st = self.state
+        st.q[0] = q
+        st.qd[0] = qd
+        st.t[0] = 0.0
+        self._solver.observe(self.arm, st)
+        self._target = (tx, ty)
         return self._observe()[0], {}
 
     def _observe(self):
-        q, qd, tx, ty = self._state
-        cq, sq, x, y = self._observe_arm(q)
+        st, (tx, ty) = self.state, self._target
+        x, y = st.tip[0].tolist()
         dx = x - tx
         dy = y - ty
-        obs = np.array(cq + sq + [tx, ty] + qd + [dx, dy], dtype=np.float32)
+        obs = np.array(st.cos_q[0].tolist() + st.sin_q[0].tolist() + [tx, ty] + st.qd[0].tolist() + [dx, dy],
+                       dtype=np.float32)
         return obs, math.sqrt(dx * dx + dy * dy)
 
     def step(self, action):
-        if self._state is None:
+        if self._target is None:
             raise RuntimeError("call reset() before step()")
-        a = check_action(action, self.action_space.shape).astype(np.float64).tolist()
-        q, qd, tx, ty = self._state
-        tau = [a[i] * self._max_torque[i] for i in range(self.n_links)]
-        q, qd = self._stepper(q, qd, tau)
-        self._state = (q, qd, tx, ty)
+        a64 = check_action(action, self.action_space.shape).astype(np.float64)
+        np.multiply(a64, self._max_torque, out=self.state.tau[0])
+        self._solver.step(self.arm, self.state, self.DT, self.SUBSTEPS)
         obs, dist = self._observe()
+        a = a64.tolist()
         ctrl = a[0] * a[0]
         for i in range(1, self.n_links):
             ctrl = ctrl + a[i] * a[i]
@@ -273,15 +294,14 @@ class ArmReachV1Env(gym.Env):
     def render(self):
         if self.render_mode is None:
             return no_render_mode(self)
-        if self._state is None:
+        if self._target is None:
             return None
         from ._render import arm_frame
 
-        q, _qd, tx, ty = self._state
-        return arm_frame(self.arm, q, (tx, ty))
+        return arm_frame(self.arm, self.state.q[0].tolist(), self._target)
 
     def close(self):
-        self._state = None
+        self._target = None
 
 
 class ArmReachV1VectorEnv(BatchedEnv):
@@ -291,11 +311,14 @@ class ArmReachV1VectorEnv(BatchedEnv):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / DT),
                 "autoreset_mode": AutoresetMode.NEXT_STEP}
+    make_arm = staticmethod(make_arm)
+    observation_space_for = staticmethod(observation_space)
+    METHOD, DT, SUBSTEPS = "semi_implicit_euler", DT, SUBSTEPS
 
     def __init__(self, num_envs: int = 1, n_links: int = 2, reward_dist_weight: float = 1.0,
                  reward_control_weight: float = 1.0, max_episode_steps: int = MAX_EPISODE_STEPS,
                  render_mode: str | None = None, autoreset_mode=AutoresetMode.NEXT_STEP):
-        self.arm = make_arm(n_links)
+        self.arm = self.make_arm(n_links)
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode={render_mode!r}; choose 'rgb_array' or None")
         super().__init__(num_envs, max_episode_steps, autoreset_mode)
@@ -306,30 +329,30 @@ class ArmReachV1VectorEnv(BatchedEnv):
         self.n_links = n
         self.single_action_space = spaces.Box(-1.0, 1.0, (n,), np.float32)
         self.action_space = batch_space(self.single_action_space, b)
-        self.single_observation_space = observation_space(n)
+        self.single_observation_space = self.observation_space_for(n)
         self.observation_space = batch_space(self.single_observation_space, b)
-        self.q = np.zeros((b, n))
-        self.qd = np.zeros((b, n))
+        self._solver = tka.ArmSolver(method=self.METHOD)   # "auto": one kernel launch for more than a few copies
+        self.state = tka.ArmState(self.arm, b)      # q, qd, tau, t, cos_q, sin_q, tip of every copy
         self.target = np.zeros((b, 2))
-        self._cos = np.zeros((b, n))
-        self._sin = np.zeros((b, n))
-        self._tip = np.zeros((b, 2))
-        self._zero_tau = np.zeros((b, n))
         self._step_info = {}
 
     def _reset_copies(self, idx):
         for k in idx.tolist():
             q, qd, tx, ty = sample_start(self._rngs[k], self.n_links)
-            self.q[k] = q
-            self.qd[k] = qd
+            self.state.q[k] = q
+            self.state.qd[k] = qd
+            self.state.t[k] = 0.0
             self.target[k] = (tx, ty)
 
     def _launch(self, tau, active):
-        tka.step_batch(self.arm, self.q, self.qd, tau, DT, SUBSTEPS, active, self._cos, self._sin, self._tip)
+        """Step the copies with ``active`` (B,) != 0 under torques ``tau`` (B, n) [N m]."""
+        self.state.tau[...] = tau
+        self._solver.step(self.arm, self.state, self.DT, self.SUBSTEPS, active)
 
     def _obs(self):
-        rel = self._tip - self.target
-        obs = np.concatenate([self._cos, self._sin, self.target, self.qd, rel], axis=1).astype(np.float32)
+        st = self.state
+        rel = st.tip - self.target
+        obs = np.concatenate([st.cos_q, st.sin_q, self.target, st.qd, rel], axis=1).astype(np.float32)
         dist = np.sqrt(rel[:, 0] * rel[:, 0] + rel[:, 1] * rel[:, 1])
         return obs, dist
 
@@ -351,7 +374,7 @@ class ArmReachV1VectorEnv(BatchedEnv):
         return obs, reward_dist + reward_ctrl, np.zeros(self.num_envs, bool)
 
     def _observe_all(self):
-        self._launch(self._zero_tau, np.zeros(self.num_envs, np.int32))
+        self._solver.observe(self.arm, self.state)
         return self._obs()[0]
 
     def render(self):
@@ -359,4 +382,4 @@ class ArmReachV1VectorEnv(BatchedEnv):
             return no_render_mode(self)
         from ._render import arm_frame
 
-        return tuple(arm_frame(self.arm, self.q[k].tolist(), self.target[k]) for k in range(self.num_envs))
+        return tuple(arm_frame(self.arm, self.state.q[k].tolist(), self.target[k]) for k in range(self.num_envs))

@@ -40,7 +40,8 @@ class ArmReachIKPD:
         self._qd, self._target = ((slice(2 * n, 3 * n), slice(3 * n, 3 * n + 2)) if layout == "v0"
                                   else (slice(2 * n + 2, 3 * n + 2), slice(2 * n, 2 * n + 2)))
         self.chain = PlanarChain(arm.lengths, lower=np.maximum(arm.lower, -np.pi), upper=np.minimum(arm.upper, np.pi))
-        self._gain = tka.coefficients(arm).C.diagonal()  # link inertia about its joint, outer links lumped
+        # link inertia about its joint, outer links lumped, plus the joint's armature (ArmReach-v2: 1 kg m^2)
+        self._gain = tka.coefficients(arm).C.diagonal() + arm.armature
 
     def __call__(self, obs):
         """Actions ``(B, n)`` float32 for observations ``(B, 3n+4)``; ``(n,)`` for one observation ``(3n+4,)``."""
@@ -326,8 +327,8 @@ def make_baseline(env_id: str, env):
     base = env.unwrapped
     if env_id.endswith("ArmReach-v0"):
         return ArmReachIKPD(base.arm)
-    if env_id.endswith("ArmReach-v1"):  # Reacher-v5's observation order; gentler gains (control cost weight 1)
-        return ArmReachIKPD(base.arm, kp=KP_V1, kd=KD_V1, layout="reacher")
+    if env_id.endswith("ArmReach-v1") or env_id.endswith("ArmReach-v2"):  # Reacher-v5's observation order;
+        return ArmReachIKPD(base.arm, kp=KP_V1, kd=KD_V1, layout="reacher")   # gentler gains (control cost 1)
     if env_id.endswith("RopeSwing-v0"):
         return RopeSwingDamped()
     if env_id.endswith("ClothFold-v0"):
@@ -340,8 +341,8 @@ def make_baseline(env_id: str, env):
         return ClothFlattenCorners()
     if env_id.endswith("RopeFlatten-v0"):
         return RopeFlattenEnds()
-    raise ValueError(f"env_id={env_id!r} has no scripted baseline; known: tianim/ArmReach-v0, ArmReach-v1, RopeSwing-v0, "
-                     "ClothFold-v0, CrowdNav-v0, CrowdNav-v1, ClothFold-v1, ClothFlatten-v0, RopeFlatten-v0")
+    raise ValueError(f"env_id={env_id!r} has no scripted baseline; known: tianim/ArmReach-v0, ArmReach-v1, ArmReach-v2, "
+                     "RopeSwing-v0, ClothFold-v0, CrowdNav-v0, CrowdNav-v1, ClothFold-v1, ClothFlatten-v0, RopeFlatten-v0")
 
 
 def evaluate(env, policy, episodes: int, seed: int = 0) -> np.ndarray:

@@ -17,6 +17,11 @@ ID = "tianim/ArmReach-v1"
 REACHER_INFO_KEYS = {"reward_dist", "reward_ctrl"}  # gymnasium/envs/mujoco/reacher_v5.py, _get_rew
 
 
+def state_of(env):
+    """``(q, qd, target_x, target_y)`` of a single env (lists and floats), from its ArmState."""
+    return env.state.q[0].tolist(), env.state.qd[0].tolist(), *env._target
+
+
 def reacher_layout(n):
     """Reacher-v5's observation order (its _get_obs), generalised to n joints: name -> slice."""
     return {"cos": slice(0, n), "sin": slice(n, 2 * n), "target": slice(2 * n, 2 * n + 2),
@@ -54,7 +59,7 @@ def test_observation_layout_and_info_keys(n):
     obs, rew, term, trunc, info = env.step(np.full(n, 0.5, np.float32))
     assert set(info) == REACHER_INFO_KEYS
     base = env.unwrapped
-    q, qd, tx, ty = base._state
+    q, qd, tx, ty = state_of(base)
     L = reacher_layout(n)
     assert np.allclose(obs[L["cos"]], np.cos(q), atol=1e-6) and np.allclose(obs[L["sin"]], np.sin(q), atol=1e-6)
     assert np.array_equal(obs[L["target"]], np.float32([tx, ty]))
@@ -83,7 +88,7 @@ def test_starting_state_is_reacher_v5_draw_for_draw(n):
     env = gym.make(ID, n_links=n).unwrapped
     for seed in range(20):
         env.reset(seed=seed)
-        q, qd, tx, ty = env._state
+        q, qd, tx, ty = state_of(env)
         rq, rqd, goal = reacher_reset(np.random.default_rng(seed), n, v1.target_radius(n))
         assert q == rq.tolist() and qd == rqd.tolist() and [tx, ty] == goal.tolist()
     assert v1.target_radius(2) == 0.2 and math.isclose(v1.target_radius(n), 0.2 * env.arm.reach / 0.21)
@@ -95,7 +100,7 @@ def test_target_distribution_uniform_over_the_disc():
     targets, q, qd = [], [], []
     for _ in range(10_000):
         env.reset()
-        s = env._state
+        s = state_of(env)
         targets.append(s[2:])
         q.append(s[0])
         qd.append(s[1])
@@ -156,10 +161,13 @@ def test_sb3_checker_is_clean():
 
 
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP])
-def test_batch_copy_k_equals_single_env_seed_plus_k(mode):
-    n, horizon, seed = 4, 6, 21
-    venv = gym.make_vec(ID, num_envs=n, max_episode_steps=horizon, autoreset_mode=mode)
-    singles = [gym.make(ID, max_episode_steps=horizon) for _ in range(n)]
+@pytest.mark.parametrize("env_id", [ID, "tianim/ArmReach-v2"])
+def test_batch_copy_k_equals_single_env_seed_plus_k(mode, env_id):
+    """Copy k of make_vec (6 copies: the kernel path) equals a single env (the launch-free path) seeded seed + k."""
+    n, horizon, seed = 6, 6, 21
+    venv = gym.make_vec(env_id, num_envs=n, max_episode_steps=horizon, autoreset_mode=mode)
+    assert venv.unwrapped._solver.resolve_path(n) == "kernel"
+    singles = [gym.make(env_id, max_episode_steps=horizon) for _ in range(n)]
     vobs, _ = venv.reset(seed=seed)
     obs = [s.reset(seed=seed + k)[0] for k, s in enumerate(singles)]
     assert np.array_equal(vobs, np.array(obs))
@@ -194,17 +202,20 @@ def test_batch_copy_k_equals_single_env_seed_plus_k(mode):
             assert np.array_equal(vinfo["final_info"]["_reward_dist"], ended)
 
 
-def test_batch_steps_in_one_kernel_launch(monkeypatch):
-    from tianim.kinematics import arm as tka
-
-    calls = []
-    original = tka.step_batch
-    monkeypatch.setattr(tka, "step_batch", lambda *a, **k: (calls.append(1), original(*a, **k))[1])
-    venv = gym.make_vec(ID, num_envs=64)
+@pytest.mark.parametrize("env_id", [ID, "tianim/ArmReach-v0", "tianim/ArmReach-v2"])
+def test_batch_steps_in_one_kernel_launch(env_id):
+    """make_vec steps every copy through one ArmSolver on the kernel path (one launch per step)
+    and the single env through the launch-free scalar path."""
+    venv = gym.make_vec(env_id, num_envs=64)
+    solver = venv.unwrapped._solver
+    assert solver.path == "auto" and solver.resolve_path(64) == "kernel"
+    assert gym.make(env_id).unwrapped._solver.path == "scalar"
     venv.reset(seed=0)
-    calls.clear()
-    venv.step(np.zeros((64, 2), np.float32))
-    assert len(calls) == 1
+    t0 = venv.unwrapped.state.t.copy()
+    venv.step(np.zeros((64, venv.unwrapped.n_links), np.float32))
+    # frozen v0/v1 behaviour: each env step integrates SUBSTEPS substeps of DT (0.04 s, not 0.02 s); v2: 0.02 s
+    expected = 0.02 if env_id.endswith("v2") else v1.DT * v1.SUBSTEPS
+    np.testing.assert_allclose(venv.unwrapped.state.t - t0, expected, rtol=1e-12)
 
 
 def test_v0_unchanged():

@@ -42,6 +42,48 @@ def test_two_link_matches_closed_form():
         np.testing.assert_allclose(inverse_dynamics(chain, q, qd, qdd), want, rtol=1e-12, atol=1e-12)
 
 
+def test_armature_adds_a_rotor_inertia_per_joint():
+    """Armature a_i (rotor inertia reflected through the gearing; Featherstone 2008, section 9.6):
+    tau = Spong's closed form + a_i qdd_i, M = M_links + diag(a), and forward dynamics inverts it."""
+    rng = np.random.default_rng(4)
+    arm = (0.3, 1.7)
+    chain = PlanarChain([1.0, 0.7], masses=[2.0, 1.5], com=[0.4, 0.3], inertias=[0.1, 0.05], armature=arm,
+                        damping=[0.2, 0.1])
+    bare = PlanarChain([1.0, 0.7], masses=[2.0, 1.5], com=[0.4, 0.3], inertias=[0.1, 0.05])
+    for _ in range(10):
+        q, qd, qdd = rng.normal(size=(3, 2))
+        want = spong_two_link(q, qd, qdd, (2.0, 1.5), 1.0, (0.4, 0.3), (0.1, 0.05)) + np.multiply(arm, qdd)
+        want = want + np.multiply([0.2, 0.1], qd)
+        np.testing.assert_allclose(inverse_dynamics(chain, q, qd, qdd), want, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(mass_matrix(chain, q), mass_matrix(bare, q) + np.diag(arm), rtol=1e-14)
+        np.testing.assert_allclose(forward_dynamics(chain, q, qd, want), qdd, rtol=1e-10, atol=1e-10)
+    with pytest.raises(ValueError, match="armature"):
+        PlanarChain([1.0, 0.7], armature=-0.1)
+
+
+def test_armature_and_damping_agree_with_mujoco_inverse():
+    """Reacher-v5's arm (armature 1, damping 1, ArmReach-v2's chain) against mujoco.mj_inverse,
+    inside the joint range (no limit force): the same torques to 1e-12 N m."""
+    mujoco = pytest.importorskip("mujoco")
+    gym = pytest.importorskip("gymnasium")
+    import warnings
+
+    from envs import arm_reach_v2
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        r = gym.make("Reacher-v5").unwrapped
+    m, d = r.model, r.data
+    chain = arm_reach_v2.make_arm(2)
+    rng = np.random.default_rng(9)
+    for _ in range(10):
+        q, qd, qdd = rng.uniform(-2.5, 2.5, 2), rng.uniform(-20, 20, 2), rng.uniform(-100, 100, 2)
+        d.qpos[:2], d.qvel[:2], d.qacc[:2] = q, qd, qdd
+        d.qvel[2:] = d.qacc[2:] = 0.0
+        mujoco.mj_inverse(m, d)
+        np.testing.assert_allclose(inverse_dynamics(chain, q, qd, qdd), d.qfrc_inverse[:2], rtol=1e-12, atol=1e-12)
+
+
 def test_static_horizontal_link_holds_gravity_moment():
     # one uniform rod held horizontal: tau = m g l/2
     chain = PlanarChain([0.8], masses=[3.0])

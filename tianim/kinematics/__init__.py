@@ -7,8 +7,9 @@
   unreachable targets), :func:`two_link_ik` (closed form, both elbows)
 * :func:`inverse_dynamics`, :func:`forward_dynamics`, :func:`mass_matrix`,
   :func:`bias_torques`, :func:`energy` - planar chain dynamics (recursive Newton-Euler)
-* :mod:`tianim.kinematics.arm` - stepping a planar chain in time: launch-free single arm
-  (``arm.step``, ``arm.stepper``) and ``B`` arms in one kernel launch (``arm.step_batch``)
+* :mod:`tianim.kinematics.arm` - stepping a planar chain in time on the one contract:
+  ``arm.ArmState`` (q, qd, tau, t of B copies) and ``arm.ArmSolver`` (``solver.step(chain, state, dt,
+  substeps) -> StepStats``; launch-free plain floats or one Taichi kernel launch for all copies)
 * :func:`point_mass_forces` - forces for a point mass to follow a path
 """
 

@@ -7,12 +7,17 @@ is recorded, in order, as one line of Python, and the lines are compiled into a
 function of plain local floats. Because the recorded operations are the
 reference function's own, in its own order (operations on two constants are
 folded at trace time with the same IEEE arithmetic), the compiled function
-returns bit-identical results: the tests check it.
+returns bit-identical results: the tests check it. Two parts are written out as text
+rather than traced, because they branch on the state: the integrator's update (clamps,
+hard stops, the RK4 combination: :func:`._arm_scalar.step` / :func:`~._arm_scalar.step_rk4`)
+and the soft-limit branches of :func:`._arm_scalar._soft_limits` (their linear algebra, the
+column of ``M^-1``, is traced).
 
 Why ``exec``: this is the "generated from the one source" option for the single
 environment's fast path, not a second copy of the dynamics. Measured on this
-machine, two links, two substeps: 11.5 us per call interpreted against 1.4 us
-compiled (ArmReach-v0 steps in ~10 us in all); seven links: 46 against 22 us.
+machine (loaded), two links, two semi-implicit Euler substeps: ~5.5 us per call
+generated (the earlier fully inlined form: ~4.5 us); Reacher-v5's RK4 with its soft
+elbow limit: the single ArmReach-v2 step ~90 us against ~300 us interpreted.
 The generated source is kept on the function (``fn.source``) for inspection;
 its only inputs are floats from a validated chain (``repr`` of finite floats).
 """
@@ -96,46 +101,125 @@ class _Tape:
         return self._fn("sqrt", x)
 
 
-def compile_stepper(params: tuple, dt: float, substeps: int):
-    """A function ``f(q, qd, tau) -> (q, qd)`` (lists of n floats) equal to
-    ``_arm_scalar.step(params, q, qd, tau, dt, substeps)`` bit for bit, ~8x faster for
-    two links. Clamps at an infinite limit are left out (they never act)."""
-    n, lower, upper, tmax, vmax = params[0], params[5], params[6], params[8], params[9]
+def _acc_source(params: tuple, dt: float) -> str:
+    """Source of ``_acc(q0.., v0.., u0..) -> (a0, ..)``: :func:`._arm_scalar.accelerations` as
+    straight-line code (the factor, the solve and, for soft limits, the column of ``M^-1`` of each
+    limited joint traced; the limit branches written out as :func:`._arm_scalar._soft_limits` runs them)."""
+    n, lower, upper, soft, invw = params[0], params[5], params[6], params[12], params[13]
     tape = _Tape()
     qs = [_Sym(f"q{i}", tape) for i in range(n)]
     vs = [_Sym(f"v{i}", tape) for i in range(n)]
     us = [_Sym(f"u{i}", tape) for i in range(n)]
-    acc = scalar.accelerations(params, qs, vs, us, ops=tape)
-    body = list(tape.lines)
-    for i in range(n):
-        body.append(f"w = v{i} + {dt!r} * {_src(acc[i])}")
+    lo, r = scalar.factor(params, qs, vs, us, ops=tape)
+    acc = scalar._relative(scalar._solve(lo, r, n), n)
+    limited = [i for i in range(n) if soft is not None and (math.isfinite(lower[i]) or math.isfinite(upper[i]))]
+    cols = {}
+    for i in limited:
+        rhs = [0.0] * n
+        rhs[i] = 1.0
+        if i > 0:
+            rhs[i - 1] = -1.0
+        cols[i] = scalar._relative(scalar._solve(lo, rhs, n), n)
+    lines = list(tape.lines)
+    lines += [f"a{k} = {_src(acc[k])}" for k in range(n)]
+    if limited:
+        kk, bb = scalar.soft_gains(params, dt)
+        for i in limited:
+            lines += [
+                f"f{i} = None",
+                f"r = q{i} - {lower[i]!r}",
+                "sign = 1.0",
+                "if not r < 0.0:",
+                f"    r = {upper[i]!r} - q{i}",
+                "    sign = -1.0",
+                "if r < 0.0:",
+                "    imp = impedance(SOLIMP, r)",
+                f"    aref = {-bb!r} * (sign * v{i}) - {kk!r} * imp * r",
+                f"    jar = sign * a{i} - aref",
+                "    if jar < 0.0:",
+                f"        rr = (1.0 - imp) * {invw[i]!r} / imp",
+                f"        if rr < {scalar.MINVAL!r}: rr = {scalar.MINVAL!r}",
+                f"        f{i} = sign * (-jar / ({_src(cols[i][i])} + rr))",
+            ]
+        for i in limited:
+            lines.append(f"if f{i} is not None:")
+            lines += [f"    b{k} = a{k} + f{i} * {_src(cols[i][k])}" for k in range(n)]
+            lines += [f"    a{k} = b{k}" for k in range(n)]
+    args = ", ".join([f"q{i}" for i in range(n)] + [f"v{i}" for i in range(n)] + [f"u{i}" for i in range(n)])
+    return (f"def _acc({args}):\n" + "".join(f"    {line}\n" for line in lines)
+            + f"    return {', '.join(f'a{k}' for k in range(n))},\n")
+
+
+def compile_stepper(params: tuple, dt: float, substeps: int, method: str = "semi_implicit_euler"):
+    """A function ``f(q, qd, tau) -> (q, qd)`` (lists of n floats) equal bit for bit to
+    ``_arm_scalar.step`` (``method="semi_implicit_euler"``) or ``_arm_scalar.step_rk4`` (``"rk4"``)
+    with ``params, dt, substeps``, for every chain (gravity, armature, hard or soft limits): the
+    accelerations are one generated function ``_acc`` called per stage; clamps at an infinite
+    limit are left out (they never act). ~2-5x faster than the interpreted reference."""
+    n, lower, upper, tmax, vmax, soft = params[0], params[5], params[6], params[8], params[9], params[12]
+    qn = [f"q{i}" for i in range(n)]
+    vn = [f"v{i}" for i in range(n)]
+    un = [f"u{i}" for i in range(n)]
+
+    def call(qq, vv):
+        return f"_acc({', '.join(qq + vv + un)})"
+
+    def finish(i, w_expr, p_expr):
+        out = [f"w = {w_expr}", f"p = {p_expr}"]
         if math.isfinite(vmax):
-            body.append(f"if w > {vmax!r}: w = {vmax!r}")
-            body.append(f"if w < {-vmax!r}: w = {-vmax!r}")
-        body.append(f"p = q{i} + {dt!r} * w")
-        if math.isfinite(lower[i]):
-            body.append(f"if p < {lower[i]!r}:\n            p = {lower[i]!r}\n            if w < 0.0: w = 0.0")
-        if math.isfinite(upper[i]):
-            body.append(f"if p > {upper[i]!r}:\n            p = {upper[i]!r}\n            if w > 0.0: w = 0.0")
-        body.append(f"n_q{i} = p; n_v{i} = w")
-    # Write back after all joints are updated (the reference updates joint i after using acc[i] only).
-    body.append(", ".join(f"q{i}" for i in range(n)) + ", = " + ", ".join(f"n_q{i}" for i in range(n)) + ",")
-    body.append(", ".join(f"v{i}" for i in range(n)) + ", = " + ", ".join(f"n_v{i}" for i in range(n)) + ",")
-    args = ", ".join(f"q{i}" for i in range(n))
+            out += [f"if w > {vmax!r}: w = {vmax!r}", f"if w < {-vmax!r}: w = {-vmax!r}"]
+        if soft is None and math.isfinite(lower[i]):
+            out.append(f"if p < {lower[i]!r}:\n            p = {lower[i]!r}\n            if w < 0.0: w = 0.0")
+        if soft is None and math.isfinite(upper[i]):
+            out.append(f"elif p > {upper[i]!r}:\n            p = {upper[i]!r}\n            if w > 0.0: w = 0.0"
+                       if math.isfinite(lower[i]) else
+                       f"if p > {upper[i]!r}:\n            p = {upper[i]!r}\n            if w > 0.0: w = 0.0")
+        return out + [f"n_q{i} = p; n_v{i} = w"]
+
+    body = []
+    if method == "rk4":
+        half = 0.5 * dt
+        body.append(f"{', '.join(f'k1_{i}' for i in range(n))}, = {call(qn, vn)}")
+        body += [f"q2_{i} = q{i} + {half!r} * v{i}; v2_{i} = v{i} + {half!r} * k1_{i}" for i in range(n)]
+        body.append(f"{', '.join(f'k2_{i}' for i in range(n))}, = "
+                    f"{call([f'q2_{i}' for i in range(n)], [f'v2_{i}' for i in range(n)])}")
+        body += [f"q3_{i} = q{i} + {half!r} * v2_{i}; v3_{i} = v{i} + {half!r} * k2_{i}" for i in range(n)]
+        body.append(f"{', '.join(f'k3_{i}' for i in range(n))}, = "
+                    f"{call([f'q3_{i}' for i in range(n)], [f'v3_{i}' for i in range(n)])}")
+        body += [f"q4_{i} = q{i} + {dt!r} * v3_{i}; v4_{i} = v{i} + {dt!r} * k3_{i}" for i in range(n)]
+        body.append(f"{', '.join(f'k4_{i}' for i in range(n))}, = "
+                    f"{call([f'q4_{i}' for i in range(n)], [f'v4_{i}' for i in range(n)])}")
+        for i in range(n):
+            body += finish(i, f"v{i} + {dt!r} * ((k1_{i} + 2.0 * k2_{i} + 2.0 * k3_{i} + k4_{i}) / 6.0)",
+                           f"q{i} + {dt!r} * ((v{i} + 2.0 * v2_{i} + 2.0 * v3_{i} + v4_{i}) / 6.0)")
+    else:
+        body.append(f"{', '.join(f'k1_{i}' for i in range(n))}, = {call(qn, vn)}")
+        for i in range(n):
+            w = f"v{i} + {dt!r} * k1_{i}"
+            lines = finish(i, w, "0.0")
+            # semi-implicit Euler: the position uses the clamped new rate
+            lines = [ln for ln in lines if not ln.startswith("p = ")]
+            at = 1 + (2 if math.isfinite(vmax) else 0)
+            lines.insert(at, f"p = q{i} + {dt!r} * w")
+            body += lines
+    body.append(", ".join(qn) + ", = " + ", ".join(f"n_q{i}" for i in range(n)) + ",")
+    body.append(", ".join(vn) + ", = " + ", ".join(f"n_v{i}" for i in range(n)) + ",")
     clamps = "".join(f"    if u{i} > {tmax[i]!r}: u{i} = {tmax[i]!r}\n    if u{i} < {-tmax[i]!r}: u{i} = {-tmax[i]!r}\n"
                      for i in range(n) if math.isfinite(tmax[i]))
     src = (
+        _acc_source(params, dt) + "\n\n"
         "def _stepper(q, qd, tau):\n"
-        f"    {args}, = q\n"
-        f"    {', '.join(f'v{i}' for i in range(n))}, = qd\n"
-        f"    {', '.join(f'u{i}' for i in range(n))}, = tau\n"
+        f"    {', '.join(qn)}, = q\n"
+        f"    {', '.join(vn)}, = qd\n"
+        f"    {', '.join(un)}, = tau\n"
         + clamps
         + f"    for _ in range({int(substeps)}):\n"
         + "".join(f"        {line}\n" for line in body)
-        + f"    return [{args}], [{', '.join(f'v{i}' for i in range(n))}]\n"
+        + f"    return [{', '.join(qn)}], [{', '.join(vn)}]\n"
     )
-    namespace = {"sin": math.sin, "cos": math.cos, "sqrt": math.sqrt}
-    exec(compile(src, f"<tianim.kinematics.arm stepper n={n}>", "exec"), namespace)
+    namespace = {"sin": math.sin, "cos": math.cos, "sqrt": math.sqrt, "impedance": scalar.impedance,
+                 "SOLIMP": None if soft is None else tuple(soft[2:])}
+    exec(compile(src, f"<tianim.kinematics.arm {method} stepper n={n}>", "exec"), namespace)
     fn = namespace["_stepper"]
     fn.source = src
     return fn

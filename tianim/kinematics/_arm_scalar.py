@@ -29,7 +29,25 @@ offset, and generalised forces ``Q_j = u_j - u_{j+1}`` (``u_n = 0``) from the jo
 torques ``u_i = tau_i - b_i q'_i`` (a torque at joint ``i`` acts on link ``i`` and
 reacts on link ``i-1``).
 
-Algorithm per substep of length ``dt`` (semi-implicit Euler):
+Armature ``a_i`` (the rotor inertia of joint i, kinetic energy ``a_i q'_i^2 / 2`` with
+``q'_i = phi'_i - phi'_{i-1}``) adds a constant to the absolute-angle mass matrix:
+
+    H_jj += a_j + a_{j+1},      H_{j,j+1} = H_{j+1,j} -= a_{j+1}                  (2)
+
+Soft joint limits (MuJoCo's, ``PlanarChain(limit_solref=...)``; MuJoCo documentation,
+"Computation: Soft constraints"; engine_core_constraint.c): while joint i is past a limit by
+``r < 0`` (``r = q_i - lower_i``, sign ``s = 1``; or ``r = upper_i - q_i``, ``s = -1``), with
+``A = (M^-1)_ii``, ``R = max(1e-15, (1 - d) w_i / d)`` (``d = d(r)`` the impedance of
+``solimp``, ``w_i`` = ``(M^-1)_ii`` at ``q = 0``, MuJoCo's ``dof_invweight0``),
+``aref = -B s q'_i - K d r`` (``B = 2 / (dmax T)``, ``K = 1 / (dmax^2 T^2 zeta^2)``,
+``T = max(timeconst, 2 dt)``), the joint gets the torque
+
+    f = max(0, (aref - s q''_i) / (A + R)) s,    q'' += f M^-1 e_i                     (3)
+
+(exact for one active limit, the case of MuJoCo's Reacher with its one limited joint; with
+several active at once each is resolved against the unconstrained accelerations).
+
+Algorithm per substep of length ``dt`` (semi-implicit Euler; :func:`step_rk4` is RK4):
 
 1. ``phi``, absolute rates ``w``; torques clamped to ``max_torque`` (once per call);
 2. ``H_jk = C_jk cos(phi_j - phi_k)`` and the right-hand side ``r`` of (1);
@@ -49,7 +67,9 @@ import numpy as np
 def packed(chain) -> np.ndarray:
     """The float64 parameter vector the fast paths read, cached on the (immutable) chain:
     ``[C (n*n, row-major), Gy (n), Gx (n), damping (n), lower (n), upper (n), lengths (n),
-    max_torque (n), max_velocity]`` (equation (1) of the module docstring)."""
+    max_torque (n), max_velocity, armature diagonal (n), armature off-diagonal (n),
+    soft limits (8: timeconst, dampratio, dmin, dmax, width, midpoint, power, MINVAL), invweight0 (n)]``
+    (equations (1)-(3) of the module docstring)."""
     p = chain.__dict__.get("_arm_packed")
     if p is None:
         n = chain.n
@@ -63,33 +83,46 @@ def packed(chain) -> np.ndarray:
                 c[j, k] = c[k, j] = l[j] * l[k] * (half[k] + outer[k])
         gy = -float(chain.gravity[1]) * l * (half + outer)
         gx = -float(chain.gravity[0]) * l * (half + outer)
+        arm = chain.armature
+        ad = arm + np.append(arm[1:], 0.0)   # armature on the diagonal of H: a_j + a_{j+1}
+        ao = np.append(arm[1:], 0.0)         # and off it: H_{j,j+1} -= a_{j+1}
+        soft = [0.0] * 8 if chain.limit_solref is None else [*chain.limit_solref, *chain.limit_solimp, MINVAL]
+        invw = np.zeros(n)
+        if chain.limit_solref is not None:   # MuJoCo's dof_invweight0: diag M^-1 at q = 0
+            from tianim.kinematics.dynamics import mass_matrix
+
+            invw = np.linalg.inv(mass_matrix(chain, np.zeros(n))).diagonal().copy()
         p = np.concatenate([c.ravel(), gy, gx, chain.damping, chain.lower, chain.upper, chain.lengths,
-                            chain.max_torque, [chain.max_velocity]])
+                            chain.max_torque, [chain.max_velocity], ad, ao, soft, invw])
         p.setflags(write=False)
         chain.__dict__["_arm_packed"] = p
     return p
 
 
 def unpack(chain) -> tuple:
-    """Parameters as Python floats: ``(n, C rows, Gy, Gx, b, lower, upper, lengths, max_torque, vmax)``."""
+    """Parameters as Python floats: ``(n, C rows, Gy, Gx, b, lower, upper, lengths, max_torque, vmax,
+    armature diagonal, armature off-diagonal (None without armature), soft limits (a 7-tuple, None
+    for hard limits), invweight0)``."""
     params = chain.__dict__.get("_arm_params")
     if params is None:
         n = chain.n
         p = packed(chain).tolist()
         o = n * n
         rows = [p[o + i * n:o + (i + 1) * n] for i in range(7)]
-        params = (n, [p[j * n:(j + 1) * n] for j in range(n)], *rows, p[o + 7 * n])
+        e = o + 7 * n + 1
+        ad, ao, soft, invw = p[e:e + n], p[e + n:e + 2 * n], p[e + 2 * n:e + 2 * n + 7], p[e + 2 * n + 8:]
+        params = (n, [p[j * n:(j + 1) * n] for j in range(n)], *rows, p[o + 7 * n],
+                  ad if any(chain.armature != 0) else None, ao,
+                  tuple(soft) if chain.limit_solref is not None else None, invw)
         chain.__dict__["_arm_params"] = params
     return params
 
 
-def accelerations(params: tuple, q: list, qd: list, tau: list, ops=math) -> list:
-    """Joint accelerations ``q''`` [rad/s^2] (list of n floats) for angles ``q`` [rad],
-    rates ``qd`` [rad/s] and joint torques ``tau`` [N m] (lists of n floats).
-
-    ``ops`` supplies ``sin``, ``cos`` and ``sqrt`` (:mod:`math`; :mod:`._arm_codegen`
-    passes a tracer to turn this very function into straight-line code)."""
+def factor(params: tuple, q: list, qd: list, tau: list, ops=math) -> tuple[list, list]:
+    """The Cholesky factor ``L`` of ``H`` (lower triangle, list of rows) and the right-hand side ``r``
+    of equation (1) (with the armature (2)) at ``q``, ``qd``, ``tau``."""
     n, c, gy, gx, b = params[:5]
+    ad, ao = params[10], params[11]
     phi = [q[0]] * n
     w = [qd[0]] * n
     for j in range(1, n):
@@ -108,11 +141,13 @@ def accelerations(params: tuple, q: list, qd: list, tau: list, ops=math) -> list
         r[j] = qj
     h = [[0.0] * n for _ in range(n)]
     for j in range(n):
-        h[j][j] = c[j][j]
+        h[j][j] = c[j][j] if ad is None else c[j][j] + ad[j]
         for k in range(j + 1, n):
             d = phi[j] - phi[k]
             s = c[j][k] * ops.sin(d)
             h[j][k] = c[j][k] * ops.cos(d)
+            if ad is not None and k == j + 1:
+                h[j][k] = h[j][k] - ao[j]
             r[j] = r[j] - s * w[k] * w[k]
             r[k] = r[k] + s * w[j] * w[j]
     # Cholesky H = L L^T (L stored in the lower triangle), then two triangular solves.
@@ -128,6 +163,27 @@ def accelerations(params: tuple, q: list, qd: list, tau: list, ops=math) -> list
             for k in range(j):
                 acc = acc - lo[i][k] * lo[j][k]
             lo[i][j] = acc / dj
+    return lo, r
+
+
+def accelerations(params: tuple, q: list, qd: list, tau: list, ops=math, dt: float = 0.0) -> list:
+    """Joint accelerations ``q''`` [rad/s^2] (list of n floats) for angles ``q`` [rad],
+    rates ``qd`` [rad/s] and joint torques ``tau`` [N m] (lists of n floats), with the
+    armature (2) and, for a chain with soft limits, the limit torques (3) of the module
+    docstring (``dt``: the integrator's step [s], which MuJoCo's soft limits read).
+
+    ``ops`` supplies ``sin``, ``cos`` and ``sqrt`` (:mod:`math`; :mod:`._arm_codegen`
+    passes a tracer to turn :func:`factor` and :func:`_solve` into straight-line code)."""
+    n = params[0]
+    lo, r = factor(params, q, qd, tau, ops)
+    qdd = _relative(_solve(lo, r, n), n)
+    if params[12] is not None:
+        qdd = _soft_limits(params, lo, q, qd, qdd, dt)
+    return qdd
+
+
+def _solve(lo: list, r: list, n: int) -> list:
+    """``x`` with ``L L^T x = r`` (forward, then backward substitution)."""
     y = [0.0] * n
     for i in range(n):
         acc = r[i]
@@ -140,13 +196,128 @@ def accelerations(params: tuple, q: list, qd: list, tau: list, ops=math) -> list
         for k in range(i + 1, n):
             acc = acc - lo[k][i] * x[k]
         x[i] = acc / lo[i][i]
+    return x
+
+
+def _relative(x: list, n: int) -> list:
+    """Relative joint accelerations from absolute link accelerations."""
     return [x[0]] + [x[i] - x[i - 1] for i in range(1, n)]
+
+
+MINVAL = 1e-15  # MuJoCo's mjMINVAL
+
+
+def impedance(solimp, r: float) -> float:
+    """MuJoCo's constraint impedance ``d(r)`` (engine_core_constraint.c, getimpedance): from ``dmin``
+    at ``r = 0`` to ``dmax`` at ``|r| >= width`` along two power curves joined at the midpoint."""
+    dmin, dmax, width, mid, power = solimp
+    x = abs(r) / width
+    if x >= 1.0:
+        return dmax
+    if x <= 0.0:
+        return dmin
+    if power == 1.0:
+        y = x
+    elif x <= mid:
+        y = (1.0 / mid ** (power - 1.0)) * x ** power
+    else:
+        y = 1.0 - (1.0 / (1.0 - mid) ** (power - 1.0)) * (1.0 - x) ** power
+    return dmin + y * (dmax - dmin)
+
+
+def soft_gains(params, dt: float) -> tuple[float, float]:
+    """``(K, B)`` of the soft limits (3) for an integrator step ``dt`` [s]."""
+    tc, dr, _dmin, dmax = params[12][:4]
+    if tc < 2.0 * dt:
+        tc = 2.0 * dt          # MuJoCo's "refsafe": the time constant is at least two steps
+    return 1.0 / (dmax * dmax * tc * tc * dr * dr), 2.0 / (dmax * tc)
+
+
+def _soft_limits(params, lo, q, qd, qdd, dt):
+    """Add the soft joint-limit torques (3) to the unconstrained accelerations ``qdd``."""
+    n, lower, upper, invw = params[0], params[5], params[6], params[13]
+    solimp = params[12][2:]
+    kk, bb = soft_gains(params, dt)
+    pushes = []
+    for i in range(n):
+        r = q[i] - lower[i]
+        sign = 1.0
+        if not r < 0.0:
+            r = upper[i] - q[i]
+            sign = -1.0
+            if not r < 0.0:
+                continue
+        imp = impedance(solimp, r)
+        aref = -bb * (sign * qd[i]) - kk * imp * r
+        jar = sign * qdd[i] - aref
+        if not jar < 0.0:
+            continue
+        rhs = [0.0] * n       # a unit torque at joint i acts on link i and reacts on link i-1
+        rhs[i] = 1.0
+        if i > 0:
+            rhs[i - 1] = -1.0
+        col = _relative(_solve(lo, rhs, n), n)   # column i of M^-1
+        rr = (1.0 - imp) * invw[i] / imp
+        if rr < MINVAL:
+            rr = MINVAL
+        force = -jar / (col[i] + rr)
+        pushes.append((sign * force, col))
+    for f, col in pushes:
+        qdd = [qdd[k] + f * col[k] for k in range(n)]
+    return qdd
+
+
+def step_rk4(params: tuple, q: list, qd: list, tau: list, dt: float, substeps: int) -> tuple[list, list]:
+    """Advance one arm by ``substeps`` classical Runge-Kutta steps of ``dt`` [s] (MuJoCo's RK4:
+    ``k = (v, a)`` at the start, the two midpoints and the end, combined ``(k1 + 2 k2 + 2 k3 + k4) / 6``),
+    torques constant and clamped to the torque limits; after each step the speed clamp and, for
+    hard limits, the inelastic stop of :func:`step`. Returns new ``(q, qd)`` lists."""
+    n, lower, upper, tmax, vmax, soft = params[0], params[5], params[6], params[8], params[9], params[12]
+    q = list(q)
+    qd = list(qd)
+    tau = list(tau)
+    for i in range(n):
+        if tau[i] > tmax[i]:
+            tau[i] = tmax[i]
+        if tau[i] < -tmax[i]:
+            tau[i] = -tmax[i]
+    half = 0.5 * dt
+    for _ in range(substeps):
+        a1 = accelerations(params, q, qd, tau, dt=dt)
+        q2 = [q[i] + half * qd[i] for i in range(n)]
+        v2 = [qd[i] + half * a1[i] for i in range(n)]
+        a2 = accelerations(params, q2, v2, tau, dt=dt)
+        q3 = [q[i] + half * v2[i] for i in range(n)]
+        v3 = [qd[i] + half * a2[i] for i in range(n)]
+        a3 = accelerations(params, q3, v3, tau, dt=dt)
+        q4 = [q[i] + dt * v3[i] for i in range(n)]
+        v4 = [qd[i] + dt * a3[i] for i in range(n)]
+        a4 = accelerations(params, q4, v4, tau, dt=dt)
+        for i in range(n):
+            v = qd[i] + dt * ((a1[i] + 2.0 * a2[i] + 2.0 * a3[i] + a4[i]) / 6.0)
+            p = q[i] + dt * ((qd[i] + 2.0 * v2[i] + 2.0 * v3[i] + v4[i]) / 6.0)
+            if v > vmax:
+                v = vmax
+            if v < -vmax:
+                v = -vmax
+            if soft is None:
+                if p < lower[i]:
+                    p = lower[i]
+                    if v < 0.0:
+                        v = 0.0
+                if p > upper[i]:
+                    p = upper[i]
+                    if v > 0.0:
+                        v = 0.0
+            q[i] = p
+            qd[i] = v
+    return q, qd
 
 
 def step(params: tuple, q: list, qd: list, tau: list, dt: float, substeps: int) -> tuple[list, list]:
     """Advance one arm by ``substeps`` semi-implicit Euler steps of ``dt`` [s] with constant
     motor torques ``tau`` (clamped to the torque limits). Returns new ``(q, qd)`` lists."""
-    n, lower, upper, tmax, vmax = params[0], params[5], params[6], params[8], params[9]
+    n, lower, upper, tmax, vmax, soft = params[0], params[5], params[6], params[8], params[9], params[12]
     q = list(q)
     qd = list(qd)
     tau = list(tau)
@@ -156,7 +327,7 @@ def step(params: tuple, q: list, qd: list, tau: list, dt: float, substeps: int) 
         if tau[i] < -tmax[i]:
             tau[i] = -tmax[i]
     for _ in range(substeps):
-        acc = accelerations(params, q, qd, tau)
+        acc = accelerations(params, q, qd, tau, dt=dt)
         for i in range(n):
             v = qd[i] + dt * acc[i]
             if v > vmax:
@@ -164,11 +335,13 @@ def step(params: tuple, q: list, qd: list, tau: list, dt: float, substeps: int) 
             if v < -vmax:
                 v = -vmax
             p = q[i] + dt * v
-            if p < lower[i]:
+            if soft is not None:
+                pass
+            elif p < lower[i]:
                 p = lower[i]
                 if v < 0.0:
                     v = 0.0
-            if p > upper[i]:
+            elif p > upper[i]:
                 p = upper[i]
                 if v > 0.0:
                     v = 0.0

@@ -11,7 +11,9 @@ override. Joint damping ``chain.damping`` (N m s/rad) is viscous friction at the
 joints. SI units throughout.
 
 The equations of motion are ``M(q) qdd + h(q, qd) + b qd = tau`` with ``h`` the
-Coriolis, centrifugal and gravity terms and ``b`` the joint damping.
+Coriolis, centrifugal and gravity terms, ``b`` the joint damping and ``M`` the links' mass
+matrix plus ``diag(chain.armature)`` (rotor inertia reflected through the gearing, which
+spins with the joint rate only: Featherstone 2008, section 9.6; MuJoCo's joint armature).
 :func:`inverse_dynamics` evaluates the left side by the recursive Newton-Euler
 algorithm (Luh, Walker and Paul 1980; Featherstone, *Rigid Body Dynamics
 Algorithms*, 2008, ch. 5) specialised to the plane:
@@ -113,17 +115,18 @@ def inverse_dynamics(chain: PlanarChain, q, qd, qdd, gravity=None) -> np.ndarray
     -------
     tau : ndarray, shape (..., n)
         Motor torques (N m), ``tau = M(q) qdd + C(q, qd) qd + G(q) + b qd`` (``b``:
-        ``chain.damping``); see the module docstring for the recursion and sign conventions.
+        ``chain.damping``; ``M`` includes ``diag(chain.armature)``, the rotor inertia term
+        ``armature_i qdd_i`` added to the links' Newton-Euler torques); see the module docstring for the recursion and sign conventions.
     """
     _check_chain(chain)
     q, qd, qdd = _broadcast_joint_args(chain, q=q, qd=qd, qdd=qdd)
-    return _rnea(chain, q, qd, qdd, _gravity(chain, gravity)) + chain.damping * qd
+    return _rnea(chain, q, qd, qdd, _gravity(chain, gravity)) + chain.armature * qdd + chain.damping * qd
 
 
 def mass_matrix(chain: PlanarChain, q) -> np.ndarray:
     """Joint-space mass matrix ``M(q)``, shape (..., n, n), kg m^2 (symmetric positive definite).
 
-    Column j is ``inverse_dynamics(q, 0, e_j)`` with gravity off.
+    Column j is ``inverse_dynamics(q, 0, e_j)`` with gravity off (the links' M plus ``diag(chain.armature)``).
     """
     _check_chain(chain)
     q = joint_vector("q", q, chain.n)
@@ -131,7 +134,7 @@ def mass_matrix(chain: PlanarChain, q) -> np.ndarray:
     eye = np.eye(n)
     qb = np.broadcast_to(q[..., None, :], q.shape[:-1] + (n, n))
     cols = _rnea(chain, qb, np.zeros_like(qb), np.broadcast_to(eye, qb.shape), np.zeros(2))  # (..., j, i)
-    return np.swapaxes(cols, -1, -2)
+    return np.swapaxes(cols, -1, -2) + np.diag(chain.armature)
 
 
 def bias_torques(chain: PlanarChain, q, qd, gravity=None) -> np.ndarray:

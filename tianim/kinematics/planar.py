@@ -18,9 +18,15 @@ Conventions (used by every function in :mod:`tianim.kinematics` that takes a
   axis; ``damping[i]`` (N m s/rad), viscous friction at joint ``i`` (the joint
   torque is ``tau_i - damping_i qd_i``); ``max_torque[i]`` (N m), the motor's
   torque limit; ``max_velocity`` (rad/s), the joint speed limit; ``gravity``
-  (m/s^2), a world-frame 2-vector. Defaults: 1 kg uniform rods, ``com = l/2``,
-  ``I = m l^2 / 12``, no damping, no torque or speed limit, ``gravity = (0, -9.81)``
-  (the y axis points up; ``(0, 0)`` for an arm lying in a horizontal plane).
+  (m/s^2), a world-frame 2-vector; ``armature[i]`` (kg m^2), the reflected inertia of
+  joint i's motor and gearing: it adds ``armature_i qdd_i`` to joint i's torque (a diagonal
+  added to the mass matrix ``M(q)``; MuJoCo's joint ``armature``, Featherstone 2008,
+  section 9.6); ``limit_solref`` / ``limit_solimp``: None for hard joint limits (the stepper
+  stops a joint on its limit, inelastically) or MuJoCo's soft-constraint parameters (a
+  one-sided spring-damper torque while a joint is past its limit, see :mod:`._arm_scalar`).
+  Defaults: 1 kg uniform rods, ``com = l/2``,
+  ``I = m l^2 / 12``, no damping, no armature, no torque or speed limit, hard limits,
+  ``gravity = (0, -9.81)`` (the y axis points up; ``(0, 0)`` for an arm lying in a horizontal plane).
 * This is the one planar arm model of tianim: inverse and forward dynamics
   (:mod:`tianim.kinematics.dynamics`), the launch-free and batched steppers
   (:mod:`tianim.kinematics.arm`), IK, rendering and the ArmReach environment all
@@ -39,6 +45,29 @@ from tianim._checks import float_array, joint_limits, joint_vector, per_joint
 
 
 DEFAULT_GRAVITY = (0.0, -9.81)
+#: MuJoCo's default constraint impedance (dmin, dmax, width, midpoint, power) (MuJoCo XML reference, solimp).
+DEFAULT_SOLIMP = (0.9, 0.95, 0.001, 0.5, 2.0)
+
+
+def _soft_limits(solref, solimp):
+    """``(solref, solimp)`` as tuples of floats (solref None: hard limits), validated."""
+    if solref is None:
+        return None, None
+    try:
+        ref = tuple(float(v) for v in solref)
+        imp = tuple(float(v) for v in solimp)
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"limit_solref={solref!r} / limit_solimp={solimp!r}: pass (timeconst, dampratio) and "
+                        f"(dmin, dmax, width, midpoint, power) as numbers") from exc
+    if len(ref) != 2 or not all(np.isfinite(ref)) or min(ref) <= 0:
+        raise ValueError(f"limit_solref={solref!r} must be (timeconst > 0 s, dampratio > 0), e.g. MuJoCo's (0.02, 1)")
+    if len(imp) != 5 or not all(np.isfinite(imp)):
+        raise ValueError(f"limit_solimp={solimp!r} must be 5 finite numbers (dmin, dmax, width, midpoint, power)")
+    dmin, dmax, width, mid, power = imp
+    if not (0 < dmin <= dmax < 1 and width > 0 and 0 < mid < 1 and power >= 1):
+        raise ValueError(f"limit_solimp={solimp!r} needs 0 < dmin <= dmax < 1, width > 0, 0 < midpoint < 1, "
+                         f"power >= 1; MuJoCo's default is {DEFAULT_SOLIMP}")
+    return ref, imp
 
 
 def fk_tail_sums(L, bx, by, q):
@@ -104,6 +133,15 @@ class PlanarChain:
         Joint speed limit, rad/s, > 0 (default None: unlimited); the stepper clamps to it.
     gravity : array_like, shape (2,), optional
         World-frame gravitational acceleration, m/s^2 (default ``(0, -9.81)``).
+    armature : array_like, shape (n,) or scalar, optional
+        Reflected motor inertia per joint, kg m^2, >= 0 (default 0), added to the diagonal of M(q).
+    limit_solref : (float, float), optional
+        None (default): hard joint limits. ``(timeconst [s], dampratio)``, both > 0: MuJoCo's
+        soft joint limits with that reference (MuJoCo's default ``(0.02, 1)``).
+    limit_solimp : 5 floats, optional
+        MuJoCo's impedance ``(dmin, dmax, width [rad], midpoint, power)`` of the soft limits
+        (default MuJoCo's ``(0.9, 0.95, 0.001, 0.5, 2)``); 0 < dmin <= dmax < 1, width > 0,
+        0 < midpoint < 1, power >= 1. Used only with ``limit_solref``.
 
     The object is immutable after construction; bad input raises ValueError or
     TypeError naming the argument.
@@ -112,7 +150,8 @@ class PlanarChain:
     task_dim = 2
 
     def __init__(self, lengths, masses=None, com=None, inertias=None, lower=None, upper=None, base=(0.0, 0.0),
-                 damping=None, max_torque=None, max_velocity=None, gravity=DEFAULT_GRAVITY):
+                 damping=None, max_torque=None, max_velocity=None, gravity=DEFAULT_GRAVITY, armature=None,
+                 limit_solref=None, limit_solimp=DEFAULT_SOLIMP):
         lengths = float_array("lengths", lengths, "of shape (n,), metres")
         if lengths.ndim != 1 or lengths.size == 0:
             raise ValueError(f"lengths has shape {lengths.shape}; pass a 1-D list of n >= 1 link lengths in metres")
@@ -138,12 +177,17 @@ class PlanarChain:
         gravity = float_array("gravity", gravity, "of shape (2,), m/s^2")
         if gravity.shape != (2,):
             raise ValueError(f"gravity has shape {gravity.shape}; pass a 2-vector in m/s^2, e.g. (0, -9.81)")
+        armature = per_joint("armature", armature, n, 0.0)
+        if np.any(armature < 0):
+            raise ValueError(f"armature={armature.tolist()} must all be >= 0 kg m^2")
+        solref, solimp = _soft_limits(limit_solref, limit_solimp)
         for name, arr in (("lengths", lengths), ("masses", masses), ("com", com), ("inertias", inertias),
                           ("lower", lo), ("upper", hi), ("base", base), ("damping", damping),
-                          ("max_torque", max_torque), ("gravity", gravity)):
+                          ("max_torque", max_torque), ("gravity", gravity), ("armature", armature)):
             arr.setflags(write=False)
             setattr(self, name, arr)
         self.max_velocity = float(vmax[0])
+        self.limit_solref, self.limit_solimp = solref, solimp
         self.n = n
 
     @property
