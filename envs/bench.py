@@ -6,7 +6,7 @@ Measures, with pre-generated actions and medians over ``--repeats``:
   gymnasium wrappers), resetting when an episode ends;
 * ``armreach_vec_steps_per_s``: ``gym.make_vec`` with N = 4096 copies (env-steps/s), resets included;
   ``armreach_kernel_steps_per_s``: the same N arms stepped by the arm kernel alone
-  (``tianim.kinematics.arm.step_batch``, as the env calls it, no env bookkeeping), and
+  (``tianim.kinematics.ArmSolver``'s kernel path, as the env calls it, no env bookkeeping), and
   ``armreach_vec_kernel_fraction``: their ratio (the share of the kernel's rate the env keeps);
 * ``ropeswing_vec_steps_per_s`` (N = 256) and ``clothfold_steps_per_s`` (single env);
 * ``mujoco_reacher_steps_per_s`` (``gym.make("Reacher-v5")`` measured the same way
