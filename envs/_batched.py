@@ -302,7 +302,8 @@ class SimVectorEnv(BatchedEnv):
         diverged = self._sim.diverged & ~reset_mask
         if saved is not None:
             self._sim.restore(reset_mask, saved)
-        self._step_info = {"diverged": diverged.copy(), "_diverged": diverged.copy()} if diverged.any() else {}
+        # every stepped copy reports it, as the single env does (a copy reset this step has no info)
+        self._step_info = {"diverged": diverged.copy(), "_diverged": ~reset_mask}
         return self._sim.observe(), reward, diverged.copy()
 
     def _observe_all(self):

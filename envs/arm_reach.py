@@ -271,6 +271,7 @@ class ArmReachVectorEnv(BatchedEnv):
         ctrl = a[:, 0] * a[:, 0]
         for i in range(1, self.n_links):
             ctrl = ctrl + a[:, i] * a[:, i]
+        self._step_info = {"distance": dist.copy(), "_distance": ~reset_mask}  # as the single env's info
         return obs, -dist - CTRL_COST * ctrl, np.zeros(self.num_envs, bool)
 
     def _observe_all(self):

@@ -66,7 +66,8 @@ def test_sb3_check_env_and_adapter(env_id):
 @pytest.mark.parametrize("env_id", IDS)
 def test_single_and_batch_copy_are_bit_identical(env_id):
     """Copy k of make_vec(seed=s) behaves exactly like a single env reset with seed s + k,
-    through NEXT_STEP autoresets (shortened episodes)."""
+    through NEXT_STEP autoresets (shortened episodes), ``info`` included: the single env has a key
+    exactly where the vector env's ``_key`` mask holds for copy k, with the same value."""
     n, k, horizon = 3, 2, 7
     single = gym.make(env_id, max_episode_steps=horizon)
     venv = gym.make_vec(env_id, num_envs=n, max_episode_steps=horizon)
@@ -78,14 +79,18 @@ def test_single_and_batch_copy_are_bit_identical(env_id):
     done = False
     for _ in range(2 * horizon + 3):
         acts = rng.uniform(-1.2, 1.2, (n, *shape)).astype(np.float32)
-        vobs, vrew, vterm, vtrunc, _ = venv.step(acts)
+        vobs, vrew, vterm, vtrunc, vinfo = venv.step(acts)
         if done:  # NEXT_STEP: this step of the batch was the reset of copy k
             assert vrew[k] == 0.0 and not vterm[k] and not vtrunc[k]
             obs, _ = single.reset()
             done = False
         else:
-            obs, rew, term, trunc, _ = single.step(acts[k])
+            obs, rew, term, trunc, info = single.step(acts[k])
             assert vrew[k] == rew and bool(vterm[k]) == term and bool(vtrunc[k]) == trunc
+            present = {key for key in vinfo if not key.startswith(("_", "final")) and vinfo[f"_{key}"][k]}
+            assert set(info) == present, (set(info), present)
+            for key in present:
+                assert np.array_equal(np.asarray(vinfo[key][k]), np.asarray(info[key]), equal_nan=True), key
             done = term or trunc
         assert np.array_equal(vobs[k], obs)
     single.close()
