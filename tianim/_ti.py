@@ -45,6 +45,8 @@ _BANNER_ENV = "ENABLE_TAICHI_HEADER_PRINT"
 _lock = threading.Lock()
 _module = None
 _verbose: bool | None = None
+#: Containers of Taichi objects that belong to one program (fields, SNode trees): see :func:`per_program`.
+_per_program: list = []
 
 
 class ConfigError(ValueError):
@@ -194,6 +196,23 @@ def cached_kernels(build):
     the hundredth scene from compiling anything again (kernels take arrays as arguments).
     """
     return functools.lru_cache(maxsize=None)(build)
+
+
+def per_program(container):
+    """Register ``container`` (a dict or list of fields, SNode trees...) as belonging to the live program.
+
+    Kernels survive a new program (Taichi resets and recompiles them), fields do not: when
+    :mod:`tianim.runtime` replaces the program (in a forked child), it empties every registered
+    container with ``container.clear()``, so the next use builds them afresh. Returns ``container``.
+    """
+    _per_program.append(container)
+    return container
+
+
+def forget_program_objects() -> None:
+    """Empty every container registered with :func:`per_program` (the program they belonged to is gone)."""
+    for container in _per_program:
+        container.clear()
 
 
 def __getattr__(name: str):

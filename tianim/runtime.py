@@ -22,6 +22,17 @@ every loop layout. The number of CPU threads can be set with
 
 Taichi itself is reached through :mod:`tianim._ti` (``TIANIM_BACKEND`` picks
 ``taichi`` or its fork ``quadrants``).
+
+**Forked children.** A process forked (``os.fork``, multiprocessing's default ``fork`` start
+method on Linux, Gymnasium's ``AsyncVectorEnv``) after Taichi started inherits a program whose
+CPU worker threads do not exist in the child: its next kernel launch waits for them forever, and
+so does the program's destructor. tianim registers an :func:`os.register_at_fork` hook that, in
+the child, finalises that program, keeps its object alive forever (its destructor would wait too),
+empties the containers of fields registered with :func:`tianim._ti.per_program`, and starts a
+fresh CPU program with the same settings (arch, threads, ``ti.init`` options); existing kernel
+objects recompile there (the offline cache makes that quick). A GPU program cannot be carried into
+a forked child (CUDA and Vulkan drivers do not support it): there the child's next tianim call
+raises :class:`ForkedRuntimeError`, which says to start workers with ``"spawn"`` or ``"forkserver"``.
 """
 
 from __future__ import annotations
@@ -43,11 +54,19 @@ PROBE_TIMEOUT_S = 120
 
 _lock = threading.Lock()
 _init_by_tianim: dict | None = None
+#: The ``ti.init`` arguments tianim used (so that a forked child can start the same program again).
+_init_kwargs: dict | None = None
+#: Set in a forked child whose inherited program ran on this GPU arch (it cannot run there).
+_forked_gpu_arch: str | None = None
 _probe_cache: dict[tuple[str, str], tuple[bool, str]] = {}
 
 
 class ArchFallbackWarning(RuntimeWarning):
     """The requested arch is not usable on this machine; tianim runs on the CPU instead."""
+
+
+class ForkedRuntimeError(RuntimeError):
+    """This process was forked from one whose Taichi ran on a GPU; the program cannot continue here."""
 
 
 def is_initialized() -> bool:
@@ -186,17 +205,86 @@ def init(arch: str | None = None, num_threads: int | None = None, **ti_kwargs) -
         if threads is not None:
             kwargs["cpu_max_num_threads"] = threads
         kwargs.update(ti_kwargs)
+        kwargs["arch"] = getattr(ti, name)
         with _ti.quiet():
-            ti.init(arch=getattr(ti, name), **kwargs)
+            ti.init(**kwargs)
+        global _init_kwargs
+        _init_kwargs = kwargs
         _init_by_tianim = {"arch": current_arch(), "initialized_by": "tianim", **info}
         return dict(_init_by_tianim)
 
 
 def ensure_taichi():
     """Return the Taichi module (see :mod:`tianim._ti`), initialising it on first need."""
+    if _forked_gpu_arch is not None:
+        raise ForkedRuntimeError(
+            f"this process was forked from one running Taichi on {_forked_gpu_arch}, which cannot continue in a "
+            "forked child; start worker processes with 'spawn' or 'forkserver' (Gymnasium: gym.make_vec(..., "
+            "vectorization_mode='async', vector_kwargs={'context': 'spawn'}))"
+        )
     if not is_initialized():
         init()
     return _ti.get()
+
+
+#: Settings of a user's own ``ti.init`` that a forked child's new program keeps (CompileConfig names).
+_USER_SETTINGS = ("cpu_max_num_threads", "fast_math", "default_fp", "default_ip", "debug", "random_seed",
+                  "offline_cache", "offline_cache_file_path", "opt_level")
+#: Old programs of forked children, referenced for ever (see :func:`_restart_in_forked_child`).
+_abandoned: list = []
+
+
+def _restart_in_forked_child() -> None:
+    """``os.register_at_fork(after_in_child=...)``: replace the program inherited through ``fork``.
+
+    The inherited program's worker threads were not copied, so launching a kernel on it, or
+    destroying it, waits for ever. ``finalize()`` (which joins nothing) releases Taichi's
+    one-program slot; the object's reference count is raised once more through the C API so that
+    not even interpreter shutdown runs its destructor. Then a CPU program with the parent's settings
+    starts. A GPU program is left alone (touching its driver in a child is unsafe): tianim's next
+    call raises :class:`ForkedRuntimeError`.
+    """
+    global _forked_gpu_arch, _init_kwargs
+    if not is_initialized():
+        return
+    ti = _ti.get()
+    runtime = ti.lang.impl.get_runtime()
+    arch = current_arch()
+    if arch not in ("x64", "arm64"):
+        _forked_gpu_arch = arch
+        return
+    if _init_kwargs is not None:
+        kwargs = dict(_init_kwargs)
+    else:  # the user's own ti.init: keep what tianim can read back of it
+        cfg = ti.lang.impl.current_cfg()
+        kwargs = {"arch": ti.cpu, "log_level": ti.WARN}
+        for key in _USER_SETTINGS:
+            if hasattr(cfg, key):
+                kwargs[key] = getattr(cfg, key)
+    old = runtime.prog
+    old.finalize()
+    import ctypes
+
+    ctypes.pythonapi.Py_IncRef(ctypes.py_object(old))
+    _abandoned.append(old)
+    runtime.prog = None
+    _ti.forget_program_objects()
+    with _lock, _ti.quiet():
+        ti.init(**kwargs)
+    if _init_kwargs is not None:
+        _init_kwargs = kwargs
+
+
+def _after_fork_in_child() -> None:
+    try:
+        _restart_in_forked_child()
+    except Exception as exc:  # never break a fork: say what happened, the child may not even need Taichi
+        warnings.warn(f"tianim could not restart Taichi in this forked process ({exc!r}); start worker "
+                      "processes with 'spawn' or 'forkserver'", RuntimeWarning, stacklevel=1)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)
 
 
 def current_arch() -> str:
