@@ -211,3 +211,58 @@ def test_banner_switch_is_not_left_in_the_environment():
     """)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines()[-1] == "None"
+
+
+# ------------------------------------------------------------------ issue 24: errors that point the right way
+
+STEP_A_ROPE = "import tianim.physics as tp; m = tp.rope(n=4); s = m.state(); tp.step(m, s, 1e-4)"
+
+
+@pytest.mark.parametrize("var, value", [("TIANIM_ARCH", "tpu"), ("TIANIM_BACKEND", "taichy"),
+                                        ("TIANIM_NUM_THREADS", "abc")])
+def test_bad_environment_value_in_library_code_is_one_line(var, value):
+    out = run(STEP_A_ROPE, **{var: value})
+    assert out.returncode == 1 and "Traceback" not in out.stderr, out.stderr
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("tianim: error: ") and f"{var}={value!r}" in lines[0], lines
+    caught = run(f"""
+        import tianim.runtime as rt
+        try:
+            {STEP_A_ROPE}
+        except rt.ConfigError as e:
+            print("caught", type(e).__name__)
+    """, **{var: value})
+    assert caught.stdout.split() == ["caught", "ConfigError"], caught.stderr  # still an exception to catch
+    full = run(STEP_A_ROPE, TIANIM_TRACEBACK="1", **{var: value})
+    assert "Traceback" in full.stderr and "ConfigError" in full.stderr
+
+
+def test_bad_arch_in_a_gymnasium_env_is_one_line():
+    out = run("import gymnasium as gym; e = gym.make('envs:tianim/RopeSwing-v0'); e.reset(seed=0); "
+              "e.step(e.action_space.sample())", TIANIM_ARCH="tpu",
+              PYTHONPATH=os.pathsep.join(sys.path))
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert out.returncode == 1 and len(lines) == 1 and "TIANIM_ARCH='tpu'" in lines[0], out.stderr
+
+
+def test_far_too_many_threads_warn_once_naming_the_cores():
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    too_many, fine = 2 * cores + 1, 2 * cores
+    out = run(STEP_A_ROPE + "; print(rt.num_threads())".replace("rt.", "__import__('tianim.runtime').runtime."),
+              TIANIM_NUM_THREADS=str(too_many))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == [str(too_many)]  # a warning, not an error: the count is used
+    assert out.stderr.count("ThreadCountWarning") == 1
+    assert f"TIANIM_NUM_THREADS={too_many}" in out.stderr and f"the {cores} CPU core" in out.stderr
+    assert "ThreadCountWarning" not in run(STEP_A_ROPE, TIANIM_NUM_THREADS=str(fine)).stderr
+    cli = tianim_cmd("info", TIANIM_NUM_THREADS=str(too_many))
+    assert cli.returncode == 0 and f"tianim: warning: TIANIM_NUM_THREADS={too_many} is far more" in cli.stderr
+
+
+def test_version_flag():
+    from importlib import metadata
+
+    out = tianim_cmd("--version")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == f"tianim {metadata.version('tianim')} (taichi {metadata.version('taichi')})"
+    assert "[Taichi]" not in out.stdout + out.stderr

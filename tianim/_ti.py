@@ -50,7 +50,12 @@ _per_program: list = []
 
 
 class ConfigError(ValueError):
-    """A bad ``TIANIM_*`` setting (one line, no traceback needed): the ``tianim`` command prints it."""
+    """A bad ``TIANIM_*`` setting (one line, no traceback needed): the ``tianim`` command prints it.
+
+    Raised at first use (the first kernel, or the first look at the Taichi package); when a script
+    does not catch it, :func:`_excepthook` prints it as one ``tianim: error: ...`` line: where in
+    the script it surfaced says nothing about a typo in the environment.
+    """
 
 
 class MissingTaichiError(ConfigError, ImportError):
@@ -196,6 +201,22 @@ def cached_kernels(build):
     the hundredth scene from compiling anything again (kernels take arrays as arguments).
     """
     return functools.lru_cache(maxsize=None)(build)
+
+
+def _excepthook(kind, value, tb, _previous=sys.excepthook):
+    """``sys.excepthook``: an uncaught :class:`ConfigError` is one line on stderr; anything else as before.
+
+    Set ``TIANIM_TRACEBACK=1`` for the full traceback of a ConfigError too. Installed when tianim is
+    imported, only if the hook is still Python's default (a hook of the user's or of IPython stays).
+    """
+    if issubclass(kind, ConfigError) and os.environ.get("TIANIM_TRACEBACK", "").strip() in ("", "0"):
+        print(f"tianim: error: {value}", file=sys.stderr)
+        return
+    _previous(kind, value, tb)
+
+
+if sys.excepthook is sys.__excepthook__:
+    sys.excepthook = _excepthook
 
 
 def per_program(container):

@@ -65,6 +65,36 @@ class ArchFallbackWarning(RuntimeWarning):
     """The requested arch is not usable on this machine; tianim runs on the CPU instead."""
 
 
+class ThreadCountWarning(RuntimeWarning):
+    """More CPU threads were asked for than this process has cores to run them (same results, slower)."""
+
+
+#: A thread count above this many times the usable cores is a typo or a copied setting, not a choice:
+#: Taichi's workers then take turns on the cores (each parallel loop waits for the slowest wake-up).
+#: Up to 2x stays silent: determinism checks and hyper-threaded hosts ask for that on purpose.
+OVERSUBSCRIPTION_WARN_FACTOR = 2
+
+
+def usable_cores() -> int:
+    """CPU cores this process may run on (its affinity mask where the OS has one, else ``os.cpu_count()``)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except (AttributeError, OSError):
+        return max(1, os.cpu_count() or 1)
+
+
+def _warn_oversubscription(threads: int, from_env: bool) -> None:
+    cores = usable_cores()
+    if threads > OVERSUBSCRIPTION_WARN_FACTOR * cores:
+        where = f"TIANIM_NUM_THREADS={threads}" if from_env else f"num_threads={threads}"
+        warnings.warn(
+            f"{where} is far more than the {cores} CPU core{'s' if cores > 1 else ''} this process can use: "
+            f"the threads would take turns (same results, slower); use at most {cores}"
+            + (" or unset it for all cores" if from_env else ""),
+            ThreadCountWarning, stacklevel=4,
+        )
+
+
 class ForkedRuntimeError(RuntimeError):
     """This process was forked from one whose Taichi ran on a GPU; the program cannot continue here."""
 
@@ -203,6 +233,7 @@ def init(arch: str | None = None, num_threads: int | None = None, **ti_kwargs) -
         ti = _ti.get()
         kwargs = dict(fast_math=False, log_level=ti.WARN)
         if threads is not None:
+            _warn_oversubscription(threads, from_env=num_threads is None)
             kwargs["cpu_max_num_threads"] = threads
         kwargs.update(ti_kwargs)
         kwargs["arch"] = getattr(ti, name)

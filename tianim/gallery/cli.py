@@ -37,7 +37,7 @@ def main(argv=None) -> int:
         if not args.out:
             raise ValueError("--out FILE is required (e.g. --out cloth.mp4, .gif or .png)")
         width, height = parse_size(args.size)
-        spec = check_output(args.out, (width, height), args.fps)
+        spec = check_output(args.out, (width, height), args.fps, name="--out")
         n = demo.FRAMES if args.frames is None else args.frames
         if n < 1:
             raise ValueError(f"--frames {n} must be >= 1")
