@@ -266,3 +266,80 @@ def test_version_flag():
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == f"tianim {metadata.version('tianim')} (taichi {metadata.version('taichi')})"
     assert "[Taichi]" not in out.stdout + out.stderr
+
+
+# ------------------------------------------------------------------ issue 24: the compile notice
+
+#: A kernel factory of the tianim kind with a tiny kernel (quick to compile cold); argv[1] is its key.
+TINY = """
+import sys
+import numpy as np
+from tianim import _ti
+from tianim.runtime import ensure_taichi
+
+@_ti.cached_kernels
+def tiny(scale):
+    ti = ensure_taichi()
+    @ti.kernel
+    def k(a: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        for i in range(a.shape[0]):
+            a[i] += scale
+    return k
+
+for key in sys.argv[1:]:
+    tiny(float(key))(np.zeros(4, np.float32))
+    tiny(float(key))(np.zeros(4, np.float32))   # cached: no second build
+"""
+
+
+def _tiny(tmp_path, *keys, **env):
+    script = tmp_path / "tiny.py"   # Taichi reads a kernel's source from its file
+    script.write_text(TINY)
+    out = subprocess.run([sys.executable, str(script), *keys], capture_output=True, text=True,
+                         env=dict(os.environ, **{"TIANIM_VERBOSE": "", **env}))
+    assert out.returncode == 0, out.stderr
+    return [ln for ln in out.stderr.splitlines() if ln.strip()]
+
+
+def test_compile_notice_once_per_process_only_on_a_cold_cache(tmp_path):
+    """An empty offline cache: one notice for two new variants; the next process (same cache) none;
+    a new variant one again; TIANIM_VERBOSE=0: none; no offline cache: one, even for a variant cached."""
+    from tianim._ti import COMPILE_NOTICE
+
+    cache = {"TI_OFFLINE_CACHE_FILE_PATH": str(tmp_path / "ticache")}
+    assert _tiny(tmp_path, "1", "2", **cache) == [COMPILE_NOTICE]
+    assert _tiny(tmp_path, "1", "2", **cache) == []
+    assert _tiny(tmp_path, "2", "3", **cache) == [COMPILE_NOTICE]
+    assert _tiny(tmp_path, "4", TIANIM_VERBOSE="0", **cache) == []
+    assert _tiny(tmp_path, "4", **cache) == []   # the quiet run compiled it and cached it
+    # key 1 is cached, but without the offline cache every process compiles it again
+    assert _tiny(tmp_path, "1", TI_OFFLINE_CACHE="0", **cache) == [COMPILE_NOTICE]
+
+
+ENV_FIRST_STEP = """
+import gymnasium as gym, envs, tianim.runtime as rt
+env = gym.make("tianim/RopeSwing-v0", render_mode="rgb_array")
+before = rt.compiled_kernel_count()
+env.reset(seed=0); env.step(env.action_space.sample()); env.render()
+print(before, rt.compiled_kernel_count())
+"""
+
+
+def _env_first_step(**env):
+    out = run(ENV_FIRST_STEP, PYTHONPATH=os.pathsep.join(sys.path), **env)
+    assert out.returncode == 0, out.stderr
+    before, after = out.stdout.split()[-2:]
+    assert int(before) > 0 and after == before   # Taichi's own count of compiled kernel instances
+    return [ln for ln in out.stderr.splitlines() if ln.startswith("tianim:")]
+
+
+def test_env_construction_compiles_what_its_first_step_and_frame_need():
+    _env_first_step()
+
+
+@pytest.mark.slow
+def test_env_construction_on_a_cold_cache_says_what_compiles_and_how_long(tmp_path):
+    lines = _env_first_step(TI_OFFLINE_CACHE_FILE_PATH=str(tmp_path / "ticache"), TIANIM_VERBOSE="")
+    assert len(lines) == 2 and "kernels for RopeSwingEnv" in lines[0], lines
+    assert lines[1].startswith("tianim: RopeSwingEnv: kernels compiled in "), lines
+    assert float(lines[1].split(" in ")[1].split()[0]) > 0

@@ -37,10 +37,12 @@ raises :class:`ForkedRuntimeError`, which says to start workers with ``"spawn"``
 
 from __future__ import annotations
 
+import contextlib
 import os
 import subprocess
 import sys
 import threading
+import time
 import warnings
 
 from tianim import _ti
@@ -316,6 +318,27 @@ def _after_fork_in_child() -> None:
 
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+@contextlib.contextmanager
+def warming(label: str):
+    """A block that compiles kernels ahead of use (an environment's constructor steps a scratch copy).
+
+    When a kernel variant built inside is not in Taichi's offline cache yet, tianim prints the
+    compile notice naming ``label`` before the compile, and at the end of the block one more line
+    with the time it took (both on stderr, silenced like every notice: ``TIANIM_VERBOSE=0``).
+    A warm cache prints nothing.
+    """
+    block = {"label": str(label), "cold": 0}
+    _ti._warming.append(block)
+    t0 = time.perf_counter()
+    try:
+        yield
+    finally:
+        _ti._warming.remove(block)
+        if block["cold"] and _ti.notices():
+            print(f"tianim: {label}: kernels compiled in {time.perf_counter() - t0:.1f} s "
+                  "(cached on disk: later runs start faster)", file=sys.stderr, flush=True)
 
 
 def current_arch() -> str:
