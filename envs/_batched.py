@@ -31,6 +31,7 @@ and ``_observe_copies(idx)``; see their docstrings.
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import gymnasium as gym
@@ -209,8 +210,13 @@ def warm_kernels(sim_class, batch: int, render: bool, label: str) -> None:
     seeded 0), steps it once with zero actions and draws frame 0, then drops it: the env's own
     state and random streams are untouched. Same batch size as the env, so the loop layouts chosen
     (which depend on the batch) are the ones its steps will use. On a cold cache
-    :func:`tianim.runtime.warming` says what is compiling and how long it took.
+    :func:`tianim.runtime.warming` says what is compiling and how long it took. Once per process
+    for each (sim class, batch, render): the next env of the same kind compiles nothing new, so it
+    skips the scratch step (the process id is part of the key: a forked child compiles afresh).
     """
+    key = (os.getpid(), sim_class, int(batch), bool(render))
+    if key in _WARMED:
+        return
     with runtime.warming(label):
         sim = sim_class(batch)
         idx = np.arange(batch, dtype=np.int64)
@@ -224,6 +230,11 @@ def warm_kernels(sim_class, batch: int, render: bool, label: str) -> None:
         sim.step(np.zeros((batch, *action_space.shape), np.float32))
         if render:
             sim.frame(0)
+    _WARMED.add(key)
+
+
+#: (process id, sim class, batch, render) already warmed by :func:`warm_kernels`.
+_WARMED: set = set()
 
 
 def _label(env) -> str:
