@@ -16,13 +16,19 @@
 Two ways to make one (Gymnasium 1.x)::
 
     import gymnasium as gym
-    env = gym.make("envs:tianim/ArmReach-v0")   # Gymnasium imports ``envs`` first: no import needed
+    env = gym.make("envs:tianim/ArmReach-v1")   # Gymnasium imports ``envs`` first: no import needed
     import envs                                 # or import this package once ...
-    env = gym.make("tianim/ArmReach-v0")        # ... and use the plain id
+    env = gym.make("tianim/ArmReach-v1")        # ... and use the plain id
 
 Without either, Gymnasium answers "Namespace tianim not found. Have you installed the proper
-package for tianim?": the ids live here, and ``tianim`` itself never imports Gymnasium (a layering
-rule, docs/architecture.md), so it cannot register them. :data:`ENV_IDS` lists the ids.
+package for tianim?": the ids live here, ``tianim`` itself never imports Gymnasium (a layering
+rule, docs/architecture.md), and Gymnasium 1.x loads no plugins from package entry points (its
+``registration.py`` has no entry-point loader since 1.0), so installing cannot register them either.
+:data:`ENV_IDS` lists the ids.
+
+Vectorization: ``gym.make_vec(id, num_envs=N)`` uses the batched class (all copies in one kernel
+launch); ``vectorization_mode="async"`` works too (a forked worker replaces the Taichi program it
+inherited, :mod:`tianim.runtime`); on a GPU arch give it ``vector_kwargs={"context": "spawn"}``.
 ``envs.sb3.SB3VecEnv`` adapts a batched env to Stable-Baselines3;
 ``envs.baselines`` has a scripted controller per task.
 """

@@ -31,6 +31,7 @@ and ``_observe_copies(idx)``; see their docstrings.
 
 from __future__ import annotations
 
+import os
 from typing import Any
 
 import gymnasium as gym
@@ -39,6 +40,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
+from tianim import runtime
 from tianim._checks import fmt
 
 from ._render import no_render_mode
@@ -201,6 +203,45 @@ def _check_render_mode(render_mode):
     return render_mode
 
 
+def warm_kernels(sim_class, batch: int, render: bool, label: str) -> None:
+    """Compile now every kernel that the env's steps (and frames, when ``render``) use.
+
+    Builds a scratch ``sim_class(batch)``, starts every copy (fixed uniforms 0.5, or a generator
+    seeded 0), steps it once with zero actions and draws frame 0, then drops it: the env's own
+    state and random streams are untouched. Same batch size as the env, so the loop layouts chosen
+    (which depend on the batch) are the ones its steps will use. On a cold cache
+    :func:`tianim.runtime.warming` says what is compiling and how long it took. Once per process
+    for each (sim class, batch, render): the next env of the same kind compiles nothing new, so it
+    skips the scratch step (the process id is part of the key: a forked child compiles afresh).
+    """
+    key = (os.getpid(), sim_class, int(batch), bool(render))
+    if key in _WARMED:
+        return
+    with runtime.warming(label):
+        sim = sim_class(batch)
+        idx = np.arange(batch, dtype=np.int64)
+        draws = getattr(sim_class, "RESET_DRAWS", None)
+        if draws is None:
+            for k in idx.tolist():
+                sim.reset(k, np.random.default_rng(0))
+        else:
+            sim.reset_copies(idx, np.full((batch, draws), 0.5))
+        action_space, _ = sim_class.spaces()
+        sim.step(np.zeros((batch, *action_space.shape), np.float32))
+        if render:
+            sim.frame(0)
+    _WARMED.add(key)
+
+
+#: (process id, sim class, batch, render) already warmed by :func:`warm_kernels`.
+_WARMED: set = set()
+
+
+def _label(env) -> str:
+    spec = getattr(env, "spec", None)
+    return spec.id if spec is not None and getattr(spec, "id", None) else type(env).__name__
+
+
 class SimEnv(gym.Env):
     """A single environment over a task simulation of batch size 1.
 
@@ -228,6 +269,7 @@ class SimEnv(gym.Env):
         self._sim = None
         self._key = None   # Philox key of this env's episodes (its seed) and the episode number
         self._episode = 0
+        warm_kernels(self.sim_class, 1, self.render_mode is not None, type(self).__name__)
 
     def reset(self, *, seed=None, options=None):
         super().reset(seed=seed)
@@ -279,6 +321,7 @@ class SimVectorEnv(BatchedEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self._sim = self.sim_class(self.num_envs)
+        warm_kernels(self.sim_class, self.num_envs, self.render_mode is not None, type(self).__name__)
 
     def _reset_copies(self, idx):
         draws = getattr(self.sim_class, "RESET_DRAWS", None)

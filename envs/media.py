@@ -12,6 +12,7 @@ import gymnasium as gym
 import imageio.v2 as imageio
 
 import envs
+from tianim.render import make_output_folder
 from envs.baselines import make_baseline
 
 
@@ -34,7 +35,10 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="docs/media")
     args = p.parse_args(argv)
-    os.makedirs(args.out, exist_ok=True)
+    try:
+        make_output_folder("--out", args.out)
+    except (TypeError, ValueError) as exc:
+        p.error(str(exc))
     for env_id in envs.ENV_IDS:
         name = env_id.split("/")[1].split("-")[0].lower()
         path = os.path.join(args.out, f"{name}.gif")

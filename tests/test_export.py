@@ -58,13 +58,20 @@ def test_bad_outputs_fail_early(tmp_path, path, size, match):
         check_output(str(tmp_path / path), size)
 
 
-def test_missing_folders_are_created_and_a_file_parent_is_rejected(tmp_path):
-    res = export(_frames(2), str(tmp_path / "new" / "deeper" / "f.png"))
+def test_only_the_last_missing_folder_is_created_and_a_file_parent_is_rejected(tmp_path):
+    res = export(_frames(2), str(tmp_path / "new" / "f.png"))
     assert [os.path.basename(p) for p in res.paths] == ["f_0000.png", "f_0001.png"]
     export(_frames(2), str(tmp_path / "other" / "out.gif"))
     assert (tmp_path / "other" / "out.gif").is_file()
+    deep = tmp_path / "typo" / "deeper" / "f.png"   # two missing levels: a typo, not a request
+    with pytest.raises(ValueError, match="parent folder") as err:
+        export(_frames(2), str(deep))
+    assert repr(str(deep)) in str(err.value) and repr(str(tmp_path / "typo")) in str(err.value)
+    assert not (tmp_path / "typo").exists()
     (tmp_path / "afile").write_text("x")
-    with pytest.raises(ValueError, match="not a directory"):
+    with pytest.raises(ValueError, match="not a folder"):
+        check_output(str(tmp_path / "afile" / "out.mp4"))
+    with pytest.raises(ValueError, match="is a file, not a folder"):
         check_output(str(tmp_path / "afile" / "sub" / "out.mp4"))
     assert not (tmp_path / "nothing").exists() and check_output(str(tmp_path / "nothing" / "x.mp4"))
     assert not (tmp_path / "nothing").exists()  # checking creates nothing
@@ -104,3 +111,32 @@ def test_progress_without_tqdm_prints_plain_lines(tmp_path, monkeypatch, capsys)
             w.append(frame)
     lines = [ln for ln in capsys.readouterr().err.splitlines() if "frames" in ln]
     assert len(lines) == 10 and lines[-1] == "f.gif: 50/50 frames", lines
+
+
+def test_demo_out_folder_typo_is_one_clear_line_and_creates_nothing(tmp_path, capsys):
+    from tianim.gallery.cli import main
+
+    out = tmp_path / "typo" / "deeper" / "x.gif"
+    assert main(["spring1d", "--out", str(out), "--frames", "2", "--size", "32x24", "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"tianim demo: --out={str(out)!r}") and repr(str(tmp_path / "typo")) in err[0]
+    assert not (tmp_path / "typo").exists()
+
+
+def test_no_new_folder_at_the_filesystem_root():
+    root = os.path.abspath(os.sep)
+    name = "tianim-surely-not-a-folder-here"
+    assert not os.path.exists(os.path.join(root, name))
+    with pytest.raises(ValueError, match="filesystem root") as err:
+        check_output(os.path.join(root, name, "x.mp4"))
+    assert repr(name) in str(err.value)   # the relative name that was probably meant
+    assert not os.path.exists(os.path.join(root, name))
+
+
+def test_output_folder_of_a_command(tmp_path):
+    from tianim.render import make_output_folder
+
+    assert make_output_folder("--out", tmp_path / "new") == str(tmp_path / "new") and (tmp_path / "new").is_dir()
+    with pytest.raises(ValueError, match=r"--out=.*parent folder"):
+        make_output_folder("--out", tmp_path / "a" / "b")
+    assert not (tmp_path / "a").exists()

@@ -77,3 +77,20 @@ def test_readme_block_runs_alone(tmp_path, kind, code):
             out = argv[argv.index("--out") + 1]
             made = list(tmp_path.glob(out.replace(".png", "_*.png"))) if out.endswith(".png") else [tmp_path / out]
             assert made and all(p.is_file() for p in made), f"{line} wrote nothing at {out}"
+
+
+def test_readme_gymnasium_example_is_current_and_says_what_to_import(tmp_path):
+    """Issue 24: the first Gymnasium line says how the ids get registered; the example uses the current
+    ArmReach version and prints none of Gymnasium's out-of-date warnings."""
+    text = README.read_text(encoding="utf-8")
+    section = text[text.index("### Gymnasium environments"):]
+    first = section.split("\n\n")[1]
+    assert "import envs" in first and "envs:" in first
+    kind, code = next((m.group(1), m.group(2)) for m in FENCE.finditer(section))
+    assert kind == "python" and "ArmReach-v0" not in code
+    script = tmp_path / "gym_block.py"
+    script.write_text(code, encoding="utf-8")
+    r = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=_env(), capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr[-3000:]
+    assert "out of date" not in r.stderr and "Warn" not in r.stderr, r.stderr

@@ -211,3 +211,135 @@ def test_banner_switch_is_not_left_in_the_environment():
     """)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip().splitlines()[-1] == "None"
+
+
+# ------------------------------------------------------------------ issue 24: errors that point the right way
+
+STEP_A_ROPE = "import tianim.physics as tp; m = tp.rope(n=4); s = m.state(); tp.step(m, s, 1e-4)"
+
+
+@pytest.mark.parametrize("var, value", [("TIANIM_ARCH", "tpu"), ("TIANIM_BACKEND", "taichy"),
+                                        ("TIANIM_NUM_THREADS", "abc")])
+def test_bad_environment_value_in_library_code_is_one_line(var, value):
+    out = run(STEP_A_ROPE, **{var: value})
+    assert out.returncode == 1 and "Traceback" not in out.stderr, out.stderr
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("tianim: error: ") and f"{var}={value!r}" in lines[0], lines
+    caught = run(f"""
+        import tianim.runtime as rt
+        try:
+            {STEP_A_ROPE}
+        except rt.ConfigError as e:
+            print("caught", type(e).__name__)
+    """, **{var: value})
+    assert caught.stdout.split() == ["caught", "ConfigError"], caught.stderr  # still an exception to catch
+    full = run(STEP_A_ROPE, TIANIM_TRACEBACK="1", **{var: value})
+    assert "Traceback" in full.stderr and "ConfigError" in full.stderr
+
+
+def test_bad_arch_in_a_gymnasium_env_is_one_line():
+    out = run("import gymnasium as gym; e = gym.make('envs:tianim/RopeSwing-v0'); e.reset(seed=0); "
+              "e.step(e.action_space.sample())", TIANIM_ARCH="tpu",
+              PYTHONPATH=os.pathsep.join(sys.path))
+    lines = [ln for ln in out.stderr.splitlines() if ln.strip()]
+    assert out.returncode == 1 and len(lines) == 1 and "TIANIM_ARCH='tpu'" in lines[0], out.stderr
+
+
+def test_far_too_many_threads_warn_once_naming_the_cores():
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    too_many, fine = 2 * cores + 1, 2 * cores
+    out = run(STEP_A_ROPE + "; print(rt.num_threads())".replace("rt.", "__import__('tianim.runtime').runtime."),
+              TIANIM_NUM_THREADS=str(too_many))
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == [str(too_many)]  # a warning, not an error: the count is used
+    assert out.stderr.count("ThreadCountWarning") == 1
+    assert f"TIANIM_NUM_THREADS={too_many}" in out.stderr and f"the {cores} CPU core" in out.stderr
+    assert "ThreadCountWarning" not in run(STEP_A_ROPE, TIANIM_NUM_THREADS=str(fine)).stderr
+    cli = tianim_cmd("info", TIANIM_NUM_THREADS=str(too_many))
+    assert cli.returncode == 0 and f"tianim: warning: TIANIM_NUM_THREADS={too_many} is far more" in cli.stderr
+
+
+def test_version_flag():
+    from importlib import metadata
+
+    out = tianim_cmd("--version")
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == f"tianim {metadata.version('tianim')} (taichi {metadata.version('taichi')})"
+    assert "[Taichi]" not in out.stdout + out.stderr
+
+
+# ------------------------------------------------------------------ issue 24: the compile notice
+
+#: A kernel factory of the tianim kind with a tiny kernel (quick to compile cold); argv[1] is its key.
+TINY = """
+import sys
+import numpy as np
+from tianim.kernels import cached_variants
+from tianim.runtime import ensure_taichi
+
+@cached_variants
+def tiny(scale):
+    ti = ensure_taichi()
+    @ti.kernel
+    def k(a: ti.types.ndarray(dtype=ti.f32, ndim=1)):
+        for i in range(a.shape[0]):
+            a[i] += scale
+    return k
+
+for key in sys.argv[1:]:
+    tiny(float(key))(np.zeros(4, np.float32))
+    tiny(float(key))(np.zeros(4, np.float32))   # cached: no second build
+"""
+
+
+def _tiny(tmp_path, *keys, **env):
+    script = tmp_path / "tiny.py"   # Taichi reads a kernel's source from its file
+    script.write_text(TINY)
+    out = subprocess.run([sys.executable, str(script), *keys], capture_output=True, text=True,
+                         env=dict(os.environ, **{"TIANIM_VERBOSE": "", **env}))
+    assert out.returncode == 0, out.stderr
+    return [ln for ln in out.stderr.splitlines() if ln.strip()]
+
+
+def test_compile_notice_once_per_process_only_on_a_cold_cache(tmp_path):
+    """An empty offline cache: one notice for two new variants; the next process (same cache) none;
+    a new variant one again; TIANIM_VERBOSE=0: none; no offline cache: one, even for a variant cached."""
+    from tianim._ti import COMPILE_NOTICE
+
+    cache = {"TI_OFFLINE_CACHE_FILE_PATH": str(tmp_path / "ticache")}
+    assert _tiny(tmp_path, "1", "2", **cache) == [COMPILE_NOTICE]
+    assert _tiny(tmp_path, "1", "2", **cache) == []
+    assert _tiny(tmp_path, "2", "3", **cache) == [COMPILE_NOTICE]
+    assert _tiny(tmp_path, "4", TIANIM_VERBOSE="0", **cache) == []
+    assert _tiny(tmp_path, "4", **cache) == []   # the quiet run compiled it and cached it
+    # key 1 is cached, but without the offline cache every process compiles it again
+    assert _tiny(tmp_path, "1", TI_OFFLINE_CACHE="0", **cache) == [COMPILE_NOTICE]
+
+
+ENV_FIRST_STEP = """
+import gymnasium as gym, envs, tianim.runtime as rt
+env = gym.make("tianim/RopeSwing-v0", render_mode="rgb_array")
+before = rt.compiled_kernel_count()
+env.reset(seed=0); env.step(env.action_space.sample()); env.render()
+print(before, rt.compiled_kernel_count())
+"""
+
+
+def _env_first_step(**env):
+    out = run(ENV_FIRST_STEP, PYTHONPATH=os.pathsep.join(sys.path), **env)
+    assert out.returncode == 0, out.stderr
+    before, after = out.stdout.split()[-2:]
+    assert int(before) > 0 and after == before   # Taichi's own count of compiled kernel instances
+    return [ln for ln in out.stderr.splitlines() if ln.startswith("tianim:")]
+
+
+def test_env_construction_compiles_what_its_first_step_and_frame_need():
+    _env_first_step()
+
+
+@pytest.mark.slow
+def test_env_construction_on_a_cold_cache_says_what_compiles_and_how_long(tmp_path):
+    lines = _env_first_step(TI_OFFLINE_CACHE_FILE_PATH=str(tmp_path / "ticache"), TIANIM_VERBOSE="")
+    assert len(lines) == 2 and "kernels for RopeSwingEnv" in lines[0], lines
+    assert lines[1].startswith("tianim: RopeSwingEnv: kernels compiled in "), lines
+    assert float(lines[1].split(" in ")[1].split()[0]) > 0

@@ -263,3 +263,49 @@ def points_array(points, name: str, dim: int) -> np.ndarray:
     if not np.all(np.isfinite(a)):
         raise ValueError(f"{name} contains NaN or infinite values; pass finite positions")
     return a
+
+
+def check_output_folder(name: str, folder, value=None) -> str:
+    """Absolute path of output folder ``folder`` (argument ``name``), checked before any work is done.
+
+    ``value``: what the user gave, shown in messages as ``name=value`` (default: ``folder``; an
+    output file's path when ``folder`` is the folder it goes in).
+
+    The folder may exist, or be missing with an existing parent folder (one level is made by
+    :func:`make_output_folder`). Deeper missing levels are most often a typo (``ouput/run1``, a
+    path that should have been relative) and raise ValueError naming the missing parent, as do a new
+    folder at the filesystem root (``/out`` for ``out``), a file in the way and a parent that cannot
+    be written.
+    """
+    import os
+
+    if not isinstance(folder, (str, os.PathLike)) or not os.fspath(folder):
+        raise TypeError(f"{name}={folder!r} must be a folder path such as 'out' or 'renders/run1'")
+    shown = repr(os.fspath(folder if value is None else value))  # whole: a cut path hides the typo
+    path = os.path.abspath(os.fspath(folder))
+    if os.path.isdir(path):
+        return path
+    if os.path.exists(path):
+        raise ValueError(f"{name}={shown}: {path!r} is a file, not a folder; choose another folder")
+    parent = os.path.dirname(path)
+    if not os.path.isdir(parent):
+        what = "is a file, not a folder" if os.path.exists(parent) else "does not exist"
+        raise ValueError(f"{name}={shown}: its parent folder {parent!r} {what}; tianim creates "
+                         f"only the last folder of a path: check it for a typo, or create {parent!r} first")
+    if os.path.dirname(parent) == parent:  # '/out/x.mp4' for 'out/x.mp4': no new folders at the root
+        raise ValueError(f"{name}={shown}: {path!r} does not exist and tianim does not create folders at the "
+                         f"filesystem root; for a folder here use {os.path.basename(path)!r} (relative), or "
+                         f"create {path!r} first")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise ValueError(f"{name}={shown}: cannot create {path!r}, its parent {parent!r} is not "
+                         "writable; choose a folder you can write to")
+    return path
+
+
+def make_output_folder(name: str, folder, value=None) -> str:
+    """:func:`check_output_folder`, then create the folder if it is missing; returns its absolute path."""
+    import os
+
+    path = check_output_folder(name, folder, value)
+    os.makedirs(path, exist_ok=True)
+    return path

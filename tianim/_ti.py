@@ -25,8 +25,10 @@ Initialisation (``ti.init``, the arch, the threads) is :mod:`tianim.runtime`'s j
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import functools
+import hashlib
 import importlib
 import importlib.util
 import io
@@ -44,12 +46,21 @@ PACKAGES = ("taichi", "quadrants")
 _BANNER_ENV = "ENABLE_TAICHI_HEADER_PRINT"
 
 _lock = threading.Lock()
+_build_lock = threading.RLock()
+_KWARGS = object()  # separates positional from keyword arguments in a factory's cache key
 _module = None
 _verbose: bool | None = None
+#: Containers of Taichi objects that belong to one program (fields, SNode trees): see :func:`per_program`.
+_per_program: list = []
 
 
 class ConfigError(ValueError):
-    """A bad ``TIANIM_*`` setting (one line, no traceback needed): the ``tianim`` command prints it."""
+    """A bad ``TIANIM_*`` setting (one line, no traceback needed): the ``tianim`` command prints it.
+
+    Raised at first use (the first kernel, or the first look at the Taichi package); when a script
+    does not catch it, :func:`_excepthook` prints it as one ``tianim: error: ...`` line: where in
+    the script it surfaced says nothing about a typo in the environment.
+    """
 
 
 class MissingTaichiError(ConfigError, ImportError):
@@ -186,6 +197,157 @@ def get():
                     raise
                 raise _missing(name) from None
     return _module
+
+
+def notices() -> bool:
+    """Whether tianim prints its one-line notices on stderr (a cold kernel compile is starting).
+
+    On by default; off with ``TIANIM_VERBOSE=0`` (``false``, ``no``, ``off``) or ``set_verbose(False)``
+    (``tianim demo --quiet``); ``TIANIM_VERBOSE=1`` shows Taichi's banner as well.
+    """
+    if _verbose is not None:
+        return _verbose
+    return os.environ.get("TIANIM_VERBOSE", "").strip().lower() not in ("0", "false", "no", "off")
+
+
+#: Stamps (file names) of the kernel variants built in this process, written at exit (:func:`_write_stamps`).
+_built_stamps: set = set()
+_stamp_state = {"notice_shown": False, "folder": None, "known": None, "atexit": False}
+_source_digests: dict = {}
+#: The compile notice (once per process, before the first cold compile): what waits, and why only once.
+COMPILE_NOTICE = ("tianim: compiling Taichi kernels on first use: seconds to a minute now (see README, "
+                  "'First calls'), then cached on disk for later runs; TIANIM_VERBOSE=0 hides this")
+
+
+def _module_digest(module_name: str) -> str:
+    """A digest of a module's source file (its kernels' text): an edit makes Taichi's cache miss, so ours too."""
+    digest = _source_digests.get(module_name)
+    if digest is None:
+        path = getattr(sys.modules.get(module_name), "__file__", None) or ""
+        try:
+            with open(path, "rb") as fh:
+                digest = hashlib.sha1(fh.read()).hexdigest()[:16]
+        except OSError:
+            digest = "?"
+        _source_digests[module_name] = digest
+    return digest
+
+
+def _stamp_folder():
+    """``<Taichi's offline cache>/tianim-warm`` (None when the cache is off or Taichi is not live)."""
+    if _stamp_state["folder"] is None:
+        ti = _module
+        if ti is None or ti.lang.impl.get_runtime().prog is None:
+            return None
+        cfg = ti.lang.impl.current_cfg()
+        if not cfg.offline_cache or not cfg.offline_cache_file_path:
+            _stamp_state["folder"] = ""
+        else:
+            _stamp_state["folder"] = os.path.join(cfg.offline_cache_file_path, "tianim-warm")
+    return _stamp_state["folder"] or None
+
+
+def _stamp(build, key) -> str | None:
+    """File name standing for "kernel variant ``build(*key)`` is in Taichi's offline cache".
+
+    Taichi's own cache key hashes the kernel's code and the compile settings; this hashes what
+    stands for them on tianim's side: the factory, its key, its module's source, the Taichi package
+    and version, the arch and the settings that change code (fast_math, default_fp, debug, opt_level).
+    """
+    ti = _module
+    if ti is None or ti.lang.impl.get_runtime().prog is None:
+        return None  # the factory built nothing of Taichi's
+    cfg = ti.lang.impl.current_cfg()
+    parts = [build.__module__, build.__qualname__, repr(key), _module_digest(build.__module__),
+             getattr(ti, "__version__", "?") and str(ti.__version__), ti.__name__]
+    parts += [str(getattr(cfg, name, "?")) for name in ("arch", "fast_math", "default_fp", "debug", "opt_level")]
+    return hashlib.sha1("|".join(parts).encode()).hexdigest()[:24]
+
+
+def _write_stamps() -> None:
+    """At exit (Taichi writes its offline cache then too): mark this process's variants as cached."""
+    folder = _stamp_folder()
+    if folder is None or not _built_stamps:
+        return
+    try:
+        os.makedirs(folder, exist_ok=True)
+        for name in _built_stamps - (_stamp_state["known"] or set()):
+            with open(os.path.join(folder, name), "w"):
+                pass
+    except OSError:  # a read-only cache: the notice shows again next time, nothing else changes
+        pass
+
+
+#: Open :func:`tianim.runtime.warming` blocks, innermost last: ``{"label": str, "cold": int}``.
+_warming: list = []
+
+
+def _after_build(build, key) -> None:
+    """A kernel variant was just built (its first call compiles): say so if it is not cached.
+
+    Outside a warming block: :data:`COMPILE_NOTICE`, once per process. Inside one: the notice naming
+    the block's label, once per block (the block then reports how long its compiles took).
+    """
+    stamp = _stamp(build, key)
+    if stamp is None:
+        return
+    _built_stamps.add(stamp)
+    if not _stamp_state["atexit"]:
+        _stamp_state["atexit"] = True
+        atexit.register(_write_stamps)
+    folder = _stamp_folder()
+    if folder is not None:
+        if _stamp_state["known"] is None:
+            try:
+                _stamp_state["known"] = set(os.listdir(folder))
+            except OSError:
+                _stamp_state["known"] = set()
+        if stamp in _stamp_state["known"]:
+            return
+    if _warming:
+        block = _warming[-1]
+        block["cold"] += 1
+        if block["cold"] == 1 and notices():
+            _stamp_state["notice_shown"] = True
+            print(COMPILE_NOTICE.replace("kernels on first use", f"kernels for {block['label']} on first use"),
+                  file=sys.stderr, flush=True)
+        return
+    if not _stamp_state["notice_shown"] and notices():
+        _stamp_state["notice_shown"] = True
+        print(COMPILE_NOTICE, file=sys.stderr, flush=True)
+
+
+def _excepthook(kind, value, tb, _previous=sys.excepthook):
+    """``sys.excepthook``: an uncaught :class:`ConfigError` is one line on stderr; anything else as before.
+
+    Set ``TIANIM_TRACEBACK=1`` for the full traceback of a ConfigError too. Installed when tianim is
+    imported, only if the hook is still Python's default (a hook of the user's or of IPython stays).
+    """
+    if issubclass(kind, ConfigError) and os.environ.get("TIANIM_TRACEBACK", "").strip() in ("", "0"):
+        print(f"tianim: error: {value}", file=sys.stderr)
+        return
+    _previous(kind, value, tb)
+
+
+if sys.excepthook is sys.__excepthook__:
+    sys.excepthook = _excepthook
+
+
+def per_program(container):
+    """Register ``container`` (a dict or list of fields, SNode trees...) as belonging to the live program.
+
+    Kernels survive a new program (Taichi resets and recompiles them), fields do not: when
+    :mod:`tianim.runtime` replaces the program (in a forked child), it empties every registered
+    container with ``container.clear()``, so the next use builds them afresh. Returns ``container``.
+    """
+    _per_program.append(container)
+    return container
+
+
+def forget_program_objects() -> None:
+    """Empty every container registered with :func:`per_program` (the program they belonged to is gone)."""
+    for container in _per_program:
+        container.clear()
 
 
 def __getattr__(name: str):

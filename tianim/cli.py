@@ -8,6 +8,7 @@ this file only dispatches, so that adding a benchmark or a demo never touches it
 * ``tianim demo [...]``          -> :mod:`tianim.gallery.cli`
 * ``tianim chart [...]``         -> :mod:`tianim.bench.chart`
 
+``tianim --version`` prints the versions of tianim and of its Taichi package.
 ``tianim --verbose COMMAND`` shows Taichi's start-up banner (hidden by default). A bad
 ``TIANIM_ARCH``, ``TIANIM_NUM_THREADS`` or ``TIANIM_BACKEND`` is reported in one line
 (exit status 2), before anything runs.
@@ -32,6 +33,7 @@ _MOVED = {"envs": "python -m envs.bench (it lives with the environments: tianim 
 _USAGE = """usage: tianim [--verbose] COMMAND [ARGS]
 
 options:
+  --version            print tianim's version (and the Taichi package's) and exit
   --verbose            show Taichi's start-up banner
 
 commands:
@@ -73,15 +75,31 @@ def _bench(argv: list[str]) -> int:
 
 
 def _one_line_fallback_warnings(runtime) -> None:
-    """Show the CPU-fallback warning as one ``tianim: warning: ...`` line (others unchanged)."""
+    """Show the CPU-fallback and thread-count warnings as one ``tianim: warning: ...`` line (others unchanged)."""
     original = warnings.formatwarning
 
     def formatwarning(message, category, filename, lineno, line=None):
-        if issubclass(category, runtime.ArchFallbackWarning):
+        if issubclass(category, (runtime.ArchFallbackWarning, runtime.ThreadCountWarning)):
             return f"tianim: warning: {message}\n"
         return original(message, category, filename, lineno, line)
 
     warnings.formatwarning = formatwarning
+
+
+def version_line() -> str:
+    """``tianim 0.1.0 (taichi 1.7.4)``: tianim's version and the installed Taichi package's, importing neither."""
+    from importlib import metadata
+
+    from tianim import __version__, _ti
+
+    try:
+        package = _ti.package_name()
+        backend = f"{package} {metadata.version(package)}"
+    except _ti.ConfigError as exc:  # a bad TIANIM_BACKEND: the version still prints
+        backend = f"backend: {exc}"
+    except metadata.PackageNotFoundError:
+        backend = f"{package} not installed"
+    return f"tianim {__version__} ({backend})"
 
 
 def _run(cmd: str, rest: list[str]) -> int:
@@ -100,6 +118,9 @@ def main(argv: list[str] | None = None) -> int:
         argv = argv[1:]
     if not argv or argv[0] in ("-h", "--help"):
         print(_USAGE)
+        return 0
+    if argv[0] in ("-V", "--version"):
+        print(version_line())
         return 0
     cmd, rest = argv[0], argv[1:]
     if cmd != "bench" and cmd not in _COMMANDS:

@@ -13,6 +13,8 @@ import argparse
 import json
 import os
 
+from tianim._checks import make_output_folder
+
 STYLE = {"tianim": "-o", "scipy": "--s"}
 
 
@@ -85,7 +87,10 @@ def main(argv) -> int:
     args = p.parse_args(argv)
     if not args.accuracy and not args.stability:
         p.error("give --accuracy and/or --stability JSON files")
-    os.makedirs(args.out, exist_ok=True)
+    try:
+        make_output_folder("--out", args.out)
+    except (TypeError, ValueError) as exc:
+        p.error(str(exc))
     paths = []
     if args.accuracy:
         with open(args.accuracy) as fh:

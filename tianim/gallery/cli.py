@@ -20,7 +20,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, default=None, help="number of frames (default: the demo's own)")
     p.add_argument("--fps", type=float, default=24.0, help="frames per second (24 film, 25/30 video; default 24)")
     p.add_argument("--size", default="640x480", help="WIDTHxHEIGHT in pixels (default 640x480)")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--quiet", action="store_true", help="no progress bar and no compile notice")
     return p
 
 
@@ -28,6 +28,10 @@ def main(argv=None) -> int:
     from tianim.render import check_output, export, parse_size
 
     args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    if args.quiet:
+        from tianim import _ti
+
+        _ti.set_verbose(False)  # the quiet settings: no banner, no notices
     if args.list or not args.name:
         for name in DEMOS:
             print(f"{name:10s} {load(name).TITLE}")
@@ -37,7 +41,7 @@ def main(argv=None) -> int:
         if not args.out:
             raise ValueError("--out FILE is required (e.g. --out cloth.mp4, .gif or .png)")
         width, height = parse_size(args.size)
-        spec = check_output(args.out, (width, height), args.fps)
+        spec = check_output(args.out, (width, height), args.fps, name="--out")
         n = demo.FRAMES if args.frames is None else args.frames
         if n < 1:
             raise ValueError(f"--frames {n} must be >= 1")

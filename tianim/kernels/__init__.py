@@ -16,6 +16,7 @@ spatial, particles, crowds), so the subpackages built on it stay in their layers
 import functools
 from types import SimpleNamespace
 
+from tianim import _ti
 from tianim.runtime import ensure_taichi
 
 
@@ -25,8 +26,29 @@ def cached_variants(build):
     The key is the factory's compile-time choices (float type, dimension, which terms are on); kernels
     take arrays as arguments, so a variant compiled for one scene serves every other, and defining the
     kernels inside the factory keeps Taichi out of import time.
+
+    A variant built for the first time in this process compiles at its first call. When it is not in
+    Taichi's offline cache yet (no stamp of it from an earlier process: ``tianim._ti._stamp``), tianim
+    prints ``tianim._ti.COMPILE_NOTICE`` on stderr, once per process, unless ``_ti.notices()`` is off.
+    ``factory.cache_clear()`` empties the cache (tests).
     """
-    return functools.lru_cache(maxsize=None)(build)
+    cache: dict = {}
+
+    @functools.wraps(build)
+    def factory(*args, **kwargs):
+        key = args if not kwargs else args + (_ti._KWARGS,) + tuple(sorted(kwargs.items()))
+        try:
+            return cache[key]
+        except KeyError:
+            pass
+        with _ti._build_lock:  # re-entrant: factories call factories
+            if key not in cache:
+                cache[key] = build(*args, **kwargs)
+                _ti._after_build(build, key)
+        return cache[key]
+
+    factory.cache_clear = cache.clear
+    return factory
 
 
 def kernel_types(real_name: str, dim: int) -> SimpleNamespace:

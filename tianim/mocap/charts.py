@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import os
 
+from tianim._checks import make_output_folder
+
 STYLE = {"linear": ("tab:gray", "-x"), "cubic": ("tab:blue", "-s"), "quintic": ("tab:purple", "-D"),
          "rigid": ("tab:green", "-o"), "pca": ("tab:orange", "-^"), "scipy-cubic": ("black", ":")}
 
@@ -46,7 +48,7 @@ def fill_error_chart(rows: list[dict], path: str, noise_floor_mm: float | None =
     ax.grid(True, which="both", lw=0.3, alpha=0.5)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    make_output_folder("path", os.path.dirname(os.path.abspath(path)), path)
     fig.savefig(path)
     plt.close(fig)
     return path
@@ -85,7 +87,7 @@ def filter_error_chart(rows: list[dict], path: str, residual_hz: float | None = 
     lines2 = ax2.get_legend_handles_labels()
     ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize=7, loc="upper center")
     fig.tight_layout()
-    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
+    make_output_folder("path", os.path.dirname(os.path.abspath(path)), path)
     fig.savefig(path)
     plt.close(fig)
     return path

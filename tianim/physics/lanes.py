@@ -38,6 +38,7 @@ size compiles nothing new.
 
 import numpy as np
 
+from tianim import _ti
 from tianim.kernels.contact import contact_response
 from tianim.kernels import cached_variants, kernel_types
 from tianim.physics.model import GRID_STENCIL
@@ -87,7 +88,7 @@ class _Pool:
         self.capacity = capacity
 
 
-_POOLS: dict = {}
+_POOLS: dict = _ti.per_program({})  # fields of the live program: emptied when it is replaced
 
 
 def _pool(real_name, dim, packs):

@@ -17,7 +17,7 @@ from tianim.render.canvas2d import Canvas2D
 from tianim.render.colors import PALETTE, strain_colors
 from tianim.render.export import ExportResult, FrameWriter, OutputSpec, check_output, export
 from tianim.render.scene3d import Scene3D, grid_faces, vertex_normals
-from tianim._checks import parse_size
+from tianim._checks import make_output_folder, parse_size
 
 __all__ = [
     "Camera",
@@ -28,6 +28,7 @@ __all__ = [
     "OutputSpec",
     "check_output",
     "export",
+    "make_output_folder",
     "parse_size",
     "strain_colors",
     "grid_faces",

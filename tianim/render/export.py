@@ -25,7 +25,7 @@ from typing import Iterable
 
 import numpy as np
 
-from tianim._checks import check_size
+from tianim._checks import check_output_folder, check_size, make_output_folder
 
 KINDS = {".mp4": "mp4", ".gif": "gif", ".png": "png"}
 PROGRESS_MIN_FRAMES = 48
@@ -52,20 +52,22 @@ class OutputSpec:
         return f"{root}_{index:04d}{ext}"
 
 
-def check_output(path, size=None, fps: float = 24.0) -> OutputSpec:
+def check_output(path, size=None, fps: float = 24.0, name: str = "path") -> OutputSpec:
     """Validate an output path, frame size and rate *before* any work is done.
 
     Raises ValueError with the remedy for an unknown extension, an unwritable
     directory, a path that is a directory (or under a file), a bad size (not positive
-    integers, odd for MP4) or a non-positive frame rate. Missing parent folders are
-    fine: the writer creates them when the first frame is written.
+    integers, odd for MP4) or a non-positive frame rate. The file's folder may be missing
+    when its parent exists (the writer creates it with the first frame); a deeper missing
+    path is a ValueError naming it (:func:`tianim._checks.check_output_folder`). ``name``: the
+    argument's name in messages (the ``tianim demo`` command passes ``"--out"``).
     """
     if not isinstance(path, (str, os.PathLike)):
-        raise TypeError(f"path={path!r} must be a file name such as 'out.mp4', 'out.gif' or 'frames.png'")
+        raise TypeError(f"{name}={path!r} must be a file name such as 'out.mp4', 'out.gif' or 'frames.png'")
     path = os.fspath(path)
     ext = os.path.splitext(path)[1].lower()
     if ext not in KINDS:
-        raise ValueError(f"path={path!r} has extension {ext or '(none)'!r}; use one of {sorted(KINDS)} "
+        raise ValueError(f"{name}={path!r} has extension {ext or '(none)'!r}; use one of {sorted(KINDS)} "
                          "(.png writes a numbered sequence)")
     kind = KINDS[ext]
     if isinstance(fps, bool) or not isinstance(fps, (int, float, np.integer, np.floating)) or not (
@@ -79,15 +81,10 @@ def check_output(path, size=None, fps: float = 24.0) -> OutputSpec:
         size = (w, h)
     probe = OutputSpec(path, kind, float(fps), size).frame_path(0)
     if os.path.isdir(probe):
-        raise ValueError(f"path={path!r} is a directory; give a file name inside it, e.g. {os.path.join(path, 'out' + ext)!r}")
-    parent = os.path.dirname(os.path.abspath(probe))
-    existing = parent
-    while not os.path.exists(existing):  # the nearest existing folder must be writable
-        existing = os.path.dirname(existing)
-    if not os.path.isdir(existing):
-        raise ValueError(f"path={path!r}: {existing!r} is a file, not a directory; choose another folder")
-    if not os.access(existing, os.W_OK) or (os.path.exists(probe) and not os.access(probe, os.W_OK)):
-        raise ValueError(f"path={path!r} is not writable; choose a directory you can write to")
+        raise ValueError(f"{name}={path!r} is a directory; give a file name inside it, e.g. {os.path.join(path, 'out' + ext)!r}")
+    check_output_folder(name, os.path.dirname(os.path.abspath(probe)), path)
+    if os.path.exists(probe) and not os.access(probe, os.W_OK):
+        raise ValueError(f"{name}={path!r} is not writable; choose a directory you can write to")
     return OutputSpec(path, kind, float(fps), size)
 
 
@@ -161,7 +158,7 @@ class FrameWriter:
         self._bar = _progress(total, os.path.basename(self.spec.path)) if progress else None
 
     def _makedirs(self):
-        os.makedirs(os.path.dirname(os.path.abspath(self.spec.frame_path(0))), exist_ok=True)
+        make_output_folder("path", os.path.dirname(os.path.abspath(self.spec.frame_path(0))), self.spec.path)
 
     def _open(self):
         import imageio.v2 as iio
