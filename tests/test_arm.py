@@ -461,3 +461,24 @@ def test_importing_kinematics_loads_no_taichi():
 def test_articulated_is_gone():
     with pytest.raises(ImportError):
         __import__("tianim.articulated")
+
+
+_THREAD_SCRIPT = """
+import hashlib, numpy as np
+from tianim.kinematics import PlanarChain
+from tianim.kinematics.arm import ArmSolver, ArmState
+chain = PlanarChain([0.5, 0.4, 0.3], masses=[1.0, 0.8, 0.5], damping=0.05, armature=0.1)
+rng = np.random.default_rng(3)
+h = hashlib.sha256()
+for method in ("semi_implicit_euler", "rk4"):
+    st = ArmState(chain, 64, q=rng.uniform(-1, 1, (64, 3)), qd=rng.uniform(-1, 1, (64, 3)))
+    solver = ArmSolver(method=method, path="kernel")
+    for _ in range(20):
+        st.tau[...] = rng.uniform(-2, 2, (64, 3))
+        solver.step(chain, st, 0.01, 4)
+    h.update(st.q.tobytes()); h.update(st.qd.tobytes())
+print(h.hexdigest())
+"""
+
+#: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
+DETERMINISM = {"arm: batched kernel": _THREAD_SCRIPT}

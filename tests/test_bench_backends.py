@@ -3,6 +3,8 @@
 import importlib.util
 import json
 
+import pytest
+
 from tianim.bench import backends
 
 

@@ -3,6 +3,8 @@
 import json
 import math
 
+import pytest
+
 from tianim import _ti
 from tianim.bench import render
 

@@ -5,6 +5,8 @@ import json
 
 import numpy as np
 
+import pytest
+
 from tianim.bench import particles as bench
 
 KEYS = {"particle_steps_per_s", "numpy_particle_steps_per_s", "speedup_vs_numpy", "dem_particle_steps_per_s",
