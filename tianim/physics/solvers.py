@@ -139,7 +139,7 @@ class Solver:
 
             w = math.sqrt(w * w + bending_omega(model, pinned) ** 2)
         g = theory.gamma_bound(model, positions, pinned)
-        ratio = theory.damping_ratio_bound(model, w, pinned) if self.name == "explicit_euler" else 0.0
+        ratio = theory.damping_ratio_bound(model, w, pinned, positions) if self.name == "explicit_euler" else 0.0
         return theory.stable_step(self.name, w, g, ratio)
 
     # ------------------------------------------------------------------ stepping
@@ -293,7 +293,9 @@ class SymplecticEuler(_Explicit):
 
 class VelocityVerlet(_Explicit):
     __doc__ = ("Velocity Verlet, order 2, stable for omega h < 2. Damping uses ``a(x', v + h a)``; the\n"
-               "acceleration is carried across the substeps of a call and recomputed at its start.\n") + _Explicit.__doc__
+               "acceleration is carried across the substeps of a call and recomputed at its start, so inside a\n"
+               "call the damping sees the previous predicted velocity: with damping the limit is that of this\n"
+               "recurrence (:func:`tianim.physics.theory.verlet_carried_limit`; h gamma <= 1 for pure damping).\n") + _Explicit.__doc__
     name, order, stability_limit = "verlet", 2, theory.STABILITY_LIMIT["verlet"]
 
 
