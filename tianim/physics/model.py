@@ -57,6 +57,15 @@ class Ground:
     friction: float = 0.0
     normal: tuple | None = None
 
+    def __post_init__(self):
+        _check_surface("Ground", self.restitution, self.friction)
+        check_finite_scalar("Ground.height", self.height)
+        if self.normal is not None:
+            n = as_float_array("Ground.normal", self.normal, ndim=1)
+            if not 1 <= n.size <= 3 or float(np.linalg.norm(n)) == 0.0:
+                raise ValueError(f"Ground.normal={fmt(self.normal)} must be a non-zero vector of 1 to 3 numbers")
+            object.__setattr__(self, "normal", tuple(float(a) for a in n))
+
 
 @dataclass(frozen=True)
 class Sphere:
@@ -76,6 +85,19 @@ class Sphere:
     radius: float = 1.0
     restitution: float = 0.0
     friction: float = 0.0
+
+    def __post_init__(self):
+        _check_surface("Sphere", self.restitution, self.friction)
+        check_finite_scalar("Sphere.radius", self.radius, lo=0.0, lo_open=True)
+        c = as_float_array("Sphere.center", self.center, ndim=1)
+        if not 1 <= c.size <= 3:
+            raise ValueError(f"Sphere.center={fmt(self.center)} must hold 1 to 3 coordinates [m]")
+        object.__setattr__(self, "center", tuple(float(a) for a in c))
+
+
+def _check_surface(kind: str, restitution, friction) -> None:
+    check_finite_scalar(f"{kind}.restitution", restitution, lo=0.0, hi=1.0)
+    check_finite_scalar(f"{kind}.friction", friction, lo=0.0)
 
 
 #: Width of one row of the collider table passed to kernels:
@@ -394,6 +416,27 @@ class Model:
                 coll=coll,
             )
         return self._kernel_data[dtype]
+
+    def check_dtype(self, dtype) -> None:
+        """Raise a ValueError naming the parameter if one of the model's values does not fit kernels of
+        ``dtype``: every magnitude (and ``1 / mass``) must be at most ``sqrt(finfo(dtype).max)``
+        (1.8e19 in float32), so that it is finite after conversion and its products stay finite."""
+        dtype = np.dtype(dtype)
+        limit = float(np.finfo(dtype).max) ** 0.5
+        values = [("mass", self.mass), ("1 / mass", 1.0 / self.mass), ("stiffness", self.stiffness),
+                  ("damping", self.damping), ("rest_length", self.rest_length), ("gravity", self.gravity),
+                  ("medium_damping", np.array([self.medium_damping]))]
+        if self.grid is not None:
+            values += [("stiffness", np.asarray(self.grid.stiffness)), ("damping", np.asarray(self.grid.damping))]
+        if self.bending is not None:
+            values.append(("bending", np.array([self.bending.k_row, self.bending.k_col])))
+        for idx in range(len(self.colliders)):
+            values.append((f"colliders[{idx}]", self.collider_table[idx, 3:]))
+        for name, arr in values:
+            arr = np.abs(np.asarray(arr, dtype=np.float64))
+            if arr.size and arr.max() > limit:
+                raise ValueError(f"{name} reaches {fmt(float(arr.max()))}, beyond what a {dtype.name} state can step "
+                                 f"(|value| <= {limit:.3g}); use dtype=np.float64 or rescale the scene's units")
 
     def state(self, batch: int = 1, dtype=np.float32):
         """A fresh :class:`~tianim.physics.state.State` with ``batch`` copies at the initial positions."""

@@ -165,7 +165,8 @@ class Solver:
         ValueError, TypeError
             Bad arguments, or non-finite values already in the state (nothing is changed).
         DivergenceError
-            The watchdog saw a blow-up (the state is rolled back to the start of the call).
+            The watchdog saw a blow-up (the state is rolled back to the start of the call); with the
+            watchdog off, the call produced non-finite positions or velocities (not rolled back).
         """
         return self._step(model, state, dt, substeps, self.watchdog)
 
@@ -173,8 +174,11 @@ class Solver:
         dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
         substeps = check_positive_int("substeps", substeps)
         check_state(model, state)
-        if not math.isfinite(dt * substeps) or float(state.dtype.type(dt)) == 0.0:
-            raise ValueError(f"dt={dt!r} with substeps={substeps} is not representable in {state.dtype.name}")
+        with np.errstate(over="ignore"):
+            dt_real = float(state.dtype.type(dt))
+        if not math.isfinite(dt * substeps) or dt_real == 0.0 or not math.isfinite(dt_real):
+            raise ValueError(f"dt={dt!r} with substeps={substeps} is not representable in {state.dtype.name}; "
+                             "give a dt within the dtype's range (tianim.physics.plan_steps chooses one)")
         token = watchdog.before(model, state, self.watched_energy) if watchdog is not None else None
         iterations = self._advance(model, state, dt, substeps) or {}
         state.t += dt * substeps
@@ -183,6 +187,15 @@ class Solver:
         if watchdog is not None:
             diverged, reason = watchdog.after(model, state, token, self.watched_energy)
         stats = StepStats(self.name, dt, substeps, diverged, reason, iterations)
+        if watchdog is None and not _finite(state):
+            bad = np.flatnonzero(~(np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2))))
+            stats.diverged[bad] = True
+            stats.reason = "non-finite positions or velocities"
+            raise DivergenceError(
+                f"{self.name} diverged: non-finite positions or velocities in copies {bad.tolist()} within "
+                f"{substeps} substeps of dt={dt:.4g} s. The watchdog was off (watchdog=False / check=False), so the "
+                "state was not rolled back: restore a snapshot, then use a smaller dt or more substeps "
+                "(Solver.stable_dt, tianim.physics.plan_steps) or a more stable method.", bad.tolist(), stats)
         if reason is not None and watchdog.on_divergence == "raise":
             raise DivergenceError(self._divergence_message(model, state, reason, dt, substeps),
                                   np.flatnonzero(diverged).tolist(), stats)
@@ -214,6 +227,14 @@ class Solver:
             buf = np.zeros(shape, dtype=dtype)
             self._buffers[key] = buf
         return buf
+
+
+def _finite(state) -> bool:
+    """True when every position and velocity is finite (a sum first: one pass, no temporary mask)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if math.isfinite(float(np.sum(state.x, dtype=np.float64)) + float(np.sum(state.v, dtype=np.float64))):
+            return True
+    return bool(np.isfinite(state.x).all() and np.isfinite(state.v).all())
 
 
 def check_state(model, state) -> None:
