@@ -182,3 +182,33 @@ def test_xpbd_layouts_bit_identical():
     for _ in range(30):
         parallel.step(model, b, 1e-3, 1)
     assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
+
+
+# --------------------------------------------------------------------------- XPBD in float32 at rest (issue 21 item 13)
+def hanging_chain_equilibrium(n, length, m, k, g):
+    """Closed form: spring s (from the top) carries the n - 1 - s particles below it, (n - 1 - s) m g, and
+    stretches by that over k; y of each particle (pinned top at 0, hanging along -y)."""
+    seg = length / (n - 1)
+    tension = (n - 1 - np.arange(n - 1)) * m * g
+    return -np.concatenate([[0.0], np.cumsum(seg + tension / k)])
+
+
+@pytest.mark.parametrize("substeps", [4, 32, 128, 256])
+def test_xpbd_float32_comes_to_rest_at_the_hanging_chain_equilibrium_like_float64(substeps):
+    """Before the fix, float32 kept |v| ~ ulp(x)/h (1e-4..2e-3 m/s at 32-512 substeps per frame) and sat
+    up to 3e-5 m off the equilibrium float64 reached to 2e-8 m."""
+    n, length, m, k, g = 10, 1.0, 0.1, 1000.0, 9.81
+    model = tp.chain(n=n, length=length, mass=m, stiffness=k, damping=2.0, medium_damping=1.0, dim=2,
+                     direction=(0, -1), gravity=g)
+    y = hanging_chain_equilibrium(n, length, m, k, g)
+    err = {}
+    for dtype in (np.float64, np.float32):
+        state = model.state(dtype=dtype)
+        for _frame in range(400):  # 1/60 s frames, one call each
+            tp.step(model, state, 1 / 60 / substeps, substeps, method="xpbd")
+        assert np.abs(state.x[0, :, 0]).max() == 0.0
+        err[dtype] = float(np.abs(state.x[0, :, 1] - y).max())
+        assert np.abs(state.v).max() < (1e-12 if dtype == np.float64 else 1e-5), dtype  # at rest
+    assert err[np.float32] <= err[np.float64] + 2e-7  # float32 resolution at 1 m is 6e-8
+    if substeps >= 128:
+        assert err[np.float64] < 1e-6  # XPBD's rest state tends to the closed form as h -> 0

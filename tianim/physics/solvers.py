@@ -487,8 +487,10 @@ class XPBD(Solver):
             return
         if self.self_collision is not None:
             check_sc_model(self.self_collision, model)
+        self._buffer("rem", state.x.shape, state.dtype).fill(0)  # one remainder per call (xpbd.run_xpbd)
         run_with_passes(model, state, dt, substeps,
-                        lambda: run_xpbd(model, state, dt, 1, self.iterations, self.layout, self._buffer),
+                        lambda: run_xpbd(model, state, dt, 1, self.iterations, self.layout, self._buffer,
+                                         keep_remainder=True),
                         False, self.self_collision, self.strain_limit, self._buffer)
 
 
