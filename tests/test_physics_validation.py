@@ -225,3 +225,15 @@ def test_non_contiguous_pinned_is_refused_like_the_other_arrays(scene):
     assert np.array_equal(state.x, before["x"]) and np.array_equal(state.v, before["v"])
     state.pinned = before["pinned"].copy()
     tp.step(model, state, 1e-4, 2)
+
+
+@pytest.mark.parametrize("methods,exc,match", [([], ValueError, "methods is empty"), (5, TypeError, "methods=5"),
+                                               (["rk5"], ValueError, "rk5")])
+def test_plan_steps_names_bad_methods(methods, exc, match):
+    with pytest.raises(exc, match=match):
+        tp.plan_steps(tp.rope(n=4), methods=methods)
+
+
+def test_a_single_method_name_is_a_one_element_list():
+    model = tp.rope(n=4)
+    assert tp.plan_steps(model, methods="rk4").method == tp.plan_steps(model, methods=["rk4"]).method == "rk4"
