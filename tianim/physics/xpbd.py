@@ -38,7 +38,7 @@ a velocity of ~ulp / h that grows with the substep count (measured on a damped 1
 chain: |v| of 1e-4 to 2e-3 m/s after 10 s at 32-512 substeps per 1/60 s frame, float64 ~1e-12).
 Here x moves once per substep, by ``rem + dx`` with Knuth's exact TwoSum, ``rem`` keeping what
 that rounding lost (a work array, zero at the start of each call), and C is formed from the small
-displacement ``e = (rem_i - rem_j) + (dx_i - dx_j)`` as ``(|d0| - l) + (2 d0.e + e.e) / (|d0 + e| + |d0|)``
+displacement ``e = (rem_i - rem_j) + (dx_i - dx_j)`` as ``((|d0|^2 - l^2) + (2 d0.e + e.e)) / (|d0 + e| + l)``
 with ``d0 = x_i - x_j``: inside a call the positions are in effect kept to twice the precision of x,
 and the chain settles.
 
@@ -102,17 +102,18 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
         wi = ti.select(pinned[b, i] == 0, inv_mass[i], 0)
         wj = ti.select(pinned[b, j] == 0, inv_mass[j], 0)
         # A particle is at x + rem + dx during the substep (x moves once, in finish; rem is what rounding
-        # x left over). C = |d0 + e| - l is formed as (|d0| - l) + (|d0 + e| - |d0|), the second term from
-        # e directly, so that displacements far below the resolution of x are kept (module docstring).
+        # x left over). C = |d0 + e| - l is formed as ((|d0|^2 - l^2) + (2 d0.e + e.e)) / (|d0 + e| + l),
+        # the small displacement's part from e directly, so that motions far below the resolution of x
+        # are kept (module docstring).
         d0 = x[b, i] - x[b, j]
         e = (rem[b, i] - rem[b, j]) + (dx[b, i] - dx[b, j])
         d = d0 + e
         length = d.norm()
         if length > 0 and wi + wj > 0:
             n = d / length
-            len0 = d0.norm()
+            r = rest[s]
             kh2 = k[s] * h * h
-            num = -kh2 * ((len0 - rest[s]) + (2 * d0.dot(e) + e.dot(e)) / (length + len0)) - lam[b, li]
+            num = -kh2 * (((d0.dot(d0) - r * r) + (2 * d0.dot(e) + e.dot(e))) / (length + r)) - lam[b, li]
             den = kh2 * (wi + wj) + 1
             if ti.static(spring_damping):
                 ch = damp[s] * h
