@@ -32,10 +32,10 @@ MODEL_CASES = [
     (dict(positions=np.zeros((3, 4))), ValueError, "1, 2 or 3"),
     (dict(positions=[["a", "b", "c"]] * 3), TypeError, "numeric"),
     (dict(colliders=["floor"]), TypeError, "collider"),
-    (dict(colliders=[tp.Ground(restitution=1.5)]), ValueError, "restitution"),
     (dict(colliders=[tp.Sphere(center=(0, 0), radius=1.0)]), ValueError, "center"),
-    (dict(colliders=[tp.Sphere(center=(0, 0, 0), radius=0.0)]), ValueError, "radius"),
-    (dict(colliders=[tp.Ground(friction=-0.1)]), ValueError, "friction"),
+    (dict(colliders=[tp.Ground(normal=(0.0, 1.0))]), ValueError, "normal"),
+    (dict(colliders=tp.Ground()), TypeError, "must be a list"),
+    (dict(colliders=tp.Sphere()), TypeError, "must be a list"),
 ]
 
 
@@ -155,3 +155,107 @@ def test_model_grid_must_fit_the_particles(change, exc, match):
         Model(**args, grid=grid)
     with pytest.raises(TypeError, match="GridTopology"):
         Model(**args, grid=(4, 4))
+
+
+COLLIDER_CASES = [  # refused when the collider is made, not when a model is built (issue 24)
+    (lambda: tp.Ground(restitution=1.5), ValueError, r"Ground.restitution=1.5 must be <= 1"),
+    (lambda: tp.Ground(restitution=-0.1), ValueError, "Ground.restitution"),
+    (lambda: tp.Ground(friction=-0.1), ValueError, "Ground.friction"),
+    (lambda: tp.Ground(friction=float("nan")), ValueError, "Ground.friction"),
+    (lambda: tp.Ground(height=float("inf")), ValueError, "Ground.height"),
+    (lambda: tp.Ground(height="0"), TypeError, "Ground.height"),
+    (lambda: tp.Ground(normal=(0.0, 0.0, 0.0)), ValueError, "Ground.normal"),
+    (lambda: tp.Ground(normal=(0.0, np.nan, 1.0)), ValueError, "Ground.normal"),
+    (lambda: tp.Sphere(radius=0.0), ValueError, "Sphere.radius"),
+    (lambda: tp.Sphere(radius=-1.0), ValueError, "Sphere.radius"),
+    (lambda: tp.Sphere(radius=float("inf")), ValueError, "Sphere.radius"),
+    (lambda: tp.Sphere(center=(0.0, np.inf, 0.0)), ValueError, "Sphere.center"),
+    (lambda: tp.Sphere(center=(1.0, 2.0, 3.0, 4.0)), ValueError, "Sphere.center"),
+    (lambda: tp.Sphere(restitution=2.0), ValueError, "Sphere.restitution"),
+    (lambda: tp.Sphere(friction=-1.0), ValueError, "Sphere.friction"),
+]
+
+
+@pytest.mark.parametrize("make,exc,match", COLLIDER_CASES)
+def test_colliders_are_validated_when_made(make, exc, match):
+    with pytest.raises(exc, match=match):
+        make()
+
+
+def test_valid_colliders_are_kept_and_hashable():
+    g, s = tp.Ground(height=np.float32(0.5), normal=np.array([0.0, 2.0, 0.0])), tp.Sphere(center=np.zeros(2), radius=1)
+    assert g.normal == (0.0, 2.0, 0.0) and s.center == (0.0, 0.0)
+    assert hash(g) != hash(s)
+    model = tp.chain(n=3, dim=2, colliders=[s])
+    assert model.colliders == (s,)
+
+
+@pytest.mark.parametrize("kwargs,name", [(dict(stiffness=1e300), "stiffness"), (dict(mass=1e300), "mass"),
+                                         (dict(mass=1e-300), "1 / mass"), (dict(damping=1e30), "damping"),
+                                         (dict(medium_damping=1e300), "medium_damping"),
+                                         (dict(gravity=1e25), "gravity")])
+def test_values_beyond_the_dtype_range_are_refused_when_the_state_is_made(kwargs, name):
+    """1e300 does not become inf in a float32 kernel: model.state(dtype) names the value (float64 steps 1e30)."""
+    model = tp.chain(n=4, dim=2, **kwargs)
+    with pytest.raises(ValueError, match=rf"{name} reaches .* float32 state"):
+        model.state(dtype=np.float32)
+    if max(kwargs.values()) < 1e100 and "mass" not in kwargs:
+        model.state(dtype=np.float64)
+
+
+def test_collider_values_beyond_float32_are_refused():
+    model = tp.chain(n=3, dim=2, colliders=[tp.Sphere(center=(1e25, 0.0), radius=1.0)])
+    with pytest.raises(ValueError, match=r"colliders\[0\] reaches"):
+        model.state()
+
+
+@pytest.mark.parametrize("dt", [1e300, 1e39])
+def test_dt_beyond_float32_is_refused_and_changes_nothing(scene, dt):
+    model, state = scene
+    before = state.snapshot()
+    with pytest.raises(ValueError, match="not representable in float32"):
+        tp.step(model, state, dt, 2)
+    for key, value in before.items():
+        assert np.array_equal(getattr(state, key), value)
+
+
+@pytest.mark.parametrize("method", tp.METHODS)
+@pytest.mark.parametrize("check", [True, False])
+def test_a_huge_dt_never_leaves_nan_silently(method, check):
+    """With the watchdog the state is rolled back; without it, the call still raises (not rolled back)."""
+    model = tp.rope(n=5)
+    state = model.state()
+    before = state.snapshot()
+    try:
+        tp.step(model, state, 1e30, 4, method=method, check=check)
+    except tp.DivergenceError as exc:
+        assert "non-finite" in str(exc) or "energy" in str(exc)
+        assert exc.copies == [0]
+        if check:
+            assert all(np.array_equal(getattr(state, k), v) for k, v in before.items())
+        return
+    assert np.isfinite(state.x).all() and np.isfinite(state.v).all()
+
+
+def test_non_contiguous_pinned_is_refused_like_the_other_arrays(scene):
+    model, state = scene
+    before = state.snapshot()
+    state.pinned = np.ascontiguousarray(before["pinned"].T).T  # right shape, dtype and values; not C-contiguous
+    assert state.pinned.shape == (2, 5) and not state.pinned.flags.c_contiguous
+    with pytest.raises(ValueError, match="state.pinned must be C-contiguous"):
+        tp.step(model, state, 1e-4, 2)
+    assert np.array_equal(state.x, before["x"]) and np.array_equal(state.v, before["v"])
+    state.pinned = before["pinned"].copy()
+    tp.step(model, state, 1e-4, 2)
+
+
+@pytest.mark.parametrize("methods,exc,match", [([], ValueError, "methods is empty"), (5, TypeError, "methods=5"),
+                                               (["rk5"], ValueError, "rk5")])
+def test_plan_steps_names_bad_methods(methods, exc, match):
+    with pytest.raises(exc, match=match):
+        tp.plan_steps(tp.rope(n=4), methods=methods)
+
+
+def test_a_single_method_name_is_a_one_element_list():
+    model = tp.rope(n=4)
+    assert tp.plan_steps(model, methods="rk4").method == tp.plan_steps(model, methods=["rk4"]).method == "rk4"

@@ -42,7 +42,10 @@ def one_step_matrix(method: str, y: float, zeta: float = 0.0) -> np.ndarray:
     eps = 1e-6 / max(1.0, y)  # small: the 1D constraint |x1 - x0| stays on one side of the anchor
     state.x[0, 1, 0] += eps  # X = omega (x - l) = eps, V = 0
     state.v[1, 1, 0] = eps  # X = 0, V = eps
-    tp.step(model, state, y, substeps=1, method=method, check=False)
+    try:
+        tp.step(model, state, y, substeps=1, method=method, check=False)
+    except tp.DivergenceError:  # non-finite after the step: growth beyond float64
+        return np.full((2, 2), np.inf)
     cols = [[state.x[b, 1, 0] - 1.0, state.v[b, 1, 0]] for b in range(2)]
     return np.array(cols).T / eps
 

@@ -13,7 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
-from tianim._checks import as_float_array, check_finite_scalar
+from tianim._checks import as_float_array, check_finite_scalar, fmt
 
 
 @dataclass(frozen=True)
@@ -41,6 +41,15 @@ class Ground:
     friction: float = 0.0
     normal: tuple | None = None
 
+    def __post_init__(self):  # checked when made (issue 24), not first when a model is built
+        _check_surface("Ground", self.restitution, self.friction)
+        check_finite_scalar("Ground.height", self.height)
+        if self.normal is not None:
+            n = as_float_array("Ground.normal", self.normal, ndim=1)
+            if not 1 <= n.size <= 3 or float(np.linalg.norm(n)) == 0.0:
+                raise ValueError(f"Ground.normal={fmt(self.normal)} must be a non-zero vector of 1 to 3 numbers")
+            object.__setattr__(self, "normal", tuple(float(a) for a in n))
+
 
 @dataclass(frozen=True)
 class Sphere:
@@ -60,6 +69,19 @@ class Sphere:
     radius: float = 1.0
     restitution: float = 0.0
     friction: float = 0.0
+
+    def __post_init__(self):
+        _check_surface("Sphere", self.restitution, self.friction)
+        check_finite_scalar("Sphere.radius", self.radius, lo=0.0, lo_open=True)
+        c = as_float_array("Sphere.center", self.center, ndim=1)
+        if not 1 <= c.size <= 3:
+            raise ValueError(f"Sphere.center={fmt(self.center)} must hold 1 to 3 coordinates [m]")
+        object.__setattr__(self, "center", tuple(float(a) for a in c))
+
+
+def _check_surface(kind: str, restitution, friction) -> None:
+    check_finite_scalar(f"{kind}.restitution", restitution, lo=0.0, hi=1.0)
+    check_finite_scalar(f"{kind}.friction", friction, lo=0.0)
 
 
 #: Width of one row of the collider table passed to kernels:

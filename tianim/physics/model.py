@@ -329,6 +329,27 @@ class Model:
             )
         return self._kernel_data[dtype]
 
+    def check_dtype(self, dtype) -> None:
+        """Raise a ValueError naming the parameter if one of the model's values does not fit kernels of
+        ``dtype``: every magnitude (and ``1 / mass``) must be at most ``sqrt(finfo(dtype).max)``
+        (1.8e19 in float32), so that it is finite after conversion and its products stay finite."""
+        dtype = np.dtype(dtype)
+        limit = float(np.finfo(dtype).max) ** 0.5
+        values = [("mass", self.mass), ("1 / mass", 1.0 / self.mass), ("stiffness", self.stiffness),
+                  ("damping", self.damping), ("rest_length", self.rest_length), ("gravity", self.gravity),
+                  ("medium_damping", np.array([self.medium_damping]))]
+        if self.grid is not None:
+            values += [("stiffness", np.asarray(self.grid.stiffness)), ("damping", np.asarray(self.grid.damping))]
+        if self.bending is not None:
+            values.append(("bending", np.array([self.bending.k_row, self.bending.k_col])))
+        for idx in range(len(self.colliders)):
+            values.append((f"colliders[{idx}]", self.collider_table[idx, 3:]))
+        for name, arr in values:
+            arr = np.abs(np.asarray(arr, dtype=np.float64))
+            if arr.size and arr.max() > limit:
+                raise ValueError(f"{name} reaches {fmt(float(arr.max()))}, beyond what a {dtype.name} state can step "
+                                 f"(|value| <= {limit:.3g}); use dtype=np.float64 or rescale the scene's units")
+
     def state(self, batch: int = 1, dtype=np.float32):
         """A fresh :class:`~tianim.physics.state.State` with ``batch`` copies at the initial positions."""
         from tianim.physics.state import State

@@ -192,7 +192,12 @@ def plan_steps(model, frame_dt: float = 1 / 24, accuracy: float | None = None, m
         methods = ("symplectic_euler", "verlet", "rk4") + (() if accuracy is None else STIFF_METHODS)
         if getattr(model, "bending", None) is not None:  # backward Euler does not model bending
             methods = tuple(m for m in methods if m != "implicit_euler")
-    methods = (methods,) if isinstance(methods, str) else tuple(methods)
+    try:
+        methods = (methods,) if isinstance(methods, str) else tuple(methods)
+    except TypeError:
+        raise TypeError(f"methods={methods!r} must be a method name or a list of them, e.g. ['rk4']") from None
+    if not methods:
+        raise ValueError(f"methods is empty; give at least one of {METHODS} (or None for the default)")
     for m in methods:
         if m not in METHODS:
             raise ValueError(f"methods contains {m!r}; choose from {METHODS}")

@@ -114,7 +114,7 @@ class Solver:
 
             w = math.sqrt(w * w + bending_omega(model, pinned) ** 2)
         g = theory.gamma_bound(model, positions, pinned)
-        ratio = theory.damping_ratio_bound(model, w, pinned) if self.name == "explicit_euler" else 0.0
+        ratio = theory.damping_ratio_bound(model, w, pinned, positions) if self.name == "explicit_euler" else 0.0
         return theory.stable_step(self.name, w, g, ratio)
 
     # ------------------------------------------------------------------ stepping
@@ -140,7 +140,8 @@ class Solver:
         ValueError, TypeError
             Bad arguments, or non-finite values already in the state (nothing is changed).
         DivergenceError
-            The watchdog saw a blow-up (the state is rolled back to the start of the call).
+            The watchdog saw a blow-up (the state is rolled back to the start of the call); with the
+            watchdog off, the call produced non-finite positions or velocities (not rolled back).
         """
         return self._step(model, state, dt, substeps, self.watchdog)
 
@@ -148,8 +149,11 @@ class Solver:
         dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
         substeps = check_positive_int("substeps", substeps)
         check_state(model, state)
-        if not math.isfinite(dt * substeps) or float(state.dtype.type(dt)) == 0.0:
-            raise ValueError(f"dt={dt!r} with substeps={substeps} is not representable in {state.dtype.name}")
+        with np.errstate(over="ignore"):
+            dt_real = float(state.dtype.type(dt))
+        if not math.isfinite(dt * substeps) or dt_real == 0.0 or not math.isfinite(dt_real):
+            raise ValueError(f"dt={dt!r} with substeps={substeps} is not representable in {state.dtype.name}; "
+                             "give a dt within the dtype's range (tianim.physics.plan_steps chooses one)")
         token = watchdog.before(model, state, self.watched_energy) if watchdog is not None else None
         iterations = self._advance(model, state, dt, substeps) or {}
         state.t += dt * substeps
@@ -158,6 +162,15 @@ class Solver:
         if watchdog is not None:
             diverged, reason = watchdog.after(model, state, token, self.watched_energy)
         stats = StepStats(self.name, dt, substeps, diverged, reason, iterations)
+        if watchdog is None and not _finite(state):
+            bad = np.flatnonzero(~(np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2))))
+            stats.diverged[bad] = True
+            stats.reason = "non-finite positions or velocities"
+            raise DivergenceError(
+                f"{self.name} diverged: non-finite positions or velocities in copies {bad.tolist()} within "
+                f"{substeps} substeps of dt={dt:.4g} s. The watchdog was off (watchdog=False / check=False), so the "
+                "state was not rolled back: restore a snapshot, then use a smaller dt or more substeps "
+                "(Solver.stable_dt, tianim.physics.plan_steps) or a more stable method.", bad.tolist(), stats)
         if reason is not None and watchdog.on_divergence == "raise":
             raise DivergenceError(self._divergence_message(model, state, reason, dt, substeps),
                                   np.flatnonzero(diverged).tolist(), stats)
@@ -189,6 +202,14 @@ class Solver:
             buf = np.zeros(shape, dtype=dtype)
             self._buffers[key] = buf
         return buf
+
+
+def _finite(state) -> bool:
+    """True when every position and velocity is finite (a sum first: one pass, no temporary mask)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if math.isfinite(float(np.sum(state.x, dtype=np.float64)) + float(np.sum(state.v, dtype=np.float64))):
+            return True
+    return bool(np.isfinite(state.x).all() and np.isfinite(state.v).all())
 
 
 def check_state(model, state) -> None:
@@ -278,7 +299,9 @@ class SymplecticEuler(_Explicit):
 
 class VelocityVerlet(_Explicit):
     __doc__ = ("Velocity Verlet, order 2, stable for omega h < 2. Damping uses ``a(x', v + h a)``; the\n"
-               "acceleration is carried across the substeps of a call and recomputed at its start.\n") + _Explicit.__doc__
+               "acceleration is carried across the substeps of a call and recomputed at its start, so inside a\n"
+               "call the damping sees the previous predicted velocity: with damping the limit is that of this\n"
+               "recurrence (:func:`tianim.physics.theory.verlet_carried_limit`; h gamma <= 1 for pure damping).\n") + _Explicit.__doc__
     name, order, stability_limit = "verlet", 2, theory.STABILITY_LIMIT["verlet"]
 
 
@@ -420,6 +443,14 @@ class XPBD(Solver):
     strain_limit : float or StrainLimit, optional
         Largest spring stretch (0.1: 10%), enforced after every substep (:mod:`tianim.physics.strain`).
     watchdog : bool or Watchdog
+    compensated : bool
+        Compensated positions (default False): x moves once per substep and keeps the remainder its
+        rounding lost (Knuth's TwoSum), constraints read the small displacement, so a float32 chain comes
+        to rest at its equilibrium as a float64 one does (without it, float32 rounding leaves a jitter
+        of ~1 ulp / h: |v| 1e-4-2e-3 m/s on a hanging chain at 32-512 substeps per frame). It costs about
+        1.2-1.5x per substep, and results then depend in their last bits on how substeps are split
+        over calls (the remainder starts from zero each call). Off keeps the papers' form, and the
+        frozen env versions' bits.
 
     A model with bending gets one XPBD bending pass after each substep (:mod:`tianim.physics.bending`).
     With any of the three the call runs one substep per launch (:mod:`tianim.physics.passes`).
@@ -429,16 +460,22 @@ class XPBD(Solver):
     watched_energy = ("kinetic", "gravity")
 
     def __init__(self, iterations: int = 1, layout: str = "auto", watchdog=True, self_collision=None,
-                 strain_limit=None):
+                 strain_limit=None, compensated: bool = False):
         super().__init__(watchdog)
         self.iterations = check_positive_int("iterations", iterations)
         self.layout = check_choice("layout", layout, XPBD_LAYOUTS)
+        if not isinstance(compensated, (bool, np.bool_)):
+            raise TypeError(f"compensated={compensated!r} must be True or False")
+        self.compensated = bool(compensated)
         self.self_collision = as_self_collision(self_collision)
         self.strain_limit = as_strain_limit(strain_limit)
         self.evals_per_substep = 2.0 * self.iterations  # a symmetric sweep visits every spring twice
 
     def options(self) -> dict:
-        return _with_passes({"iterations": self.iterations, "layout": self.layout}, self)
+        opts = {"iterations": self.iterations, "layout": self.layout}
+        if self.compensated:
+            opts["compensated"] = True
+        return _with_passes(opts, self)
 
     def _advance(self, model, state, dt, substeps):
         from tianim.physics.xpbd import run_xpbd
@@ -446,12 +483,16 @@ class XPBD(Solver):
         if self.layout == "parallel" and model.grid is None:
             raise ValueError("layout='parallel' needs a cloth grid model; use 'auto' or 'per_copy'")
         if not has_passes(model, self.self_collision, self.strain_limit):
-            run_xpbd(model, state, dt, substeps, self.iterations, self.layout, self._buffer)
+            run_xpbd(model, state, dt, substeps, self.iterations, self.layout, self._buffer,
+                     compensated=self.compensated)
             return
         if self.self_collision is not None:
             check_sc_model(self.self_collision, model)
+        if self.compensated:
+            self._buffer("rem", state.x.shape, state.dtype).fill(0)  # one remainder per call (xpbd.run_xpbd)
         run_with_passes(model, state, dt, substeps,
-                        lambda: run_xpbd(model, state, dt, 1, self.iterations, self.layout, self._buffer),
+                        lambda: run_xpbd(model, state, dt, 1, self.iterations, self.layout, self._buffer,
+                                         keep_remainder=True, compensated=self.compensated),
                         False, self.self_collision, self.strain_limit, self._buffer)
 
 

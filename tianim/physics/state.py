@@ -54,6 +54,7 @@ class State(StateArrays):
         if np.abs(model.positions).max() > np.finfo(dt).max ** 0.25:
             raise ValueError(f"the model's positions reach {fmt(float(np.abs(model.positions).max()))} m, too large "
                              f"for {dt.name} kernels; use dtype=np.float64 or rescale the scene")
+        model.check_dtype(dt)
         self.model = model
         self.dtype = dt
         n, d = model.n_particles, model.dim
@@ -73,7 +74,8 @@ class State(StateArrays):
         return f"State(batch={self.batch}, particles={self.x.shape[1]}, dim={self.x.shape[2]}, dtype={self.dtype.name})"
 
     def check_arrays(self) -> None:
-        """Raise if ``x``, ``v``, ``t`` or ``pinned`` were replaced by arrays of the wrong shape or dtype."""
+        """Raise if ``x``, ``v``, ``t`` or ``pinned`` were replaced by arrays of the wrong shape or dtype, or
+        ``x``, ``v`` or ``pinned`` by non-contiguous ones."""
         b, n, d = self.batch, self.model.n_particles, self.model.dim
         for name in ("x", "v"):
             a = getattr(self, name)
@@ -86,6 +88,9 @@ class State(StateArrays):
                 raise ValueError(f"state.{name} must be C-contiguous; assign with state.{name}[...] = values")
         if not isinstance(self.pinned, np.ndarray) or self.pinned.shape != (b, n) or self.pinned.dtype != bool:
             raise ValueError(f"state.pinned must be a ({b}, {n}) bool array; write into it in place")
+        if not self.pinned.flags.c_contiguous:
+            raise ValueError("state.pinned must be C-contiguous (the kernels read it in place); assign with "
+                             "state.pinned[...] = values")
         if not isinstance(self.t, np.ndarray) or self.t.shape != (b,) or self.t.dtype != np.float64:
             raise ValueError(f"state.t has shape {getattr(self.t, 'shape', None)} and dtype "
                              f"{getattr(self.t, 'dtype', None)}; expected ({b},) float64: write into it in place "

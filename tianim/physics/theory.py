@@ -18,15 +18,34 @@ scalar modes; symplectic Euler's discrete eigenproblem
 for every (gamma, omega) in the box ``[0, gamma_bound] x [0, omega_bound]`` is therefore
 stable for the scene; :func:`omega_bound` and :func:`gamma_bound` are rigorous upper
 bounds (block Gershgorin, Feingold & Varga 1962, on ``M^-1/2 K M^-1/2`` and
-``M^-1/2 C M^-1/2``). Velocity Verlet evaluates damping at a predicted velocity
-(products of ``M^-1 C`` and ``M^-1 K`` that do not commute), so for it the box is a
-model, and :data:`VERLET_DAMPED_SAFETY` keeps the limit below the measured one.
+``M^-1/2 C M^-1/2``).
+
+Velocity Verlet carries the acceleration across the substeps of a call: ``a = a(x, w)`` with
+``w`` the previous substep's predicted velocity ``v + h a``, so inside a call it advances
+``(x, v, w)``. Eliminating x, v and w from ``S (x, v, w) = mu (x, v, w)`` (with ``a = -M^-1 (K x + C w)``,
+``a' = mu a``) leaves the cubic pencil ``2 mu (mu - 1)^2 M + h (3 mu - 1)(mu - 1) C + 2 h^2 mu^2 K``
+acting on ``a``, linear in M, C and K, so it too reduces to scalar modes of the box, whatever
+M^-1 C and M^-1 K (they need not commute). Jury's criterion on
+``2 mu^3 + (2p + 3q - 4) mu^2 + (2 - 4q) mu + q`` gives ``p + 4q <= 4`` and
+``2 q^2 + p q + 2 q <= 4``, both monotone in p and q, so the corner of the box is the limit
+(:func:`verlet_carried_limit`). The first substep of a call recomputes ``a(x, v)`` (the 2 x 2
+:func:`step_matrix`); on scalar modes its limit is above the carried one (checked over the box in
+the tests), and the test suite checks the full matrices of both on damped scenes.
+
+RK4's step is ``R(hA)`` with ``R(z) = 1 + z + ... + z^4/24``; the modes' ``z = h lambda`` fill
+``{|z| <= h omega, -h gamma / 2 <= Re z <= 0}`` and the real segment ``[-h gamma, 0]``, a set that
+grows with h. :func:`rk4_max_modulus` takes the maximum of ``|R|`` on its boundary (maximum modulus
+principle) exactly, from the critical points of ``|R|^2`` restricted to each boundary piece
+(a polynomial of one variable), and the limit is bisected on it.
 
 Explicit Euler grows on every undamped mode. On a damped mode ``|1 + h lambda| <= 1``
 gives ``h <= gamma~ / omega~^2`` (underdamped) and ``h <= 2 / |lambda|`` (overdamped).
-With dashpots along the springs, ``u* C u >= beta u* K u + rho |u|^2`` where
-``beta = min_s c_s / k_s`` (both sums run over the same rank-one spring terms at rest),
-so ``gamma~ / omega~^2 >= beta + rho / (m_max omega_bound^2)``.
+With dashpots along the springs, ``u* C u >= beta u* K_ax u + rho |u|^2`` where
+``beta = min_s c_s / k_s`` and ``K_ax`` is the springs' axial stiffness; the rest of K (the
+transverse stiffness of stretched springs, bending) is bounded by ``G`` (Gershgorin) and is not
+damped by the dashpots, so :func:`damping_ratio_bound` is the minimum of a linear-fractional
+function over a polygon, ``min(rho^ / G, beta (1 - G / W) + rho^ / W)`` with ``W = omega_bound^2``
+and ``rho^ = rho / m_max``.
 """
 
 from __future__ import annotations
@@ -46,14 +65,11 @@ STABILITY_LIMIT = {
     "xpbd": math.inf,
 }
 
-#: Fraction of the box-model limit used for velocity Verlet on damped scenes (see the module docstring).
-VERLET_DAMPED_SAFETY = 0.9
-
 #: Tolerance on the spectral radius when bisecting for a stability limit (rounding of the 2 x 2 eigenvalues).
 RADIUS_TOL = 1e-12
 
-#: Grid points per axis of the (gamma, omega) box searched for RK4 and Verlet limits.
-BOX_POINTS = 41
+#: Coefficients of RK4's stability polynomial R(z) (Hairer & Wanner II, IV.2).
+RK4_POLYNOMIAL = (1.0, 1.0, 1.0 / 2.0, 1.0 / 6.0, 1.0 / 24.0)
 
 
 # --------------------------------------------------------------------------- one step on a scalar mode
@@ -143,20 +159,23 @@ def _free(model, pinned):
     return free
 
 
-def _block_gershgorin(model, coef, n, alpha, diag_extra, free) -> float:
+def _block_gershgorin(model, coef, blocks, diag_extra, free) -> float:
     """max over free i of lambda_max(A_ii) + sum_j ||A_ij|| for A = M^-1/2 (sum_s coef_s B_s) M^-1/2,
-    B_s = (1 - alpha) n n^T + alpha I the spring block (norm 1)."""
+    ``blocks`` (S, D, D) the symmetric spring blocks B_s of norm <= 1 (coef_s >= 0)."""
     i, j = model.springs[:, 0], model.springs[:, 1]
-    dim, npart, m = model.dim, model.n_particles, model.mass
-    blocks = coef[:, None, None] * ((1.0 - alpha)[:, None, None] * n[:, :, None] * n[:, None, :]
-                                    + alpha[:, None, None] * np.eye(dim))
-    diag = np.zeros((npart, dim, dim))
+    npart, m = model.n_particles, model.mass
+    blocks = coef[:, None, None] * blocks
+    diag = np.zeros((npart, model.dim, model.dim))
     np.add.at(diag, i, blocks)
     np.add.at(diag, j, blocks)
     lam = np.linalg.eigvalsh(diag)[:, -1] / m + diag_extra / m
     w = coef / np.sqrt(m[i] * m[j]) * (free[i] & free[j])
     off = np.bincount(i, w, minlength=npart) + np.bincount(j, w, minlength=npart)
     return float(np.max((lam + off)[free])) if free.any() else 0.0
+
+
+def _axial(n):
+    return n[:, :, None] * n[:, None, :]
 
 
 def omega_bound(model, positions=None, pinned=None) -> float:
@@ -167,9 +186,23 @@ def omega_bound(model, positions=None, pinned=None) -> float:
     if model.n_springs == 0:
         return 0.0
     _i, _j, n, alpha = _spring_frames(model, positions)
-    lam = _block_gershgorin(model, np.asarray(model.stiffness, dtype=np.float64), n, alpha, 0.0,
+    blocks = (1.0 - alpha)[:, None, None] * _axial(n) + alpha[:, None, None] * np.eye(model.dim)
+    lam = _block_gershgorin(model, np.asarray(model.stiffness, dtype=np.float64), blocks, 0.0,
                             _free(model, pinned))
     return math.sqrt(max(lam, 0.0))
+
+
+def transverse_bound(model, positions=None, pinned=None) -> float:
+    """Rigorous upper bound [1/s^2] on the largest eigenvalue of ``M^-1/2 K_t M^-1/2``, ``K_t`` the springs'
+    transverse (geometric) stiffness ``k max(0, 1 - l/L) (I - n n^T)``, which the dashpots along the
+    springs do not damp (block Gershgorin as :func:`omega_bound`; 0 at rest)."""
+    if model.n_springs == 0:
+        return 0.0
+    _i, _j, n, alpha = _spring_frames(model, positions)
+    if model.dim == 1 or not np.any(alpha > 0):
+        return 0.0
+    coef = np.asarray(model.stiffness, dtype=np.float64) * alpha
+    return max(_block_gershgorin(model, coef, np.eye(model.dim) - _axial(n), 0.0, _free(model, pinned)), 0.0)
 
 
 def gamma_bound(model, positions=None, pinned=None) -> float:
@@ -179,36 +212,106 @@ def gamma_bound(model, positions=None, pinned=None) -> float:
     if model.n_springs == 0:
         return float(np.max(model.medium_damping / model.mass[free])) if free.any() else 0.0
     _i, _j, n, _alpha = _spring_frames(model, positions)
-    return _block_gershgorin(model, np.asarray(model.damping, dtype=np.float64), n, np.zeros(model.n_springs),
+    return _block_gershgorin(model, np.asarray(model.damping, dtype=np.float64), _axial(n),
                              model.medium_damping, free)
 
 
-def damping_ratio_bound(model, omega: float, pinned=None) -> float:
-    """Lower bound [s] on ``gamma~ / omega~^2`` over the modes: ``min_s c_s / k_s + rho / (m_max omega^2)``
-    (springs with k_s > 0; the module docstring derives it, for the springs at rest)."""
+def damping_ratio_bound(model, omega: float, pinned=None, positions=None, undamped=None) -> float:
+    """Lower bound [s] on ``gamma~ / omega~^2 = c / k`` over the modes with k > 0 (module docstring).
+
+    ``omega`` [rad/s] bounds every mode's frequency; ``undamped`` [1/s^2] bounds the stiffness the
+    dashpots do not act on (default :func:`transverse_bound` at ``positions`` plus the bending bound
+    squared). With ``beta = min_s c_s / k_s`` (springs with k_s > 0 and a free end),
+    ``rho^ = rho / m_max``, ``G = undamped`` and ``W = max(omega^2, G)``: the minimum of
+    ``(beta a + rho^) / (a + r)`` over ``a >= 0, 0 <= r <= G, a + r <= W`` is
+    ``min(rho^ / G, beta (1 - G / W) + rho^ / W)`` (a vertex of the polygon)."""
     free = _free(model, pinned)
-    if not free.any():
+    if not free.any() or omega == 0.0:
         return math.inf
-    beta = 0.0
+    if undamped is None:
+        from tianim.physics.bending import omega_bound as bending_omega
+
+        undamped = transverse_bound(model, positions, pinned) + bending_omega(model, pinned) ** 2
+    beta = math.inf
     if model.n_springs:
         k = np.asarray(model.stiffness)
         acts = (k > 0) & (free[model.springs[:, 0]] | free[model.springs[:, 1]])
         beta = float(np.min(np.asarray(model.damping)[acts] / k[acts])) if acts.any() else math.inf
-    if omega == 0.0:
-        return math.inf
-    return beta + model.medium_damping / (float(np.max(model.mass[free])) * omega * omega)
+    rho = model.medium_damping / float(np.max(model.mass[free]))
+    w2 = max(omega * omega, undamped)
+    if undamped > 0.0:
+        if math.isinf(beta):  # no stiff springs: every stiff mode is an undamped one
+            return rho / undamped
+        return min(rho / undamped, beta * (1.0 - undamped / w2) + rho / w2)
+    return beta + rho / w2
 
 
 # --------------------------------------------------------------------------- stability limits
-def _box_limit(method: str, omega: float, gamma: float) -> float:
-    """Largest h with spectral radius <= 1 on every (gamma, omega) of the box [0, gamma] x [0, omega]."""
-    w = np.linspace(0.0, omega, BOX_POINTS)
-    g = np.linspace(0.0, gamma, BOX_POINTS)
-    ww, gg = (a.ravel() for a in np.meshgrid(w, g))
+def verlet_carried_limit(omega: float, gamma: float) -> float:
+    """Largest h [s] at which velocity Verlet with the acceleration carried across substeps is stable on
+    every mode of the box ``[0, gamma] x [0, omega]``: the corner (p, q) = (h^2 omega^2, h gamma) must
+    satisfy ``p + 4q <= 4`` and ``2 q^2 + p q + 2 q <= 4`` (module docstring)."""
+    w2 = omega * omega
+    h = 2.0 * (math.sqrt(gamma * gamma + w2) - gamma) / w2 if omega > 0 else 1.0 / gamma
+    if gamma > 0:
+        f = lambda t: 2 * (gamma * t) ** 2 + w2 * gamma * t**3 + 2 * gamma * t - 4  # noqa: E731, increasing
+        if f(h) > 0:
+            lo, hi = 0.0, h
+            for _ in range(200):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if f(mid) <= 0 else (lo, mid)
+                if hi - lo <= 1e-16 * hi:
+                    break
+            h = lo
+    return h
+
+
+def _max_on(poly, a: float, b: float) -> float:
+    """Maximum of the real polynomial ``poly`` on ``[a, b]`` (endpoints and real critical points)."""
+    pts = [a, b]
+    if poly.degree() > 1:
+        for r in poly.deriv().roots():
+            if abs(r.imag) <= 1e-9 * max(1.0, abs(r.real)) and a < r.real < b:
+                pts.append(r.real)
+    return float(max(poly(t) for t in pts))
+
+
+def rk4_max_modulus(q_max: float, r: float, coef=RK4_POLYNOMIAL) -> float:
+    """Maximum of ``|R(z)|`` (R with coefficients ``coef``) over ``{|z| <= r, -q_max/2 <= Re z <= 0}``
+    union ``[-q_max, 0]``: the modes ``z = h lambda`` of the box with ``r = h omega``, ``q_max = h gamma``.
+
+    By the maximum modulus principle it is reached on the boundary: the imaginary axis, the arc
+    ``|z| = r``, the line ``Re z = -q_max/2`` and the real segment; on each, ``|R|^2`` is a polynomial
+    of one real variable whose maximum comes from its critical points."""
+    P, C = np.polynomial.Polynomial, np.polynomial.Chebyshev
+    coef = np.asarray(coef, dtype=np.float64)
+
+    def on_line(x0):  # |R(x0 + i y)|^2 as a polynomial in y
+        z = P([x0, 1j])
+        rz = sum((c * z**k for k, c in enumerate(coef)), P([0j]))
+        return P(rz.coef.real) ** 2 + P(rz.coef.imag) ** 2
+
+    best = _max_on(on_line(0.0), 0.0, r)
+    half = 0.5 * q_max
+    if 0 < half < r:
+        best = max(best, _max_on(on_line(-half), 0.0, math.sqrt(r * r - half * half)))
+    if r > 0:  # |R(r e^{i t})|^2 = sum_n a_n cos(n t), a polynomial of c = cos t (Chebyshev)
+        deg = len(coef) - 1
+        cr = coef * r ** np.arange(deg + 1)
+        a = np.array([sum(cr[j] * cr[j - n] for j in range(n, deg + 1)) for n in range(deg + 1)])
+        a[1:] *= 2.0
+        best = max(best, _max_on(C(a).convert(kind=P), -min(1.0, half / r), 0.0))
+    if q_max > 0:
+        best = max(best, _max_on(P(coef) ** 2, -q_max, 0.0))
+    return math.sqrt(max(best, 0.0))
+
+
+def rk4_limit(omega: float, gamma: float) -> float:
+    """Largest h [s] with ``rk4_max_modulus(h gamma, h omega) <= 1`` (bisection: the set of modes grows
+    with h, so stability is monotone)."""
 
     def stable(h):
-        lam = np.linalg.eigvals(step_matrix(method, (ww * h) ** 2, gg * h))
-        return bool(np.all(np.abs(lam) <= 1.0 + RADIUS_TOL))
+        return rk4_max_modulus(gamma * h, omega * h) <= 1.0 + RADIUS_TOL
 
     hi = 4.0 / max(omega, gamma, 1e-300)
     while stable(hi):
@@ -229,7 +332,8 @@ def stable_step(method: str, omega: float, gamma: float, ratio: float = 0.0) -> 
       ``p + 2 q < 4``, monotone in both, so the corner is the limit:
       ``h = (-gamma + sqrt(gamma^2 + 4 omega^2)) / omega^2`` (= 2/omega undamped);
     * explicit Euler: ``min(ratio, 2 / gamma)`` (zero without damping);
-    * RK4 and velocity Verlet: bisection over the (gamma, omega) box (:data:`BOX_POINTS` per axis).
+    * velocity Verlet: :func:`verlet_carried_limit` (= 2/omega undamped);
+    * RK4: :func:`rk4_limit` (= 2 sqrt 2 / omega undamped).
     """
     if math.isinf(STABILITY_LIMIT.get(method, 0.0)):
         return math.inf
@@ -246,5 +350,6 @@ def stable_step(method: str, omega: float, gamma: float, ratio: float = 0.0) -> 
         return (-gamma + math.sqrt(gamma * gamma + 4.0 * omega * omega)) / (omega * omega)
     if gamma == 0.0:
         return STABILITY_LIMIT[method] / omega
-    h = _box_limit(method, omega, gamma)
-    return h * VERLET_DAMPED_SAFETY if method == "verlet" else h
+    if method == "verlet":
+        return verlet_carried_limit(omega, gamma)
+    return rk4_limit(omega, gamma)

@@ -7,17 +7,19 @@ A spring of stiffness k, rest length l and damping c is the constraint
 ``C = |x_i - x_j| - l`` with compliance ``alpha = 1/k`` (``alpha~ = alpha / h^2``)
 and damping ``beta = c`` (``gamma = alpha~ beta h = c / (k h)``). One substep of size h:
 
-1. predict: ``v += h (g - rho v / m)``, ``dx = h v``, ``x += dx`` (free particles); ``lambda = 0``;
+1. predict: ``v += h (g - rho v / m)``, ``dx = h v`` (free particles); ``lambda = 0``; during the
+   substep a particle is at ``x + dx``;
 2. ``iterations`` symmetric Gauss-Seidel sweeps over the springs: a forward sweep
    then the same springs in reverse order. Each spring update is XPBD eq. 18 with
    the damping of eq. 26, numerator and denominator multiplied by ``k h^2``
    (so that ``k = 0`` needs no division; ``lambda`` is the paper's multiplier):
 
        dlambda = (-k h^2 C - lambda - c h n . (dx_i - dx_j)) / ((k h^2 + c h)(w_i + w_j) + 1)
-       lambda += dlambda,   x_i += w_i dlambda n,   x_j -= w_j dlambda n,   n = (x_i - x_j)/|x_i - x_j|
+       lambda += dlambda,   dx_i += w_i dlambda n,   dx_j -= w_j dlambda n,   n = d/|d|,
+       d = (x_i - x_j) + (dx_i - dx_j)
 
-   (w = 1/m, 0 for pinned particles), and every correction is added to ``dx`` as well;
-3. ``v = dx / h``; colliders (:mod:`tianim.kernels.contact`) then push
+   (w = 1/m, 0 for pinned particles);
+3. ``x += dx``, ``v = dx / h``; colliders (:mod:`tianim.kernels.contact`) then push
    particles out and apply restitution and friction.
 
 Velocity in float32. The papers form ``v = (x - p) / h`` from two positions. In float32 that
@@ -27,6 +29,18 @@ it fell 0.0 m in 0.1 s; exact 0.049 m). Here the displacement of the substep, ``
 in its own buffer: the predicted ``h v`` plus the sum of the corrections, each exact to float32
 relative to its own (small) size, so ``v = dx / h`` keeps gravity and small motions at any h. In
 exact arithmetic ``dx = x - p`` and the method is unchanged.
+
+Positions in float32. The constraints are evaluated at ``x + dx`` as ``(x_i - x_j) + (dx_i - dx_j)``,
+and x is moved once per substep. Moving x by every prediction and correction (as the papers do)
+rounds it to ~6e-8 m each time; at rest the prediction ``h^2 g`` and the corrections cancel, but
+the rounding does not: the constraint then sees a position jitter of ~1 ulp, whose correction is
+a velocity of ~ulp / h that grows with the substep count (measured on a damped 10-particle hanging
+chain: |v| of 1e-4 to 2e-3 m/s after 10 s at 32-512 substeps per 1/60 s frame, float64 ~1e-12).
+Here x moves once per substep, by ``rem + dx`` with Knuth's exact TwoSum, ``rem`` keeping what
+that rounding lost (a work array, zero at the start of each call), and C is formed from the small
+displacement ``e = (rem_i - rem_j) + (dx_i - dx_j)`` as ``((|d0|^2 - l^2) + (2 d0.e + e.e)) / (|d0 + e| + l)``
+with ``d0 = x_i - x_j``: inside a call the positions are in effect kept to twice the precision of x,
+and the chain settles.
 
 Why symmetric sweeps. One sweep of Gauss-Seidel per substep (the plain "small
 steps" loop) is, linearised, ``x+ = G (2 x - x-)`` with ``G`` the Gauss-Seidel
@@ -74,7 +88,7 @@ PARALLEL_MIN_PARTICLES = 1024
 
 
 @cached_variants
-def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
+def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, compensated=False):
     t = kernel_types(real_name, dim)
     ti, real, vec, vec_arr = t.ti, t.real, t.vec, t.vec_arr
     real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
@@ -83,29 +97,56 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
     respond = contact_response(real_name, dim)
 
     @ti.func
-    def project(b, i, j, s, li, x: T, dx: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T, damp: T, h):
+    def project(b, i, j, s, li, x: T, dx: T, rem: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T, damp: T, h):
         """One XPBD update of spring s (multiplier lam[b, li]) between particles i and j of copy b."""
         wi = ti.select(pinned[b, i] == 0, inv_mass[i], 0)
         wj = ti.select(pinned[b, j] == 0, inv_mass[j], 0)
-        d = x[b, i] - x[b, j]
-        length = d.norm()
-        if length > 0 and wi + wj > 0:
-            n = d / length
-            kh2 = k[s] * h * h
-            num = -kh2 * (length - rest[s]) - lam[b, li]
-            den = kh2 * (wi + wj) + 1
-            if ti.static(spring_damping):
-                ch = damp[s] * h
-                num -= ch * n.dot(dx[b, i] - dx[b, j])
-                den += ch * (wi + wj)
-            dl = num / den
-            lam[b, li] += dl
-            ci = (wi * dl) * n
-            cj = (wj * dl) * n
-            x[b, i] += ci
-            dx[b, i] += ci
-            x[b, j] -= cj
-            dx[b, j] -= cj
+        if ti.static(compensated):
+            # A particle is at x + rem + dx during the substep (x moves once, in finish; rem is what rounding
+            # x left over). C = |d0 + e| - l is formed as ((|d0|^2 - l^2) + (2 d0.e + e.e)) / (|d0 + e| + l),
+            # the small displacement's part from e directly, so that motions far below the resolution of x
+            # are kept (module docstring).
+            d0 = x[b, i] - x[b, j]
+            e = (rem[b, i] - rem[b, j]) + (dx[b, i] - dx[b, j])
+            d = d0 + e
+            length = d.norm()
+            if length > 0 and wi + wj > 0:
+                n = d / length
+                r = rest[s]
+                kh2 = k[s] * h * h
+                num = -kh2 * (((d0.dot(d0) - r * r) + (2 * d0.dot(e) + e.dot(e))) / (length + r)) - lam[b, li]
+                den = kh2 * (wi + wj) + 1
+                if ti.static(spring_damping):
+                    ch = damp[s] * h
+                    num -= ch * n.dot(dx[b, i] - dx[b, j])
+                    den += ch * (wi + wj)
+                dl = num / den
+                lam[b, li] += dl
+                ci = (wi * dl) * n
+                cj = (wj * dl) * n
+                dx[b, i] += ci
+                dx[b, j] -= cj
+        else:
+            # the papers' form: x moves by every prediction and correction (each also added to dx)
+            d = x[b, i] - x[b, j]
+            length = d.norm()
+            if length > 0 and wi + wj > 0:
+                n = d / length
+                kh2 = k[s] * h * h
+                num = -kh2 * (length - rest[s]) - lam[b, li]
+                den = kh2 * (wi + wj) + 1
+                if ti.static(spring_damping):
+                    ch = damp[s] * h
+                    num -= ch * n.dot(dx[b, i] - dx[b, j])
+                    den += ch * (wi + wj)
+                dl = num / den
+                lam[b, li] += dl
+                ci = (wi * dl) * n
+                cj = (wj * dl) * n
+                x[b, i] += ci
+                dx[b, i] += ci
+                x[b, j] -= cj
+                dx[b, j] -= cj
 
     @ti.func
     def predict(b, i, x: T, v: T, dx: T, pinned: T, inv_mass: T, g, rho, h):
@@ -115,10 +156,19 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
                 a -= rho * inv_mass[i] * v[b, i]
             v[b, i] += h * a
         dx[b, i] = h * v[b, i]
-        x[b, i] += dx[b, i]
+        if ti.static(not compensated):
+            x[b, i] += dx[b, i]
 
     @ti.func
-    def finish(b, i, x: T, v: T, dx: T, pinned: T, coll: T, g_norm, h):
+    def finish(b, i, x: T, v: T, dx: T, rem: T, pinned: T, coll: T, g_norm, h):
+        if ti.static(compensated):
+            # x += rem + dx, and rem = what that rounding lost, exactly (Knuth's TwoSum; fast_math is off).
+            xo = x[b, i]
+            u = rem[b, i] + dx[b, i]
+            xn = xo + u
+            bb = xn - xo
+            rem[b, i] = (xo - (xn - bb)) + (u - bb)
+            x[b, i] = xn
         if pinned[b, i] == 0:
             v[b, i] = dx[b, i] / h
             if ti.static(colliders):
@@ -142,7 +192,7 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
         return ((along + 2 * a - 1) // (2 * a)) * a * across
 
     @ti.func
-    def grid_colour(b, m, c: ti.template(), x: T, dx: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T,
+    def grid_colour(b, m, c: ti.template(), x: T, dx: T, rem: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T,
                     damp: T, h, nx):
         """Update the m-th spring of colour c of copy b (if it exists)."""
         o, dc, dr, a, vertical, parity = ti.static(colour_geometry(c))
@@ -160,14 +210,14 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
         rr = row + dr
         if 0 <= col < nx and 0 <= row < ny and 0 <= cc < nx and 0 <= rr < ny:
             i = row * nx + col
-            project(b, i, rr * nx + cc, o, i * nf + c // 2, x, dx, lam, pinned, inv_mass, k, rest, damp, h)
+            project(b, i, rr * nx + cc, o, i * nf + c // 2, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h)
 
     def sweep_order(sweeps):
         """Compile-time colour order of ``sweeps`` symmetric sweeps."""
         return (tuple(range(N_COLOURS)) + tuple(reversed(range(N_COLOURS)))) * sweeps
 
     @ti.kernel
-    def per_copy(x: vec_arr, v: vec_arr, dx: vec_arr, lam: real2_arr, pinned: mask_arr, inv_mass: real_arr,
+    def per_copy(x: vec_arr, v: vec_arr, dx: vec_arr, rem: vec_arr, lam: real2_arr, pinned: mask_arr, inv_mass: real_arr,
                  ends: int_arr, k: real_arr, rest: real_arr, damp: real_arr,
                  coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32, n_springs: ti.i32, nsub: ti.i32,
                  iters: ti.i32):
@@ -184,18 +234,18 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
                         if sweep % 2 == 0:
                             for c in ti.static(range(N_COLOURS)):
                                 for m in range(colour_count(c, n, nx)):
-                                    grid_colour(b, m, c, x, dx, lam, pinned, inv_mass, k, rest, damp, h, nx)
+                                    grid_colour(b, m, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
                         else:
                             for c in ti.static(tuple(reversed(range(N_COLOURS)))):
                                 for m in range(colour_count(c, n, nx)):
-                                    grid_colour(b, m, c, x, dx, lam, pinned, inv_mass, k, rest, damp, h, nx)
+                                    grid_colour(b, m, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
                     else:
                         for ss in range(n_springs):
                             s = ss if sweep % 2 == 0 else n_springs - 1 - ss
-                            project(b, ends[2 * s], ends[2 * s + 1], s, s, x, dx, lam, pinned, inv_mass, k,
+                            project(b, ends[2 * s], ends[2 * s + 1], s, s, x, dx, rem, lam, pinned, inv_mass, k,
                                     rest, damp, h)
                 for i in range(n):
-                    finish(b, i, x, v, dx, pinned, coll, g_norm, h)
+                    finish(b, i, x, v, dx, rem, pinned, coll, g_norm, h)
 
     kernels = {"per_copy": per_copy}
     if grid:
@@ -203,7 +253,7 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
 
         def make(phase):
             @ti.kernel
-            def parallel_substep(x: vec_arr, v: vec_arr, dx: vec_arr, lam: real2_arr, pinned: mask_arr,
+            def parallel_substep(x: vec_arr, v: vec_arr, dx: vec_arr, rem: vec_arr, lam: real2_arr, pinned: mask_arr,
                                  inv_mass: real_arr, k: real_arr, rest: real_arr,
                                  damp: real_arr, coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32):
                 """A piece of a substep, parallel over (copy, particle); each top-level loop ends in a barrier.
@@ -218,10 +268,10 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders):
                             lam[b, i * nf + f] = 0
                 for c in ti.static(order):
                     for b, m in ti.ndrange(x.shape[0], colour_count(c, x.shape[1], nx)):
-                        grid_colour(b, m, c, x, dx, lam, pinned, inv_mass, k, rest, damp, h, nx)
+                        grid_colour(b, m, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
                 if ti.static(phase in (2, 3)):
                     for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                        finish(b, i, x, v, dx, pinned, coll, g.norm(), h)
+                        finish(b, i, x, v, dx, rem, pinned, coll, g.norm(), h)
 
             return parallel_substep
 
@@ -241,7 +291,8 @@ def choose_xpbd_layout(model, batch: int) -> str:
     return "per_copy"
 
 
-def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: str, buffer) -> None:
+def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: str, buffer,
+             keep_remainder: bool = False, compensated: bool = False) -> None:
     """Advance every copy of ``state`` by ``substeps`` XPBD substeps of ``dt`` [s], in place.
 
     The solver itself, without validation: use :class:`tianim.physics.solvers.XPBD` (which validates,
@@ -265,19 +316,29 @@ def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: st
     buffer : callable
         ``buffer(name, shape, dtype)`` returns the solver's work array of that name (contents need not
         be kept between calls).
+    keep_remainder : bool
+        Keep the sub-resolution remainder of the positions (work array ``"rem"``) from the previous
+        call instead of starting from zero: for callers that run one substep per call within a step.
+    compensated : bool
+        Compensated positions (module docstring, "Positions in float32"): x moves once per substep with
+        its rounding remainder kept; float32 chains then come to rest at their equilibrium. Off: the
+        papers' form, x moved by every prediction and correction.
     """
     if layout == "auto":
         layout = choose_xpbd_layout(model, state.batch)
     data = model.kernel_data(state.dtype)
     grid = model.grid is not None
     kernels = _kernels(state.dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
-                       len(model.colliders) > 0)
+                       len(model.colliders) > 0, bool(compensated))
     edges = not grid and model.n_springs > 0
     n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
     lam = buffer("lambda", (state.batch, n_lam), state.dtype)
     real = state.dtype.type
-    common_head = (state.x, state.v, buffer("dx", state.x.shape, state.dtype), lam, state.pinned.view(np.uint8),
-                   data["inv_mass"])
+    rem = buffer("rem", state.x.shape, state.dtype)
+    if compensated and not keep_remainder:
+        rem.fill(0)
+    common_head = (state.x, state.v, buffer("dx", state.x.shape, state.dtype), rem, lam,
+                   state.pinned.view(np.uint8), data["inv_mass"])
     g, rho, h = model.gravity.astype(state.dtype), float(real(model.medium_damping)), float(real(dt))
     nx = model.grid.nx if grid else 1
     if layout == "per_copy":
