@@ -309,3 +309,35 @@ def make_output_folder(name: str, folder, value=None) -> str:
     path = check_output_folder(name, folder, value)
     os.makedirs(path, exist_ok=True)
     return path
+
+
+def check_domain(domain, dim=None):
+    """``domain`` as a ``(lower, upper)`` pair of float64 (D,) corners [m] with upper > lower on every
+    axis (D = ``dim``, or 2 or 3 when ``dim`` is None); None stays None. The one domain check of the grid
+    boxes of particles and crowds."""
+    if domain is None:
+        return None
+    if isinstance(domain, np.ndarray) and domain.ndim == 2 and domain.shape[0] == 2:
+        domain = (domain[0], domain[1])
+    if not isinstance(domain, (tuple, list)) or len(domain) != 2:
+        raise ValueError(f"domain={fmt(domain)} must be a (lower, upper) pair of corners [m]")
+    try:
+        lo, hi = (np.asarray(corner) for corner in domain)
+    except (TypeError, ValueError):
+        raise TypeError(f"domain={fmt(domain)} must hold numbers: a (lower, upper) pair of corners [m]") from None
+    for corner in (lo, hi):
+        if corner.dtype == object or corner.dtype == bool or not (np.issubdtype(corner.dtype, np.floating)
+                                                                  or np.issubdtype(corner.dtype, np.integer)):
+            raise TypeError(f"domain={fmt(domain)} must hold numbers: a (lower, upper) pair of corners [m]")
+    lo, hi = lo.astype(np.float64), hi.astype(np.float64)
+    if lo.ndim != 1 or lo.shape != hi.shape or lo.size not in (2, 3) or (dim is not None and lo.size != dim):
+        want = f"{dim}" if dim is not None else "2 or 3"
+        where = f" (this system is {dim}D)" if dim is not None else ""
+        raise ValueError(f"domain={fmt(domain)} must be two corners of {want} coordinates each{where}, "
+                         "(lower, upper) [m]")
+    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+        raise ValueError(f"domain={fmt(domain)} is not finite; give finite corners [m]")
+    if np.any(hi <= lo):
+        raise ValueError(f"domain={fmt(domain)} must have upper > lower on every axis (is it reversed? "
+                         "give (lower corner, upper corner))")
+    return lo, hi

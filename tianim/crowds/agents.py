@@ -136,31 +136,6 @@ def check_fits(name, value, dtype) -> None:
                          "give smaller values or use dtype=np.float64")
 
 
-def check_domain(domain, dim=None):
-    """``domain`` as a ``(lower, upper)`` pair of float64 (D,) corners with upper > lower, or a clear error."""
-    if domain is None:
-        return None
-    if isinstance(domain, np.ndarray) and domain.ndim == 2 and domain.shape[0] == 2:
-        domain = (domain[0], domain[1])
-    if not isinstance(domain, (tuple, list)) or len(domain) != 2:
-        raise ValueError(f"domain={fmt(domain)} must be a (lower, upper) pair of corners [m]")
-    lo, hi = (np.asarray(c) for c in domain)
-    for c in (lo, hi):
-        if c.dtype == object or c.dtype == bool or not (np.issubdtype(c.dtype, np.floating)
-                                                        or np.issubdtype(c.dtype, np.integer)):
-            raise TypeError(f"domain={fmt(domain)} must hold numbers: a (lower, upper) pair of corners [m]")
-    lo, hi = lo.astype(np.float64), hi.astype(np.float64)
-    if lo.ndim != 1 or lo.shape != hi.shape or lo.size not in (2, 3) or (dim is not None and lo.size != dim):
-        want = f"{dim}" if dim is not None else "2 or 3"
-        raise ValueError(f"domain={fmt(domain)} must be two corners of {want} coordinates each, (lower, upper) [m]")
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-        raise ValueError(f"domain={fmt(domain)} must be finite")
-    if np.any(hi <= lo):
-        raise ValueError(f"domain={fmt(domain)} must have upper > lower on every axis (is it reversed? "
-                         "give (lower corner, upper corner))")
-    return lo, hi
-
-
 class CrowdState(Agents):
     """Everything that changes for B copies of a crowd (make it with ``model.state(agents)``).
 

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt
-from tianim.crowds.agents import Agents, CrowdState, check_agents, check_domain
+from tianim._checks import as_float_array, check_domain, check_finite_scalar, check_int, fmt
+from tianim.crowds.agents import Agents, CrowdState, check_agents
 from tianim.crowds.solver import CrowdModel
 
 

@@ -62,7 +62,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tianim._checks import as_float_array, check_choice, check_finite_scalar, check_int, fmt, real_dtype
+from tianim._checks import (as_float_array, check_choice, check_domain, check_finite_scalar, check_int,
+                            fmt, real_dtype)
 from tianim.particles.emitters import Emitter
 from tianim.particles.forces import force_table
 from tianim.stepping import StateArrays, StepStats, draw, rng_states
@@ -193,23 +194,6 @@ def _check_fields(name, emitter, dtype):
         _check_magnitude(f"{name}.{f.name}", a, dtype)
 
 
-def _domain(domain, dim):
-    try:
-        lo, hi = domain
-        lo, hi = np.asarray(lo, np.float64), np.asarray(hi, np.float64)
-    except (TypeError, ValueError):
-        raise TypeError(f"domain={fmt(domain)} must be (lower, upper), each {dim} coordinates [m]") from None
-    if lo.shape != (dim,) or hi.shape != (dim,):
-        raise ValueError(f"domain={fmt(domain)} has corners of shape {lo.shape} and {hi.shape}; this system is "
-                         f"{dim}D: give (lower, upper), each {dim} coordinates [m]")
-    if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
-        raise ValueError(f"domain={fmt(domain)} is not finite; give finite corners [m]")
-    if np.any(hi <= lo):
-        raise ValueError(f"domain={fmt(domain)}: upper must be > lower on every axis (reversed corners?); "
-                         "give (lower, upper)")
-    return lo, hi
-
-
 def _frozen(a: np.ndarray) -> np.ndarray:
     a = np.array(a)
     a.flags.writeable = False
@@ -302,7 +286,7 @@ class ParticleModel:
         #: contact distance of the colliders [m]: the DEM radius (particles rest on their surface), else 0
         self.collider_radius = float(self.granular.radius) if self.granular is not None else 0.0
         D, f = self.dim, self.dtype
-        lo, hi = (np.full(D, -5.0), np.full(D, 5.0)) if domain is None else _domain(domain, D)
+        lo, hi = (np.full(D, -5.0), np.full(D, 5.0)) if domain is None else check_domain(domain, D)
         _check_magnitude("domain", np.concatenate([lo, hi]), self.dtype)
         self.domain = (_frozen(np.asarray(lo, np.float64)), _frozen(np.asarray(hi, np.float64)))
         #: where each emitter's bursts start in a state's ``fired`` row (emitter k: offsets[k]:offsets[k + 1])

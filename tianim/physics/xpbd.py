@@ -101,52 +101,39 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
         """One XPBD update of spring s (multiplier lam[b, li]) between particles i and j of copy b."""
         wi = ti.select(pinned[b, i] == 0, inv_mass[i], 0)
         wj = ti.select(pinned[b, j] == 0, inv_mass[j], 0)
+        # compensated: a particle is at x + rem + dx during the substep (x moves once, in finish; rem is
+        # what rounding x left over), and C = |d0 + e| - l is formed as
+        # ((|d0|^2 - l^2) + (2 d0.e + e.e)) / (|d0 + e| + l), the small displacement's part from e
+        # directly, so that motions far below the resolution of x are kept (module docstring).
+        # Otherwise the papers' form: x moves by every prediction and correction (each added to dx too).
+        d0 = x[b, i] - x[b, j]
+        d = d0
         if ti.static(compensated):
-            # A particle is at x + rem + dx during the substep (x moves once, in finish; rem is what rounding
-            # x left over). C = |d0 + e| - l is formed as ((|d0|^2 - l^2) + (2 d0.e + e.e)) / (|d0 + e| + l),
-            # the small displacement's part from e directly, so that motions far below the resolution of x
-            # are kept (module docstring).
-            d0 = x[b, i] - x[b, j]
-            e = (rem[b, i] - rem[b, j]) + (dx[b, i] - dx[b, j])
-            d = d0 + e
-            length = d.norm()
-            if length > 0 and wi + wj > 0:
-                n = d / length
-                r = rest[s]
-                kh2 = k[s] * h * h
-                num = -kh2 * (((d0.dot(d0) - r * r) + (2 * d0.dot(e) + e.dot(e))) / (length + r)) - lam[b, li]
-                den = kh2 * (wi + wj) + 1
-                if ti.static(spring_damping):
-                    ch = damp[s] * h
-                    num -= ch * n.dot(dx[b, i] - dx[b, j])
-                    den += ch * (wi + wj)
-                dl = num / den
-                lam[b, li] += dl
-                ci = (wi * dl) * n
-                cj = (wj * dl) * n
-                dx[b, i] += ci
-                dx[b, j] -= cj
-        else:
-            # the papers' form: x moves by every prediction and correction (each also added to dx)
-            d = x[b, i] - x[b, j]
-            length = d.norm()
-            if length > 0 and wi + wj > 0:
-                n = d / length
-                kh2 = k[s] * h * h
-                num = -kh2 * (length - rest[s]) - lam[b, li]
-                den = kh2 * (wi + wj) + 1
-                if ti.static(spring_damping):
-                    ch = damp[s] * h
-                    num -= ch * n.dot(dx[b, i] - dx[b, j])
-                    den += ch * (wi + wj)
-                dl = num / den
-                lam[b, li] += dl
-                ci = (wi * dl) * n
-                cj = (wj * dl) * n
+            d = d0 + ((rem[b, i] - rem[b, j]) + (dx[b, i] - dx[b, j]))
+        length = d.norm()
+        if length > 0 and wi + wj > 0:
+            n = d / length
+            r = rest[s]
+            kh2 = k[s] * h * h
+            c = length - r
+            if ti.static(compensated):
+                e = (rem[b, i] - rem[b, j]) + (dx[b, i] - dx[b, j])
+                c = ((d0.dot(d0) - r * r) + (2 * d0.dot(e) + e.dot(e))) / (length + r)
+            num = -kh2 * c - lam[b, li]
+            den = kh2 * (wi + wj) + 1
+            if ti.static(spring_damping):
+                ch = damp[s] * h
+                num -= ch * n.dot(dx[b, i] - dx[b, j])
+                den += ch * (wi + wj)
+            dl = num / den
+            lam[b, li] += dl
+            ci = (wi * dl) * n
+            cj = (wj * dl) * n
+            dx[b, i] += ci
+            dx[b, j] -= cj
+            if ti.static(not compensated):
                 x[b, i] += ci
-                dx[b, i] += ci
                 x[b, j] -= cj
-                dx[b, j] -= cj
 
     @ti.func
     def predict(b, i, x: T, v: T, dx: T, pinned: T, inv_mass: T, g, rho, h):
