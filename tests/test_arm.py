@@ -140,7 +140,7 @@ def test_pendulum_small_swing_period():
 
 
 def test_inverse_dynamics_round_trip_converges():
-    """Torques from the RNEA along q(t), forward-simulated by arm.step, reproduce q(t);
+    """Torques from the RNEA along q(t), forward-simulated by ArmSolver, reproduce q(t);
     the error falls like dt (semi-implicit Euler is first order)."""
     chain = tk.PlanarChain([0.4, 0.3, 0.3], masses=[1.0, 0.7, 0.5], damping=0.05)
     w, a, b = np.array([2.0, 3.0, 1.5]), np.array([0.8, 0.5, 0.6]), np.array([0.1, -0.4, 0.3])

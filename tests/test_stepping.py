@@ -64,3 +64,13 @@ def test_stepstats_counts_read_as_attributes():
     assert st.born[0] == 3 and st.iterations == {}
     with pytest.raises(AttributeError, match="no attribute or count 'died'"):
         st.died
+
+
+def test_one_divergence_error_for_every_stepping_thing():
+    import tianim.physics as tp
+    from tianim.kinematics import arm
+    from tianim.stepping import DivergenceError
+
+    assert tp.DivergenceError is DivergenceError and arm.ArmDivergenceError is DivergenceError
+    err = DivergenceError("copy 1 blew up", copies=[1])
+    assert err.copies == [1] and err.stats is None and isinstance(err, RuntimeError)

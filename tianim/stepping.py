@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["StepStats", "StateArrays", "rng_states", "copy_rng", "draw"]
+__all__ = ["StepStats", "StateArrays", "DivergenceError", "rng_states", "copy_rng", "draw"]
 
 
 @dataclass
@@ -65,6 +65,19 @@ class StepStats:
         if counts is not None and name in counts:
             return counts[name]
         raise AttributeError(f"StepStats has no attribute or count {name!r}")
+
+
+class DivergenceError(RuntimeError):
+    """A step blew up (non-finite values, or energy a solver created beyond its bound), for every
+    stepping thing (physics, particles, crowds, the arm). What the state holds afterwards is the raising
+    solver's documented choice (physics and crowds: rolled back to the start of the call; the arm: left
+    as before the step). ``copies`` lists the copies that diverged, ``stats`` is the call's
+    :class:`StepStats` where one exists."""
+
+    def __init__(self, message: str, copies=(), stats=None):
+        super().__init__(message)
+        self.copies = list(copies)
+        self.stats = stats
 
 
 class StateArrays:

@@ -141,7 +141,7 @@ class CrowdSolver:
         if not _all_finite(state.x, state.v):
             bad = ~(np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2)))
             _put_back(state, snap)
-            from tianim.physics.watchdog import DivergenceError
+            from tianim.stepping import DivergenceError
 
             copies = np.flatnonzero(bad)
             raise DivergenceError(f"{type(model).__name__} diverged in copies {fmt(copies)}: positions or velocities "

@@ -54,7 +54,7 @@ from tianim._checks import check_choice, check_finite_scalar, check_positive_int
 from tianim.kinematics import _arm_scalar
 from tianim.kinematics._arm_codegen import compile_stepper
 from tianim.kinematics.planar import PlanarChain
-from tianim.stepping import StateArrays, StepStats
+from tianim.stepping import DivergenceError, StateArrays, StepStats
 
 __all__ = ["ArmDivergenceError", "ArmSolver", "ArmState", "Coefficients", "PATHS", "coefficients", "observer"]
 
@@ -63,13 +63,8 @@ ON_DIVERGENCE = ("raise", "rollback")
 METHODS = ("semi_implicit_euler", "rk4")
 
 
-class ArmDivergenceError(FloatingPointError):
-    """A step made ``q`` or ``qd`` of some copy non-finite (``on_divergence="raise"``); the state
-    was left as it was before the step. ``copies`` lists the copies that diverged."""
-
-    def __init__(self, message: str, copies):
-        super().__init__(message)
-        self.copies = list(copies)
+#: The arm's divergence error is the one of every stepping thing (kept under this name for callers).
+ArmDivergenceError = DivergenceError
 
 
 class Coefficients(NamedTuple):

@@ -667,7 +667,7 @@ class ParticleSolver:
         bad = self._diverged(state)
         stats = StepStats("particles", h, substeps, bad, reason=None, counts=c)
         if bad.any():
-            from tianim.physics.watchdog import DivergenceError
+            from tianim.stepping import DivergenceError
 
             stats.reason = "non-finite particle positions or velocities"
             copies = [int(b) for b in np.flatnonzero(bad)]

@@ -39,17 +39,7 @@ import numpy as np
 
 from tianim.physics.model import GRID_STENCIL
 from tianim.kernels import cached_variants, kernel_types
-
-
-class DivergenceError(RuntimeError):
-    """A simulation blew up (non-finite values or energy growth); the state was rolled back to the start
-    of the call. ``copies`` lists the copies that diverged, ``stats`` is the call's
-    :class:`~tianim.physics.solvers.StepStats`."""
-
-    def __init__(self, message: str, copies=(), stats=None):
-        super().__init__(message)
-        self.copies = list(copies)
-        self.stats = stats
+from tianim.stepping import DivergenceError  # noqa: F401  (the one divergence error, re-exported here)
 
 
 #: Default bound on the energy the solver may create, in units of the scene reference R (module docstring).
