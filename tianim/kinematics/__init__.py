@@ -3,6 +3,8 @@
 * :class:`PlanarChain` - the planar arm model: revolute chain (FK, Jacobian) with masses,
   inertias, joint damping, torque, speed and joint limits, gravity
 * :class:`JointTree` (skeletons), :class:`SerialChain` - 3D revolute/prismatic joints, FK, Jacobians
+* :func:`solve_tree_ik` - points attached to a JointTree's joints onto targets, batched over copies
+  (Levenberg-Marquardt, NaN targets dropped, joint limits): the IK of mocap's marker solve and retargeting
 * :func:`solve_ik` (DLS, Jacobian transpose, CCD, FABRIK; batched; limits; redundant and
   unreachable targets), :func:`two_link_ik` (closed form, both elbows)
 * :func:`inverse_dynamics`, :func:`forward_dynamics`, :func:`mass_matrix`,
@@ -26,6 +28,7 @@ from tianim.kinematics.dynamics import (
 from tianim.kinematics.ik import METHODS, IKResult, solve_ik, two_link_ik
 from tianim.kinematics.planar import PlanarChain
 from tianim.kinematics.tree import JointTree, SerialChain, rotation
+from tianim.kinematics.tree_ik import TreeIKResult, solve_tree_ik
 
 __all__ = [
     "DEFAULT_GRAVITY",
@@ -34,9 +37,11 @@ __all__ = [
     "METHODS",
     "PlanarChain",
     "SerialChain",
+    "TreeIKResult",
     "arm",
     "rotation",
     "solve_ik",
+    "solve_tree_ik",
     "two_link_ik",
     "bias_torques",
     "energy",

@@ -21,7 +21,7 @@ from math import cos, sin
 
 import numpy as np
 
-from tianim._checks import float_array, joint_limits, joint_vector
+from tianim._checks import float_array, joint_limits, joint_vector, numeric_array
 
 KINDS = ("revolute", "prismatic")
 
@@ -156,10 +156,25 @@ class JointTree:
             self.__dict__["_block_plan"] = plan
         return plan
 
+    def frames_t(self, qT, joints=None, axes: bool = True, rotations: bool = True):
+        """:meth:`frames` in the batch-last layout its loop works in, for callers that keep that layout.
+
+        ``qT`` (n, B): joint-major coordinates (rad / m; one contiguous row of B copies per joint).
+        ``joints`` (k,) as in :meth:`frames`. Returns pos (k, 3, B) [m], rot (k, 3, 3, B) (None unless
+        ``rotations``) and ax (k, 3, B) (None unless ``axes``): the arrays :meth:`frames` returns, batch
+        axis last, with the same bits. Skipping the rotations or axes nobody reads saves their memory
+        traffic (a skeleton's joint positions need neither the axes nor, for the leaves, the rotations).
+        """
+        if not (isinstance(qT, np.ndarray) and qT.dtype == np.float64):
+            qT = numeric_array("qT", qT, f"pass joint-major coordinates of shape ({self.n}, copies), rad / m")
+        if qT.ndim != 2 or qT.shape[0] != self.n:
+            raise ValueError(f"qT has shape {qT.shape}; pass ({self.n}, copies): one row per joint of the tree")
+        if not np.all(np.isfinite(qT)):
+            raise ValueError("qT contains NaN or inf; pass finite joint coordinates")
+        return self._frames_t(np.ascontiguousarray(qT), joints, axes, rotations)
+
     def _frames_t(self, qT: np.ndarray, joints=None, axes: bool = True, rotations: bool = True):
-        """:meth:`frames` on joint-major coordinates qT (n, B) (finite, unchecked), returning the
-        batch-last arrays pos (k, 3, B), rot (k, 3, 3, B) (None unless ``rotations``) and ax (k, 3, B)
-        (None unless ``axes``)."""
+        """:meth:`frames_t` on checked input (qT (n, B) finite, contiguous float64)."""
         n, B = qT.shape
         plan, last_child, _ = self._joint_plan()
         upfront = _cos_sin(qT) if B <= TRIG_UPFRONT_MAX_BATCH else None

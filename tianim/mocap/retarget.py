@@ -14,7 +14,7 @@
    of the foot - the foot joint or a joint below it, toes and toe tips - within ``height_tol`` of its
    lowest height over the clip and slower than ``speed_tol``); during a contact the target's
    foot joint is put, by inverse kinematics of the two leg joints above it (the batched
-   Levenberg-Marquardt of :mod:`tianim.mocap.solve`), at ``s x`` the source foot position: on the
+   Levenberg-Marquardt of :func:`tianim.kinematics.solve_tree_ik`), at ``s x`` the source foot position: on the
    ground (the source's contact height, scaled) and as still as the source foot was. The foot keeps
    its world rotation. Over ``blend`` frames either side of a contact the goal eases from the rotated
    pose to the planted one (smoothstep), so nothing pops.
@@ -32,10 +32,10 @@ from typing import NamedTuple
 import numpy as np
 
 from tianim._checks import check_finite_scalar, check_int, fmt
+from tianim.kinematics.tree_ik import solve_tree_ik
 from tianim.mocap.skeleton import ROTATION_CHANNELS, Skeleton
 from tianim.mocap.rigid import kabsch, smallest_rotation
 from tianim.mocap.rotations import euler_from_matrix
-from tianim.mocap.solve import _levenberg_marquardt
 
 
 class RetargetResult(NamedTuple):
@@ -270,10 +270,9 @@ def _plant(target: Skeleton, motion: np.ndarray, feet: list, goal: np.ndarray, w
     dof_cols = dof_cols[target.rotation_channel[dof_cols]]
     dof = target.channel_tree_joint[dof_cols]
     tj = target.tree_joint[np.asarray(feet)]
-    anc = np.stack([tree.ancestors(int(t)) for t in tj])[:, dof]
-    q = target.to_q(motion)
-    q, _, _ = _levenberg_marquardt(tree, q, dof, tree.revolute[dof], anc, tj, np.zeros((len(feet), 3)), x_goal,
-                                   w > 0, iterations, 1e-12)
+    x_goal = np.where((w > 0)[..., None], x_goal, np.nan)  # a foot out of contact (weight 0) has no goal
+    q = solve_tree_ik(tree, tj, np.zeros((len(feet), 3)), x_goal, q0=target.to_q(motion), dof=dof,
+                      iterations=iterations, tol=1e-12).q
     out = motion.copy()
     out[:, dof_cols] = target.from_q(q)[:, dof_cols]
     # each foot keeps its world rotation: local = (new parent world rotation)^T (old foot world rotation)

@@ -2,16 +2,13 @@
 
 :func:`solve_markers` finds, for every frame, the channel values that put a skeleton's virtual markers
 (rigidly attached: joint index + offset in the joint's frame) on the observed markers, in the least
-squares sense. Method: Levenberg-Marquardt (damped Gauss-Newton; Levenberg 1944, Marquardt 1963) on
-all frames of a block at once - one batched FK, one batched Jacobian, one batched (n x n) solve per
-iteration - with a damping factor per frame. Blocks run in time order, each warm-started from the
-previous block's last solution (the first from ``q0``, or from a root pose fitted to the root
-segment's markers by Kabsch's method, 1976). Missing markers (NaN) simply drop out of their frame's
-least-squares problem.
-
-The Jacobian of marker x (attached below tree joint i) has column ``a_i x (x - p_i)`` for a revolute
-joint and ``a_i`` for a prismatic one (``a_i`` the joint's world axis, ``p_i`` its pivot), the
-geometric Jacobian of :mod:`tianim.kinematics.tree`.
+squares sense. The IK itself is :func:`tianim.kinematics.solve_tree_ik` (Levenberg-Marquardt, Levenberg
+1944, Marquardt 1963, on all frames of a block at once, a damping factor per frame; missing markers (NaN)
+drop out of their frame's least-squares problem). What is mocap's own: frames are solved in blocks that
+run in time order, each warm-started from the previous block's last solution (the first from ``q0``, or
+from a root pose fitted to the root segment's markers by Kabsch's method, 1976), the root's position
+channels shifted by the markers' mean motion, and (by default) every frame started from
+:func:`segment_fit`, the pose its markers determine segment by segment.
 """
 
 from __future__ import annotations
@@ -21,6 +18,7 @@ from typing import NamedTuple
 import numpy as np
 
 from tianim._checks import as_index_array, check_choice, check_finite_scalar, check_positive_int, float_array, numeric_array
+from tianim.kinematics.tree_ik import solve_tree_ik
 from tianim.mocap.skeleton import ROTATION_CHANNELS, Skeleton
 from tianim.mocap.rigid import kabsch
 from tianim.mocap.rotations import euler_from_matrix, euler_matrix  # noqa: F401 - euler_from_matrix re-exported
@@ -151,8 +149,7 @@ def solve_markers(skeleton: Skeleton, markers, joints, local, q0=None, block: in
     tree = skeleton.tree
     dof = skeleton.channel_tree_joint  # (C,) tree joints with a channel
     tj = skeleton.tree_joint[idx]  # (M,) tree joint each marker rides on
-    anc = np.stack([tree.ancestors(int(t)) for t in tj])[:, dof]  # (M, C) channel moves marker
-    rev = tree.revolute[dof]
+    x_raw = x_obs  # NaN for drop-outs: the IK's targets
     x_obs = np.where(seen[..., None], x_obs, 0.0)
     motion = np.empty((F, skeleton.n_channels))
     rms = np.empty(F)
@@ -175,7 +172,7 @@ def solve_markers(skeleton: Skeleton, markers, joints, local, q0=None, block: in
                 q = skeleton.to_q(segment_fit(skeleton, raw, idx, loc, fallback=skeleton.from_q(q)))
         else:
             q = skeleton.to_q(start_all[s:e])
-        q, r, it = _levenberg_marquardt(tree, q, dof, rev, anc, tj, loc, x_obs[s:e], seen[s:e], iterations, tol)
+        q, r, it, _ = solve_tree_ik(tree, tj, loc, x_raw[s:e], q0=q, dof=dof, iterations=iterations, tol=tol)
         motion[s:e] = skeleton.from_q(q)
         rms[s:e] = np.sqrt(r / np.maximum(seen[s:e].sum(1), 1))
         iters[s:e] = it
@@ -183,49 +180,3 @@ def solve_markers(skeleton: Skeleton, markers, joints, local, q0=None, block: in
     rot = skeleton.rotation_channel  # continuous angle curves: no 360-degree jumps between frames
     motion[:, rot] = np.unwrap(motion[:, rot], period=360.0, axis=0)
     return SolveResult(motion, rms, iters)
-
-
-def _residual(tree, q, tj, loc, x_obs, w):
-    pos, rot, ax = tree.frames(q)
-    x = pos[:, tj] + (rot[:, tj] @ loc[:, :, None])[..., 0]
-    res = (x - x_obs) * w[..., None]
-    return pos, ax, x, res, (res * res).sum(axis=(1, 2))
-
-
-def _levenberg_marquardt(tree, q, dof, rev, anc, tj, loc, x_obs, seen, iterations, tol):
-    """LM on a block: q (B, n_tree) updated on the channel columns ``dof``; returns q, cost (B,), iterations."""
-    w = seen.astype(np.float64)
-    pos, ax, x, res, cost = _residual(tree, q, tj, loc, x_obs, w)
-    lam = np.full(q.shape[0], 1e-3)
-    n = dof.size
-    eye = np.eye(n)
-    for it in range(1, iterations + 1):
-        a, p = ax[:, dof], pos[:, dof]  # (B, n, 3)
-        cols = np.where(rev[None, None, :, None], np.cross(a[:, None], x[:, :, None] - p[:, None]),
-                        a[:, None])  # (B, M, n, 3)
-        cols *= (anc[None, :, :, None] * w[:, :, None, None])
-        Jm = cols.transpose(0, 1, 3, 2).reshape(q.shape[0], -1, n)  # (B, 3M, n)
-        # einsum, not matmul: OpenBLAS threads these (66 x 189) products and, on a busy machine, its
-        # threads' hand-offs cost 10x the arithmetic; einsum's own loop is steady
-        JtJ = np.einsum("bki,bkj->bij", Jm, Jm)
-        g = np.einsum("bki,bk->bi", Jm, res.reshape(q.shape[0], -1))
-        diag = np.einsum("bii->bi", JtJ)
-        A = JtJ + lam[:, None, None] * (eye * (diag[:, None, :] + 1e-9))
-        step = -np.linalg.solve(A, g[..., None])[..., 0]
-        q_new = q.copy()
-        q_new[:, dof] += step
-        pos2, ax2, x2, res2, cost2 = _residual(tree, q_new, tj, loc, x_obs, w)
-        ok = cost2 <= cost
-        # a frame is done when its step is below tol, or an accepted step no longer lowers its cost
-        # measurably (noisy markers: Gauss-Newton then creeps towards the minimum in ever smaller steps)
-        done = (np.abs(step).max(axis=1) < tol) | (ok & (cost - cost2 <= 1e-10 * cost))
-        q = np.where(ok[:, None], q_new, q)
-        pos = np.where(ok[:, None, None], pos2, pos)
-        ax = np.where(ok[:, None, None], ax2, ax)
-        x = np.where(ok[:, None, None], x2, x)
-        res = np.where(ok[:, None, None], res2, res)
-        cost = np.where(ok, cost2, cost)
-        lam = np.where(ok, np.maximum(lam * 0.3, 1e-12), np.minimum(lam * 10.0, 1e12))
-        if np.all(done):
-            break
-    return q, cost, it
