@@ -127,7 +127,8 @@ def as_index_array(name: str, value, n: int, ndim: int = 1, of: str = "particles
         if np.issubdtype(arr.dtype, np.floating) and np.all(np.isfinite(arr)) and np.all(arr == np.round(arr)):
             arr = arr.astype(np.int64)
         else:
-            raise TypeError(f"{name} must hold integer particle indices, got dtype {arr.dtype} ({_short(value)})")
+            raise TypeError(f"{name} must hold integer indices into the {n} {of}, got dtype {arr.dtype} "
+                            f"({_short(value)})")
     if arr.ndim != ndim:
         raise ValueError(f"{name} has shape {arr.shape}; expected {ndim} dimensions")
     bad = np.flatnonzero((arr.ravel() < 0) | (arr.ravel() >= n))

@@ -197,12 +197,12 @@ class Skeleton:
     def fk(self, motion) -> tuple[np.ndarray, np.ndarray]:
         """Global joint positions (F, J, 3) [m] and rotations (F, J, 3, 3) of every frame, in one batched call
         of the tree's forward kinematics (:meth:`JointTree.frames`; returned as views with frames first)."""
-        pos, rot, _ = self.tree._frames_t(self._tree_coordinates(motion), joints=self.tree_joint, axes=False)
+        pos, rot, _ = self.tree.frames_t(self._tree_coordinates(motion), joints=self.tree_joint, axes=False)
         return np.moveaxis(pos, -1, 0), np.moveaxis(rot, -1, 0)
 
     def positions(self, motion) -> np.ndarray:
         """Global joint positions (F, J, 3) [m] only: :meth:`fk` without storing the rotations (less memory)."""
-        pos, _, _ = self.tree._frames_t(self._tree_coordinates(motion), joints=self.tree_joint, axes=False,
+        pos, _, _ = self.tree.frames_t(self._tree_coordinates(motion), joints=self.tree_joint, axes=False,
                                         rotations=False)
         return np.moveaxis(pos, -1, 0)
 
