@@ -4,7 +4,7 @@ Each test module that owns a stepping or rendering subsystem keeps its digest sc
 ``DETERMINISM = {name: script}`` (a script prints a SHA-256 of its results as its last line). This harness
 runs *all* of them in one subprocess per thread count (``TIANIM_NUM_THREADS`` = 1 and 3: one chunk
 against three, more threads than these machines' 2 cores, so the parallel loops split differently)
-and compares the digests name by name. Two cold process starts instead of one pair per module.
+and compares the digests name by name. Two process starts, side by side, instead of one pair per module.
 """
 
 import importlib
@@ -52,17 +52,27 @@ SCRIPTS = _scripts()
 
 @pytest.fixture(scope="module")
 def digests(tmp_path_factory):
+    """Both thread counts at once, one subprocess each (each compiles its kernels: together they keep
+    both cores busy while this process waits)."""
     path = tmp_path_factory.mktemp("determinism") / "scripts.json"
     path.write_text(json.dumps(SCRIPTS))
-    runs = {}
+    procs = {}
     for n in THREADS:
         env = dict(os.environ, TIANIM_NUM_THREADS=n, TIANIM_ARCH="cpu", OPENBLAS_NUM_THREADS=n, OMP_NUM_THREADS=n,
                    MPLBACKEND="Agg")
-        out = subprocess.run([sys.executable, "-c", RUNNER, str(path)], env=env, capture_output=True, text=True,
-                             timeout=3000)
-        line = next((x for x in out.stdout.splitlines() if x.startswith("DIGESTS ")), None)
-        assert line, f"the harness printed no digests under {n} threads (exit {out.returncode}):\n{out.stderr[-3000:]}"
-        runs[n] = json.loads(line[len("DIGESTS "):])
+        procs[n] = subprocess.Popen([sys.executable, "-c", RUNNER, str(path)], env=env, stdout=subprocess.PIPE,
+                                    stderr=subprocess.PIPE, text=True)
+    runs = {}
+    try:
+        for n, proc in procs.items():
+            out, err = proc.communicate(timeout=3000)
+            line = next((x for x in out.splitlines() if x.startswith("DIGESTS ")), None)
+            assert line, f"the harness printed no digests under {n} threads (exit {proc.returncode}):\n{err[-3000:]}"
+            runs[n] = json.loads(line[len("DIGESTS "):])
+    finally:
+        for proc in procs.values():
+            if proc.poll() is None:
+                proc.kill()
     return runs
 
 
