@@ -240,6 +240,7 @@ def test_xpbd_float32_converges_on_the_stiff_cloth():
 
 
 # --------------------------------------------------------------------------- the API
+@pytest.mark.slow
 def test_solver_objects_and_step_agree_bit_for_bit():
     model = tp.cloth(8, 8, damping=(0.1, 0.05, 0.01))
     for method in tp.METHODS:
