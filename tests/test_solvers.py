@@ -10,22 +10,11 @@ import tianim.physics as tp
 
 # --------------------------------------------------------------------------- independent linear algebra
 def dense_system(model):
-    """M^-1 K and M^-1 C of the free particles, assembled densely at the rest configuration."""
-    n, d = model.n_particles, model.dim
-    K = np.zeros((n * d, n * d))
-    C = np.zeros((n * d, n * d))
-    for (i, j), k, c in zip(model.springs, model.stiffness, model.damping):
-        e = model.positions[i] - model.positions[j]
-        nn = np.outer(e, e) / (e @ e)
-        for a, b, s in ((i, i, 1), (j, j, 1), (i, j, -1), (j, i, -1)):
-            K[a * d:(a + 1) * d, b * d:(b + 1) * d] += s * k * nn
-            C[a * d:(a + 1) * d, b * d:(b + 1) * d] += s * c * nn
-    C += model.medium_damping * np.eye(n * d)
-    free = np.ones(n, bool)
-    free[model.pins] = False
-    keep = np.repeat(free, d)
-    minv = 1 / np.repeat(model.mass, d)[keep]
-    return minv[:, None] * K[np.ix_(keep, keep)], minv[:, None] * C[np.ix_(keep, keep)]
+    """M^-1 K and M^-1 C of the free particles, assembled densely at the rest configuration (the one dense
+    assembly, tests/test_stability_limits.py)."""
+    from test_stability_limits import dense_mk_mc
+
+    return dense_mk_mc(model, model.positions)
 
 
 def full_step_matrix(method, MK, MC, h):
