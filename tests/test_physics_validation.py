@@ -34,8 +34,7 @@ MODEL_CASES = [
     (dict(colliders=["floor"]), TypeError, "collider"),
     (dict(colliders=[tp.Sphere(center=(0, 0), radius=1.0)]), ValueError, "center"),
     (dict(colliders=[tp.Ground(normal=(0.0, 1.0))]), ValueError, "normal"),
-    (dict(colliders=tp.Ground()), TypeError, "must be a list"),
-    (dict(colliders=tp.Sphere()), TypeError, "must be a list"),
+    (dict(colliders=3.0), TypeError, "Ground/Sphere or a list"),
 ]
 
 
@@ -259,3 +258,12 @@ def test_plan_steps_names_bad_methods(methods, exc, match):
 def test_a_single_method_name_is_a_one_element_list():
     model = tp.rope(n=4)
     assert tp.plan_steps(model, methods="rk4").method == tp.plan_steps(model, methods=["rk4"]).method == "rk4"
+
+
+@pytest.mark.parametrize("collider", [tp.Ground(height=-0.5, friction=0.3), tp.Sphere(center=(0, -1, 0), radius=0.4)])
+def test_one_collider_is_a_one_element_list(collider):
+    """One collider alone means ``[collider]`` (as in the particle systems): the same collider table."""
+    args = dict(positions=POS, edges=EDGES)
+    one, listed = tp.from_edges(colliders=collider, **args), tp.from_edges(colliders=[collider], **args)
+    assert one.colliders == (collider,)
+    np.testing.assert_array_equal(one.collider_table, listed.collider_table)

@@ -293,7 +293,7 @@ def test_numpy_scalars_are_accepted():
     (lambda: tp.from_edges(np.array([[0.0, 0, 0], [1e200, 0, 0]]), [[0, 1]]), ValueError, ["positions", "1e+200"]),
     (lambda: tp.from_edges(np.array([[0.0, 0, 0], [1e12, 0, 0]]), [[0, 1]]).state(), ValueError, ["float32", "float64"]),
     (lambda: tp.from_edges(np.array([[0.0, 0, 0], [1, 0, 0]]), [[0, 5]]), ValueError, ["edges", "5"]),
-    (lambda: tp.rope(n=4, colliders=tp.Ground()), TypeError, ["colliders", "list"]),
+    (lambda: tp.rope(n=4, colliders="ground"), TypeError, ["colliders", "list"]),
     (lambda: tp.rope(n=4, gravity=float("nan")), ValueError, ["gravity"]),
     (lambda: tp.rope(n=4, pins=[7]), ValueError, ["pins", "7"]),
     (lambda: tp.cloth(4, 4, stiffness=(-1, 2, 3)), ValueError, ["stiffness=(-1.0, 2.0, 3.0)"]),

@@ -102,7 +102,8 @@ class Model:
         rho >= 0 [kg/s]: each free particle feels ``-rho v``.
     pins : array_like of int, optional
         Particles pinned by default (kinematic: they move with their own velocity).
-    colliders : sequence of Ground / Sphere
+    colliders : sequence of Ground / Sphere, or one of them
+        One collider alone is a one-element list (as in the particle systems).
     faces : array_like of int, shape (F, 3), optional
         Triangles for rendering surfaces.
     grid : GridTopology, optional
@@ -214,8 +215,11 @@ class Model:
         rho = check_finite_scalar("medium_damping", medium_damping, lo=0.0)
 
         pin_idx = np.zeros(0, dtype=np.int32) if pins is None else as_index_array("pins", list(pins) if not isinstance(pins, np.ndarray) else pins, n, ndim=1)
-        if isinstance(colliders, (Ground, Sphere)) or not isinstance(colliders, (list, tuple)):
-            raise TypeError(f"colliders={fmt(colliders)} must be a list of colliders, e.g. [tianim.physics.Ground()]")
+        if isinstance(colliders, (Ground, Sphere)):  # one collider where a list is expected: a one-element list
+            colliders = (colliders,)                 # (as the particle systems take it)
+        if not isinstance(colliders, (list, tuple)):
+            raise TypeError(f"colliders={fmt(colliders)} must be a Ground/Sphere or a list of them, "
+                            f"e.g. [tianim.physics.Ground()]")
         table = collider_table(tuple(colliders), dim, g)
 
         if faces is not None:
