@@ -164,6 +164,24 @@ def numeric_array(name: str, value, remedy: str) -> np.ndarray:
         raise TypeError(f"{name}={fmt(value)} is not numeric; {remedy}") from exc
 
 
+def marker_array(name: str, value, n_markers: int | None = None, min_frames: int = 1,
+                 what: str = "markers", missing: str = "NaN for a drop-out") -> np.ndarray:
+    """Marker positions ``value`` as a float64 array (frames, markers, 3) with NaN for drop-outs (the one
+    marker-array check of tianim.mocap). Refuses non-numeric values (TypeError), another shape, fewer
+    than ``min_frames`` frames, a marker count other than ``n_markers`` (when given) and infinite
+    values (ValueError), each naming ``name`` and the remedy."""
+    arr = numeric_array(name, value, f"pass positions of shape (frames, {what}, 3)")
+    cols = what if n_markers is None else str(n_markers)
+    if (arr.ndim != 3 or arr.shape[2] != 3 or arr.shape[0] < min_frames or arr.shape[1] < 1
+            or (n_markers is not None and arr.shape[1] != n_markers)):
+        raise ValueError(f"{name} has shape {arr.shape}; pass (frames >= {min_frames}, {cols}, 3) positions, "
+                         f"{missing}")
+    if np.isinf(arr).any():
+        idx = [int(i) for i in np.argwhere(np.isinf(arr))[0]]
+        raise ValueError(f"{name}{idx} is infinite; use {missing}")
+    return arr
+
+
 def float_array(name: str, value, shape_hint: str) -> np.ndarray:
     """``value`` as a finite float64 array, or a ValueError/TypeError naming ``name``."""
     arr = numeric_array(name, value, f"pass an array of floats {shape_hint}")

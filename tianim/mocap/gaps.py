@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tianim._checks import check_choice, check_finite_scalar, check_int, fmt
+from tianim._checks import check_choice, check_finite_scalar, check_int, fmt, marker_array
 from tianim.mocap.rigid import kabsch
 
 METHODS = ("auto", "linear", "cubic", "quintic", "rigid", "pca")
@@ -83,20 +83,6 @@ class Gap:
         what = f"filled by {self.method}" if self.filled else "NOT filled"
         return f"{who} frames {self.first}..{self.last} ({self.length}): {what}" + (f"; {self.reason}" if self.reason else "")
 
-
-def _check_markers(markers) -> np.ndarray:
-    if isinstance(markers, (str, bytes)):
-        raise TypeError(f"markers={fmt(markers)} is not numeric; pass positions of shape (frames, markers, 3)")
-    try:
-        arr = np.array(markers, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"markers={fmt(markers)} is not numeric; pass positions of shape (frames, markers, 3)") from exc
-    if arr.ndim != 3 or arr.shape[2] != 3 or arr.shape[0] < 2 or arr.shape[1] < 1:
-        raise ValueError(f"markers has shape {arr.shape}; pass (frames >= 2, markers >= 1, 3) positions, NaN for drop-outs")
-    if np.isinf(arr).any():
-        idx = [int(i) for i in np.argwhere(np.isinf(arr))[0]]
-        raise ValueError(f"markers{idx} is infinite; use NaN for a drop-out")
-    return arr
 
 
 def _check_segments(segments, n_markers: int) -> list[tuple[int, ...]]:
@@ -335,7 +321,7 @@ def fill_gaps(markers, fs, method="auto", max_gap=None, segments=None, *, on_unf
     from tianim.mocap.markers import Markers
 
     container = markers if isinstance(markers, Markers) else None
-    P = _check_markers(container.positions if container is not None else markers)
+    P = marker_array("markers", container.positions if container is not None else markers, min_frames=2)
     fs = check_finite_scalar("fs", fs, lo=0.0, lo_open=True)
     if container is not None and not math.isclose(fs, container.rate, rel_tol=1e-6):
         raise ValueError(f"fs={fs!r} Hz disagrees with markers.rate={container.rate!r} Hz; pass fs=markers.rate")

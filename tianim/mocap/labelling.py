@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim._checks import check_finite_scalar, fmt
+from tianim._checks import check_finite_scalar, fmt, marker_array
 from tianim.mocap.markers import Markers
 from tianim.mocap.rigid import kabsch, smallest_rotation
 
@@ -66,11 +66,7 @@ def label_markers(points, first: Markers, gate: float, segments=None) -> Markers
     """
     if not isinstance(first, Markers):
         raise TypeError(f"first={fmt(first)} must be a tianim.mocap.Markers with frame 0 labelled")
-    x = np.array(points, dtype=np.float64)
-    if x.ndim != 3 or x.shape[2] != 3:
-        raise ValueError(f"points has shape {x.shape}; pass (frames, points, 3), NaN rows for empty slots")
-    if np.isinf(x).any():
-        raise ValueError("points contains inf; use NaN for an empty slot")
+    x = marker_array("points", points, what="points", missing="NaN rows for empty slots")
     gate = check_finite_scalar("gate", gate, lo=0.0, lo_open=True)
     F, M = x.shape[0], first.n_markers
     mates = _segment_of(segments, M)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim._checks import check_choice, check_finite_scalar, fmt
+from tianim._checks import check_choice, check_finite_scalar, fmt, marker_array
 
 #: Length units a capture may be in, and their size in metres.
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
@@ -27,17 +27,7 @@ class Markers:
     __slots__ = ("positions", "labels", "rate", "units")
 
     def __init__(self, positions, labels=None, rate=120.0, units="mm"):
-        if isinstance(positions, (str, bytes)):
-            raise TypeError(f"positions={fmt(positions)} is not numeric; pass an array of shape (frames, markers, 3)")
-        try:
-            P = np.array(positions, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise TypeError(f"positions={fmt(positions)} is not numeric; pass an array of shape (frames, markers, 3)") from exc
-        if P.ndim != 3 or P.shape[2] != 3 or P.shape[0] < 1 or P.shape[1] < 1:
-            raise ValueError(f"positions has shape {P.shape}; pass (frames >= 1, markers >= 1, 3)")
-        if np.isinf(P).any():
-            idx = [int(i) for i in np.argwhere(np.isinf(P))[0]]
-            raise ValueError(f"positions{idx} is infinite; use NaN for a missing marker")
+        P = marker_array("positions", positions, missing="NaN for a missing marker")
         P[np.isnan(P).any(axis=2)] = np.nan
         M = P.shape[1]
         if labels is None:

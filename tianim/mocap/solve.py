@@ -17,7 +17,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from tianim._checks import as_index_array, check_choice, check_finite_scalar, check_positive_int, float_array, numeric_array
+from tianim._checks import as_index_array, check_choice, check_finite_scalar, check_positive_int, float_array, marker_array
 from tianim.kinematics.tree_ik import solve_tree_ik
 from tianim.mocap.skeleton import ROTATION_CHANNELS, Skeleton
 from tianim.mocap.rigid import kabsch
@@ -31,15 +31,6 @@ class SolveResult(NamedTuple):
     motion: np.ndarray
     rms: np.ndarray
     iterations: np.ndarray
-
-
-def _markers_array(markers, M):
-    x = numeric_array("markers", markers, "pass marker positions (frames, markers, 3) in metres, NaN for drop-outs")
-    if x.ndim != 3 or x.shape[1:] != (M, 3):
-        raise ValueError(f"markers has shape {x.shape}; pass (frames, {M}, 3) metres, one column per attached marker")
-    if np.any(np.isinf(x)):
-        raise ValueError("markers contains inf; use NaN for a missing marker")
-    return x
 
 
 def segment_fit(skeleton: Skeleton, markers: np.ndarray, joints: np.ndarray, local: np.ndarray,
@@ -125,7 +116,7 @@ def solve_markers(skeleton: Skeleton, markers, joints, local, q0=None, block: in
     loc = float_array("local", local, f"of shape ({M}, 3), metres")
     if loc.shape != (M, 3):
         raise ValueError(f"local has shape {loc.shape}; pass ({M}, 3) metres, one row per marker")
-    x_obs = _markers_array(markers, M)
+    x_obs = marker_array("markers", markers, n_markers=M, min_frames=0)  # its own "no frames" below
     F = x_obs.shape[0]
     if F == 0:
         raise ValueError("markers has no frames; pass (frames >= 1, markers, 3)")
