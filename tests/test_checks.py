@@ -199,3 +199,26 @@ def test_one_module():
     root = Path(c.__file__).parent
     for gone in ("kinematics/_validate.py", "render/validate.py", "physics/validation.py"):
         assert not (root / gone).exists(), gone
+
+
+# --- seed_list and marker_array: the one seed-list and marker-array checks ---------------------
+
+
+def test_seed_list():
+    assert c.seed_list(7, None, 3) == (7, 8, 9)
+    assert c.seed_list(0, np.array([4, 2]), 2) == (4, 2)
+    _raises(ValueError, lambda: c.seed_list(0, [1], 2), "seeds=[1]", "batch=2")
+    _raises(ValueError, lambda: c.seed_list(-1, None, 2), "seed=-1")
+    _raises(TypeError, lambda: c.seed_list(0, [1, 2.5], 2), "seeds[1]")
+
+
+def test_marker_array():
+    x = np.zeros((4, 2, 3))
+    x[1, 0] = np.nan
+    out = c.marker_array("markers", x.tolist(), n_markers=2)
+    assert out.dtype == np.float64 and np.isnan(out[1, 0]).all()
+    _raises(ValueError, lambda: c.marker_array("markers", x, n_markers=3), "markers has shape (4, 2, 3)", "3, 3)")
+    _raises(ValueError, lambda: c.marker_array("markers", x[:1], min_frames=2), "frames >= 2")
+    _raises(TypeError, lambda: c.marker_array("points", "abc"), "points='abc'")
+    x[2, 1, 2] = np.inf
+    _raises(ValueError, lambda: c.marker_array("markers", x), "markers[2, 1, 2] is infinite", "NaN")

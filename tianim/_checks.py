@@ -82,6 +82,18 @@ def check_positive_int(name: str, value, lo: int = 1, hi: int | None = INT32_MAX
     return check_int(name, value, lo=lo, hi=hi)
 
 
+def seed_list(seed, seeds, batch: int) -> tuple:
+    """The per-copy seeds of a batch of ``batch`` copies (the one seed-list check): ``seeds`` checked
+    (``batch`` non-negative ints, one per copy), or ``(seed, seed + 1, ..., seed + batch - 1)`` when
+    ``seeds`` is None; copy b then draws what ``np.random.default_rng(seeds[b])`` draws."""
+    if seeds is None:
+        seed = check_int("seed", seed, lo=0, hi=None)
+        return tuple(seed + b for b in range(batch))
+    if not isinstance(seeds, (list, tuple, np.ndarray)) or len(seeds) != batch:
+        raise ValueError(f"seeds={fmt(seeds)} must hold batch={batch} integers, one per copy")
+    return tuple(check_int(f"seeds[{b}]", s, lo=0, hi=None) for b, s in enumerate(seeds))
+
+
 def check_bool(name: str, value) -> bool:
     """Return ``value`` as a bool; only ``True``/``False`` (or NumPy bools) are flags.
 

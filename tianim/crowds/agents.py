@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt, real_dtype
+from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt, real_dtype, seed_list
 from tianim.stepping import StateArrays, rng_states
 
 #: Below this speed [m/s] a solver keeps an agent's heading instead of turning it to v / |v|.
@@ -115,16 +115,6 @@ class Agents(StateArrays):
             g = rng.standard_normal((n, D))
             d[b] = g / np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
         return cls(x, speed * d, d, dtype=dtype)
-
-
-def seed_list(seed, seeds, batch) -> tuple:
-    """``seeds`` checked (B non-negative ints), or ``(seed, seed + 1, ..., seed + B - 1)``."""
-    if seeds is None:
-        seed = check_int("seed", seed, lo=0, hi=None)
-        return tuple(seed + b for b in range(batch))
-    if not isinstance(seeds, (list, tuple, np.ndarray)) or len(seeds) != batch:
-        raise ValueError(f"seeds={fmt(seeds)} must hold batch={batch} integers, one per copy")
-    return tuple(check_int(f"seeds[{b}]", s, lo=0, hi=None) for b, s in enumerate(seeds))
 
 
 def check_fits(name, value, dtype) -> None:

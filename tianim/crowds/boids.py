@@ -45,8 +45,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tianim._checks import as_float_array, check_choice, check_domain, check_finite_scalar, check_int, fmt
-from tianim.crowds.agents import Agents, CrowdState, check_agents, seed_list
+from tianim._checks import as_float_array, check_choice, check_domain, check_finite_scalar, check_int, fmt, seed_list
+from tianim.crowds.agents import Agents, CrowdState, check_agents
 from tianim.crowds.obstacles import check_obstacle_types, obstacle_tables
 from tianim.crowds.solver import CrowdModel
 from tianim.stepping import draw

@@ -23,8 +23,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt, real_dtype
-from tianim.crowds.agents import Agents, CrowdState, check_agents, seed_list
+from tianim._checks import as_float_array, check_finite_scalar, check_int, fmt, real_dtype, seed_list
+from tianim.crowds.agents import Agents, CrowdState, check_agents
 from tianim.crowds.solver import CrowdModel
 from tianim.stepping import draw
 

@@ -63,7 +63,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from tianim._checks import (as_float_array, check_choice, check_domain, check_finite_scalar, check_int,
-                            fmt, real_dtype)
+                            fmt, real_dtype, seed_list)
 from tianim.particles.emitters import Emitter
 from tianim.particles.forces import force_table
 from tianim.stepping import StateArrays, StepStats, draw, rng_states
@@ -360,12 +360,7 @@ class ParticleState(StateArrays):
         if not isinstance(model, ParticleModel):
             raise TypeError(f"model={fmt(model)} must be a ParticleModel(...)")
         batch = check_int("batch", batch, lo=1, hi=1 << 16)
-        if seeds is None:
-            seed = check_int("seed", seed, lo=0, hi=None)
-            seeds = [seed + b for b in range(batch)]
-        if len(seeds) != batch:
-            raise ValueError(f"seeds has {len(seeds)} entries; expected batch={batch}")
-        self.seeds = tuple(check_int(f"seeds[{b}]", s, lo=0, hi=None) for b, s in enumerate(seeds))
+        self.seeds = seed_list(seed, seeds, batch)
         self.model = model
         B, C, D, f = batch, model.capacity, model.dim, model.dtype
         self.x = np.zeros((B, C, D), f)
