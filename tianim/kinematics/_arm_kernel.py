@@ -1,19 +1,20 @@
 """Taichi kernel: B planar arms stepped in one launch (one copy per loop iteration).
 
 The body mirrors :func:`tianim.kinematics._arm_scalar.accelerations`,
-:func:`~tianim.kinematics._arm_scalar.step` and
-:func:`~tianim.kinematics._arm_scalar.observe` operation for operation (same order,
+:func:`~tianim.kinematics._arm_scalar.step` operation for operation (same order,
 float64 throughout, every constant read from the packed parameter array, see
 :func:`~tianim.kinematics._arm_scalar.packed`, since Taichi would round a float
 literal to float32), so copy ``b`` of a batch and a single arm stepped in plain
 floats agree bit for bit (tests/test_arm.py checks it). Loops over joints are
-unrolled at compile time (``ti.static``): one kernel per link count and gravity
+unrolled at compile time (``ti.static``); the tip position is
+:mod:`tianim.kinematics.planar_fk`'s, the source the plain-float observation runs too: one kernel per link count and gravity
 pattern, built on first use by the cached factory :func:`arm_step_kernel` (no
 Taichi import when this module is imported).
 """
 
 
 from tianim.kernels import cached_variants
+from tianim.kinematics import planar_fk
 
 
 def arm_step_kernel(n: int, gy_on: bool, gx_on: bool, arm_on: bool = False, soft_on: bool = False,
@@ -195,18 +196,6 @@ def _arm_step_kernel(n: int, gy_on: bool, gx_on: bool, arm_on: bool, soft_on: bo
                     v = 0.0
         return pos, v
 
-    @ti.func
-    def tip_position(length, qv):
-        """Forward kinematics of the end effector, summed from the base outwards (as ``observe``)."""
-        phi = qv[0]
-        x = length[0] * ti.cos(phi)
-        y = length[0] * ti.sin(phi)
-        for j in ti.static(range(1, n)):
-            phi = phi + qv[j]
-            x = x + length[j] * ti.cos(phi)
-            y = y + length[j] * ti.sin(phi)
-        return x, y
-
     @ti.kernel
     def arm_step(substeps: ti.i32, dt: f64, p: arr1, q: arr2, qd: arr2, tau: arr2,
                  active: ti.types.ndarray(dtype=ti.i32, ndim=1), cos_q: arr2, sin_q: arr2, tip: arr2):
@@ -305,7 +294,9 @@ def _arm_step_kernel(n: int, gy_on: bool, gx_on: bool, arm_on: bool, soft_on: bo
             for i in ti.static(range(n)):
                 cos_q[b, i] = ti.cos(qv[i])
                 sin_q[b, i] = ti.sin(qv[i])
-            x, y = tip_position(length, qv)
+            lv = [length[j] for j in ti.static(range(n))]
+            qs = [qv[j] for j in ti.static(range(n))]
+            x, y = ti.static(planar_fk.tip(*planar_fk.link_terms(lv, qs, n, ti.cos, ti.sin)))  # traced
             tip[b, 0] = x
             tip[b, 1] = y
 

@@ -63,6 +63,8 @@ import math
 
 import numpy as np
 
+from tianim.kinematics import planar_fk
+
 
 def packed(chain) -> np.ndarray:
     """The float64 parameter vector the fast paths read, cached on the (immutable) chain:
@@ -358,11 +360,5 @@ def observe(params: tuple, q: list) -> tuple[list, list, float, float]:
     n, lengths = params[0], params[7]
     cq = [math.cos(a) for a in q]
     sq = [math.sin(a) for a in q]
-    phi = q[0]
-    x = lengths[0] * math.cos(phi)
-    y = lengths[0] * math.sin(phi)
-    for j in range(1, n):
-        phi = phi + q[j]
-        x = x + lengths[j] * math.cos(phi)
-        y = y + lengths[j] * math.sin(phi)
+    x, y = planar_fk.tip(*planar_fk.link_terms(lengths, q, n, math.cos, math.sin))
     return cq, sq, x, y

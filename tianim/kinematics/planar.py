@@ -32,7 +32,8 @@ Conventions (used by every function in :mod:`tianim.kinematics` that takes a
   (:mod:`tianim.kinematics.arm`), IK, rendering and the ArmReach environment all
   read it. The NumPy forward kinematics is :meth:`PlanarChain.joint_positions`
   and :meth:`PlanarChain._fk_jac` (both from :meth:`PlanarChain._links`); the
-  plain-float one (single-target IK) is :func:`fk_tail_sums`.
+  plain-float one (single-target IK, the launch-free arm) and the batched arm kernel's are
+  :mod:`tianim.kinematics.planar_fk`, written once for both.
 """
 
 from __future__ import annotations
@@ -42,6 +43,7 @@ from math import cos, sin
 import numpy as np
 
 from tianim._checks import float_array, joint_limits, joint_vector, per_joint
+from tianim.kinematics import planar_fk
 
 
 DEFAULT_GRAVITY = (0.0, -9.81)
@@ -73,23 +75,9 @@ def _soft_limits(solref, solimp):
 def fk_tail_sums(L, bx, by, q):
     """Plain-float forward kinematics for one pose (lists of n floats; about 4x faster than
     NumPy for n <= ~30): end effector ``(x, y)`` and tail sums ``dx[i], dy[i]`` = end minus
-    joint i, so that the Jacobian column i is ``(-dy[i], dx[i])``."""
-    n = len(L)
-    cs = [0.0] * n
-    ss = [0.0] * n
-    phi = 0.0
-    for i in range(n):
-        phi += q[i]
-        cs[i] = L[i] * cos(phi)
-        ss[i] = L[i] * sin(phi)
-    dx = [0.0] * n
-    dy = [0.0] * n
-    x = y = 0.0
-    for i in range(n - 1, -1, -1):
-        x += cs[i]
-        y += ss[i]
-        dx[i] = x
-        dy[i] = y
+    joint i, so that the Jacobian column i is ``(-dy[i], dx[i])`` (:mod:`.planar_fk`)."""
+    dx, dy = planar_fk.tail_sums(*planar_fk.link_terms(L, q, len(L), cos, sin))
+    x, y = dx[0], dy[0]
     return x + bx, y + by, dx, dy
 
 
