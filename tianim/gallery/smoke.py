@@ -25,7 +25,7 @@ FRAMES = 120
 PREROLL = 2.0  # [s] simulated before the first frame: the plume is up
 
 #: sprite radius [m] (3 standard deviations of its Gaussian) over normalised age: puffs spread as they rise
-SIZE = Track([0.0, 0.3, 1.0], [[0.04], [0.10], [0.24]], interpolation="linear")
+SIZE = Track([0.0, 0.3, 1.0], [[0.07], [0.12], [0.24]], interpolation="linear")
 COLOUR = Track([0.0, 0.4, 1.0], [[0.30, 0.30, 0.32], [0.45, 0.46, 0.49], [0.62, 0.63, 0.66]], interpolation="linear")
 #: optical depth at a sprite's centre over normalised age: fades in near the source, out at the end of life
 DENSITY = Track([0.0, 0.1, 0.5, 1.0], [[0.03], [0.09], [0.04], [0.0]], interpolation="linear")
@@ -37,7 +37,7 @@ def make_system(seed: int = 0) -> tpar.ParticleSystem:
                               speed=(0.35, 0.6), lifetime=3.0, lifetime_variance=0.3)
     return tpar.ParticleSystem(
         6000, emitters=[source], gravity=(0.0, 0.6, 0.0),
-        forces=[tpar.Drag(linear=0.8, wind=(0.5, 0.0, 0.0)), tpar.CurlNoise(amplitude=0.25, scale=0.3, seed=seed)],
+        forces=[tpar.Drag(linear=0.8, wind=(0.5, 0.0, 0.0)), tpar.CurlNoise(amplitude=0.7, scale=0.35, seed=seed)],
         colliders=[tp.Ground(height=0.0, normal=(0.0, 1.0, 0.0), restitution=0.0, friction=0.2)], seed=seed)
 
 
@@ -90,7 +90,7 @@ def frames(width: int, height: int, n_frames: int, fps: float, substeps: int = 4
     """Yield (height, width, 3) uint8 frames; the system advances one frame per image."""
     system = make_system()
     scene = Scene3D(width, height, ambient=0.85, specular=0.0, shadows=False)
-    box = np.array([[-0.5, 0.0, -0.4], [1.5, 2.3, 0.4]])  # the plume's reach
+    box = np.array([[-0.7, 0.0, -0.1], [0.2, 2.2, 1.1]])  # the plume's reach (1-99 % of puff positions)
     scene.particles(box, 0.01)
     camera = scene.frame(azimuth=-10.0, elevation=10.0, margin=1.0)
     scene.clear().ground(0.0, size=4.0, cell=0.25)
