@@ -280,7 +280,7 @@ def test_cloth_drawn_sphere_stays_inside_the_cloth_at_contact():
     T_render = T.Timeline.render
     T.Timeline.render = record
     try:
-        list(cloth.frames(64, 48, 36, 24.0, n=40))  # the swing and first contact (about frame 10)
+        list(cloth.frames(64, 48, 60, 24.0, n=40))  # first contact (frame 10), release at 1.25 s, the drape
     finally:
         T.Timeline.render = T_render
     c, r = np.array([0.0, 0.35, 0.0]), 0.3
@@ -289,4 +289,5 @@ def test_cloth_drawn_sphere_stays_inside_the_cloth_at_contact():
         # the cloth is drawn as flat quads: their centres sag deepest between particles
         centres = (g[:-1, :-1] + g[1:, :-1] + g[:-1, 1:] + g[1:, 1:]).reshape(-1, 3) / 4
         closest = min(np.linalg.norm(x - c, axis=1).min(), np.linalg.norm(centres - c, axis=1).min())
-        assert closest >= cloth.SPHERE_DRAWN * r + 1e-3, (k, closest)  # >= 1 mm of cloth over the drawn sphere
+        # >= 4 mm of clearance over the drawn sphere: less lets the shadow map's bias leak light through
+        assert closest >= cloth.SPHERE_DRAWN * r + 4e-3, (k, closest)
