@@ -21,7 +21,7 @@ from tianim.physics import Ground, Sphere
 from tianim.render import Scene3D
 
 TITLE = "a 3D flock of boids circling two pillars"
-FRAMES = 240  # 10 s at 24 fps: a lap and a quarter
+FRAMES = 240  # 10 s at 24 fps: one lap of the goal
 N = 300
 LAP = 10.0  # [s] per lap of the goal
 PILLAR_AXES = ((-1.1, 0.0), (1.1, 0.0))  # (x, z) [m] of the pillars' axes
