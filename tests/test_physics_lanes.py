@@ -60,6 +60,51 @@ def test_lanes_agree_with_the_numpy_reference():
     np.testing.assert_allclose(state.v, v, rtol=0, atol=1e-10)
 
 
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_every_lane_count_equals_the_substep_layout_bit_for_bit(dtype, lanes_mode):
+    """4, 8 and 16 float32 lanes (2, 4, 8 float64): the same operations in the same order per particle, so
+    the same bits as the one-particle-per-thread kernel (damping and colliders on: every branch of a lane)."""
+    model = SCENES["damped_colliders"]()  # 19 rows: 16 lanes give bands of 2 rows, the last 13 lanes padding
+    ref = loaded(model, 2, 5, dtype)
+    tp.step(model, ref, 3e-4, substeps=9, layout="substep", check=False)
+    for count in lanes.LANE_CHOICES[np.dtype(dtype).name]:
+        s = loaded(model, 2, 5, dtype)
+        tp.step(model, s, 3e-4, substeps=9, layout=lanes_mode, lanes=count, check=False)
+        assert np.array_equal(s.x, ref.x) and np.array_equal(s.v, ref.v), count
+    assert not np.array_equal(ref.x, loaded(model, 2, 5, dtype).x)
+
+
+def test_auto_lanes_follow_the_cpu_flags():
+    assert lanes.cpu_simd_bytes({"sse2"}) == 16 and lanes.cpu_simd_bytes(set()) == 16
+    assert lanes.cpu_simd_bytes({"sse2", "avx", "avx2"}) == 32
+    assert lanes.cpu_simd_bytes({"avx2", "avx512f"}) == 64
+    assert lanes.host_lanes(np.float32, {"sse2"}) == 4 and lanes.host_lanes(np.float64, {"sse2"}) == 2
+    assert lanes.host_lanes(np.float32, {"avx2"}) == 8 and lanes.host_lanes(np.float64, {"avx2"}) == 4
+    # AVX-512: still one ymm register's worth (16 float32 lanes measured slower, see AUTO_MAX_BYTES)
+    assert lanes.host_lanes(np.float32, {"avx2", "avx512f"}) == 8
+    with open("/proc/cpuinfo") as fh:
+        host_avx2 = " avx2" in fh.read()
+    assert lanes.lanes_for(np.float32, 128) == (8 if host_avx2 else 4)
+    # "auto" halves the lanes while a band would get fewer than 2 rows; a count is taken as given
+    assert lanes.lanes_for(np.float32, 8) == 4 and lanes.lanes_for(np.float32, 8, lanes=8) == 8
+    assert lanes.supports(tp.cloth(3, 8), np.float32) and not lanes.supports(tp.cloth(3, 8), np.float32, lanes=8)
+
+
+def test_bad_lane_counts_are_refused_and_change_nothing():
+    with pytest.raises(ValueError, match=r"lanes=3 is not a lane count.*use 'auto' or one of \[2, 4, 8, 16\]"):
+        tp.make_solver("symplectic_euler", lanes=3)
+    with pytest.raises(ValueError, match="lanes='8'"):
+        tp.SymplecticEuler(lanes="8")
+    model = tp.cloth(20, 20)
+    s = loaded(model, 1, 2, np.float64)
+    before = s.x.copy()
+    with pytest.raises(ValueError, match="lanes=16 is not a lane count for float64.*one of \\[2, 4, 8\\]"):
+        tp.step(model, s, 1e-4, substeps=4, layout="lanes", lanes=16)
+    assert np.array_equal(s.x, before)
+    assert tp.SymplecticEuler(lanes=8).options() == {"layout": "auto", "lanes": 8}
+    assert tp.SymplecticEuler().options() == {"layout": "auto"}
+
+
 def test_auto_chooses_lanes_for_large_grids_under_symplectic_euler():
     big, rope = tp.cloth(32, 32), tp.rope(2000)
     assert tp.choose_layout(big, 1, "symplectic_euler", 16) == "lanes"
@@ -97,9 +142,9 @@ def test_pool_growth_keeps_results(lanes_mode):
         for batch in (1, 5):
             a, b = loaded(model, batch, 9), loaded(model, batch, 9)
             tp.step(model, a, 2e-4, substeps=8, layout="substep", check=False)
-            tp.step(model, b, 2e-4, substeps=8, layout=lanes_mode, check=False)
+            tp.step(model, b, 2e-4, substeps=8, layout=lanes_mode, lanes=4, check=False)
             assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
-        assert lanes._POOLS[("float32", 3)].capacity == 512
+        assert lanes._POOLS[("float32", 3, 4)].capacity == 512
     finally:
         lanes.MIN_CAPACITY = old
         lanes._POOLS.clear()

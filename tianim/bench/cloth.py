@@ -25,6 +25,15 @@ measured in the same run.
   installed (the ``bench`` extra); checked against tianim on a 16x16 cloth first. Warp's CPU
   kernels run on one thread. Without Warp the ``warp_*`` keys are null and the reason is printed.
 
+* ``numba_simple`` / ``numba_vector`` (:mod:`tianim.bench._numba_cloth`): the straightforward numba
+  kernel (a ``prange`` over particles) and the one written to vectorise (1-D row views, no branch in the
+  inner loop, ``error_model="numpy"``), ``fastmath`` off, on tianim's thread count; ``jax``
+  (:mod:`tianim.bench._jax_cloth`: shifted slices, the substeps of a call in one jitted
+  ``lax.fori_loop``, XLA's own threads). Each is checked to agree with tianim within
+  :data:`AGREE_F32_M` on a 16x16 cloth after 50 substeps before anything is timed; where ``numba`` /
+  ``jax`` is not installed (the ``bench`` extra) their keys are null and the reason is printed.
+  ``speedup_vs_X`` = tianim's substeps/s over X's.
+
 Self-collision (``selfcollision_*`` keys): the 128x128 cloth, symplectic Euler, with
 ``SelfCollision(thickness=0.8 dx)`` against the same cloth without it, from rest, in the same run.
 Before timing, both runs are checked bit-identical over the timed substeps (the hanging cloth has no
@@ -38,10 +47,16 @@ from __future__ import annotations
 import numpy as np
 
 import tianim.physics as tp
-from tianim.bench import _warp_cloth
+from tianim.bench import _jax_cloth, _numba_cloth, _warp_cloth
 from tianim.bench._numpy_cloth import FastNumpyCloth
 from tianim.bench._physics import check_agreement, perturbed_state, time_numpy
 from tianim.bench.common import median_time, median_times, parser, print_table, write_json
+
+
+#: Largest |x_tianim - x_ref| [m] accepted from the float32 references that reorder the force sum (numba,
+#: JAX) on the 16x16 bench cloth after 50 substeps: about 20 float32 ulps of a 1 m coordinate (measured
+#: 2.4e-7 to 3.0e-7 m); a wrong stiffness, stencil or update order shows up as 1e-4 m or more.
+AGREE_F32_M = 2e-6
 
 
 def copy_bandwidth(megabytes: int = 256, repeats: int = 5) -> float:
@@ -135,8 +150,48 @@ def warp_agreement(n: int = 16, substeps: int = 50) -> float:
     return float(np.max(np.abs(state.x[0].astype(np.float64) - ref.positions())))
 
 
+def peers(model, state, threads):
+    """The optional peers on ``state``'s copy 0: {name: object with step(h, n)}, those installed."""
+    out = {}
+    x, v, p = state.x[0], state.v[0], state.pinned[0]
+    if _numba_cloth.available():
+        for kind in _numba_cloth.KINDS:
+            out[f"numba_{kind}"] = _numba_cloth.NumbaCloth(model, x, v, p, kind, threads=threads)
+    if _jax_cloth.available():
+        out["jax"] = _jax_cloth.JaxCloth(model, x, v, p)
+    return out
+
+
+def peer_agreement(threads, n: int = 16, substeps: int = 50) -> dict:
+    """{peer: max |x_tianim - x_peer| [m]} after ``substeps`` from the same perturbed state; raises past
+    :data:`AGREE_F32_M`."""
+    model = cloth_model(n)
+    dt = 0.5 * tp.stable_dt(model, "symplectic_euler")
+    state = perturbed_state(model)
+    refs = peers(model, state, threads)
+    tp.step(model, state, dt, substeps=substeps)
+    out = {}
+    for name, ref in refs.items():
+        ref.step(dt, substeps)
+        out[name] = float(np.max(np.abs(state.x[0].astype(np.float64) - ref.positions())))
+        if not out[name] <= AGREE_F32_M:
+            raise RuntimeError(f"tianim and {name} disagree by {out[name]:.3g} m on a 16x16 cloth "
+                               f"(more than {AGREE_F32_M} m): refusing to time it")
+    return out
+
+
+#: The optional peers: the reason printed when each is missing.
+PEER_NOTES = {"numba_simple": "numba: not installed (pip install numba, or the bench extra); numba_* keys are null",
+              "jax": 'jax: not installed (pip install "jax[cpu]", or the bench extra); jax_* keys are null'}
+
+
 def run(sizes=(128, 256, 512), repeats=5, numpy_max=256) -> dict:
+    from tianim.runtime import ensure_taichi, num_threads
+
     rows = []
+    ensure_taichi()
+    threads = num_threads()
+    peer_err = peer_agreement(threads)
     fast_err = fast_numpy_agreement()
     if fast_err > 1e-4:
         raise RuntimeError(f"tianim and the fast NumPy reference disagree by {fast_err:.3g} m on a 16x16 cloth")
@@ -163,6 +218,9 @@ def run(sizes=(128, 256, 512), repeats=5, numpy_max=256) -> dict:
         if warp_err is not None:
             wc = _warp_cloth.WarpCloth(model, state.x[0], state.v[0], state.pinned[0])
             fns["warp"] = lambda: wc.step(dt, kr)
+        for name, ref in peers(model, state, threads).items():
+            fns[name] = lambda ref=ref: ref.step(dt, k)
+            ref.step(dt, 1)  # compile (numba) / trace (jax) outside the timing
         # in turn within each round: load from other processes slows every candidate alike
         t = median_times(fns, repeats=repeats)
         row = {
@@ -180,13 +238,16 @@ def run(sizes=(128, 256, 512), repeats=5, numpy_max=256) -> dict:
         if warp_err is not None:
             row["warp_substeps_per_s"] = kr / t["warp"]
             row["speedup_vs_warp"] = row["substeps_per_s"] / row["warp_substeps_per_s"]
+        for name in ("numba_simple", "numba_vector", "jax"):
+            row[f"{name}_substeps_per_s"] = k / t[name] if name in t else None
+            row[f"speedup_vs_{name}"] = t[name] / t["tianim"] if name in t else None
         if n <= numpy_max:
             kn = max(2, k // 8)
             t_np = time_numpy(model, state, dt, kn, max(3, repeats // 2))
             row["numpy_simple_substeps_per_s"] = kn / t_np
             row["speedup_vs_numpy_simple"] = row["substeps_per_s"] / row["numpy_simple_substeps_per_s"]
         rows.append(row)
-    return {"rows": rows, "agreement_max_abs_m": err, "fast_numpy_agreement_max_abs_m": fast_err,
+    return {"rows": rows, "agreement_max_abs_m": err, "peer_agreement_max_abs_m": peer_err, "threads": threads, "fast_numpy_agreement_max_abs_m": fast_err,
             "warp_agreement_max_abs_m": warp_err, "copy_bandwidth_bytes_per_s": bandwidth}
 
 
@@ -198,12 +259,24 @@ def main(argv) -> int:
     print_table(res["rows"], ["size", "particles", "layout", "substeps_per_s", "substep_layout_substeps_per_s",
                               "numpy_substeps_per_s", "speedup_vs_numpy", "warp_substeps_per_s", "speedup_vs_warp", "numpy_simple_substeps_per_s",
                               "speedup_vs_numpy_simple", "bandwidth_fraction"])
+    print_table(res["rows"], ["size", "substeps_per_s", "numba_simple_substeps_per_s", "speedup_vs_numba_simple",
+                              "numba_vector_substeps_per_s", "speedup_vs_numba_vector", "jax_substeps_per_s",
+                              "speedup_vs_jax"])
+    for name, note in PEER_NOTES.items():
+        if name not in res["peer_agreement_max_abs_m"]:
+            print(note)
+    print(f"tianim and numba on {res['threads']} threads; peers agree with tianim within "
+          + ", ".join(f"{k} {v:.2e} m" for k, v in res["peer_agreement_max_abs_m"].items()))
     main_row = next(r for r in res["rows"] if r["size"] == "128x128")
     summary = {k: main_row.get(k) for k in ("substeps_per_s", "numpy_substeps_per_s", "speedup_vs_numpy",
                                             "numpy_simple_substeps_per_s", "bandwidth_fraction", "spring_updates_per_s")}
     summary["substep_layout_substeps_per_s"] = main_row["substep_layout_substeps_per_s"]
     summary["warp_substeps_per_s"] = main_row.get("warp_substeps_per_s")
     summary["speedup_vs_warp"] = main_row.get("speedup_vs_warp")
+    for name in ("numba_simple", "numba_vector", "jax"):
+        summary[f"{name}_substeps_per_s"] = main_row.get(f"{name}_substeps_per_s")
+        summary[f"speedup_vs_{name}"] = main_row.get(f"speedup_vs_{name}")
+    summary["threads"] = res["threads"]
     if res["warp_agreement_max_abs_m"] is None:
         print("warp: not installed (pip install warp-lang, or the bench extra); warp_* keys are null")
     sc = selfcollision_row(128, repeats=2 if args.quick else args.repeats)
@@ -221,5 +294,6 @@ def main(argv) -> int:
     write_json(args.json, summary, rows=res["rows"], agreement_max_abs_m=res["agreement_max_abs_m"],
                fast_numpy_agreement_max_abs_m=res["fast_numpy_agreement_max_abs_m"],
                warp_agreement_max_abs_m=res["warp_agreement_max_abs_m"],
+               peer_agreement_max_abs_m=res["peer_agreement_max_abs_m"],
                copy_bandwidth_bytes_per_s=res["copy_bandwidth_bytes_per_s"], selfcollision=[sc, sc_xpbd])
     return 0

@@ -9,8 +9,13 @@ Measured on the optimised LLVM IR (``ti.init(print_kernel_llvm_ir_optimized=True
 ``sqrt.v4f32`` and ``fdiv <4 x float>`` for ``ti.Vector.field`` storage, and scalar code for the same
 body on ``ti.types.ndarray`` arguments or on scalar fields; quadrants 1.3.3 emits scalar code in all
 three forms (there this layout still ran 1.1-1.4x the substep layout, 64x64-128x128, against 2.3-4.2x
-on taichi). Both target generic x86-64 (SSE2), so a register holds 4 float32 (2 float64), and this
-layout keeps the state of a call in a pool of vector fields of that many lanes (L):
+on taichi). The number of lanes ``L`` is an option (``lanes=``: :func:`lanes_for`; "auto" from the host's
+CPU flags, :func:`host_lanes`: 8 float32 / 4 float64 with AVX2 or AVX-512, 4 / 2 with SSE only). On the
+AVX-512 host of this project (taichi 1.7.4) the optimised IR holds ``<4 x float>`` operations whatever L
+(LLVM's vectoriser works to a 16-byte width there), so 8 lanes are two independent 4-wide chains:
+measured at 128x128, float32, one thread, 8 lanes ran 1.01-1.03x the speed of 4 (16: 0.89x) and compile
+in 4.9 s against 2.8 s (16: 9.3 s) cold; a session on an AVX2 host measured 8 lanes 1.19-1.22x faster.
+The state of a call lives in a pool of vector fields of L lanes:
 
 * the ``ny`` rows of each copy are cut into ``L`` bands of ``H = ceil(ny / L)`` rows (the last band
   padded); lane ``l`` of pack ``(r, c)`` holds particle ``(l H + r, c)``;
@@ -43,9 +48,16 @@ from tianim.kernels.contact import contact_response
 from tianim.kernels import cached_variants, kernel_types
 from tianim.physics.model import GRID_STENCIL
 
-#: Particles per vector, by float type: one SSE register (8 lanes in two registers ran 0.8-0.95x as fast at
-#: 128x128, float32, and compiled twice as long: 16 xmm registers do not hold 3 components of 2-register vectors).
-LANES = {"float32": 4, "float64": 2}
+#: Vector register width [bytes] of the host's widest float SIMD, by CPU flag (``/proc/cpuinfo``); SSE2 (16)
+#: is the x86-64 baseline. Taichi compiles kernel bodies for the host CPU, so a vector of that many bytes
+#: fills one register.
+SIMD_BYTES = (("avx512f", 64), ("avx2", 32), ("avx", 32))
+#: Lane counts a caller may ask for (``lanes=``), by float type; the smallest is one SSE register.
+LANE_CHOICES = {"float32": (4, 8, 16), "float64": (2, 4, 8)}
+#: Widest vector "auto" uses [bytes], measured (see :func:`host_lanes`): on this project's AVX-512 host,
+#: 16 float32 lanes ran slower than 8 at 128x128 (LLVM splits 64-byte vectors in two ymm halves and
+#: 3 D components of 16 lanes do not fit the register file), so "auto" stops at one ymm register.
+AUTO_MAX_BYTES = 32
 #: Substeps per launch of the main kernel (even: the ping-pong ends in the first buffer).
 SUBSTEPS_PER_LAUNCH = 8  # 16 ran ~2% faster at 128x128 but compiled 17 s cold (0.9 s per unrolled substep)
 #: Largest batch x padded grid [particles] that runs on one thread, all substeps in one launch: below it the
@@ -57,15 +69,64 @@ MIN_CAPACITY = 1 << 12
 _N_OFF = len(GRID_STENCIL)
 
 
-def lanes_for(dtype) -> int:
-    """Particles per vector for the state's float type."""
-    return LANES[np.dtype(dtype).name]
+def cpu_simd_bytes(flags=None) -> int:
+    """Width [bytes] of the widest float vector register of the host (16, 32 or 64), from the CPU flags
+    (``flags``: a set of ``/proc/cpuinfo`` flag names; None: read this host's, SSE2 where unreadable)."""
+    if flags is None:
+        flags = _host_flags()
+    return next((b for flag, b in SIMD_BYTES if flag in flags), 16)
 
 
-def supports(model, dtype) -> bool:
+def _host_flags() -> frozenset:
+    global _FLAGS
+    if _FLAGS is None:
+        try:
+            with open("/proc/cpuinfo") as fh:
+                line = next((ln for ln in fh if ln.startswith("flags")), "")
+            _FLAGS = frozenset(line.partition(":")[2].split())
+        except OSError:
+            _FLAGS = frozenset()
+    return _FLAGS
+
+
+_FLAGS = None
+
+
+def host_lanes(dtype, flags=None) -> int:
+    """The ``lanes="auto"`` count for ``dtype``: one vector register of the host, at most
+    :data:`AUTO_MAX_BYTES` (8 float32 / 4 float64 lanes with AVX2 or AVX-512, 4 / 2 with SSE only)."""
+    itemsize = np.dtype(dtype).itemsize
+    return min(cpu_simd_bytes(flags), AUTO_MAX_BYTES) // itemsize
+
+
+def check_lanes(lanes, dtype=None):
+    """``lanes`` ("auto" or a count of :data:`LANE_CHOICES` for ``dtype``; None: for any float type), or a
+    ValueError naming it."""
+    name = "float32 or float64" if dtype is None else np.dtype(dtype).name
+    choices = sorted({c for v in LANE_CHOICES.values() for c in v}) if dtype is None else LANE_CHOICES.get(name, ())
+    if isinstance(lanes, str) and lanes == "auto":
+        return lanes
+    if isinstance(lanes, (int, np.integer)) and not isinstance(lanes, bool) and int(lanes) in choices:
+        return int(lanes)
+    raise ValueError(f"lanes={lanes!r} is not a lane count for {name}; use 'auto' or one of {list(choices)}")
+
+
+def lanes_for(dtype, ny=None, lanes="auto") -> int:
+    """Particles per vector for the state's float type: ``lanes`` when a count, else :func:`host_lanes`
+    halved while a grid of ``ny`` rows would get fewer than 2 rows per band (down to one SSE register)."""
+    if lanes != "auto":
+        return int(lanes)
+    L = host_lanes(dtype)
+    smallest = LANE_CHOICES[np.dtype(dtype).name][0]
+    while ny is not None and L > smallest and -(-ny // L) < 2:
+        L //= 2
+    return L
+
+
+def supports(model, dtype, lanes="auto") -> bool:
     """Whether ``model`` can run in this layout: a cloth grid with at least 2 rows per band."""
     g = model.grid
-    return g is not None and -(-g.ny // lanes_for(dtype)) >= 2
+    return g is not None and -(-g.ny // lanes_for(dtype, g.ny, lanes)) >= 2
 
 
 class _Pool:
@@ -91,9 +152,9 @@ class _Pool:
 _POOLS: dict = _ti.per_program({})  # fields of the live program: emptied when it is replaced
 
 
-def _pool(real_name, dim, packs):
-    """The pool for (real_name, dim) with room for ``packs`` packs (grown by doubling)."""
-    key = (real_name, dim)
+def _pool(real_name, dim, L, packs):
+    """The pool for (real_name, dim, L lanes) with room for ``packs`` packs (grown by doubling)."""
+    key = (real_name, dim, L)
     pool = _POOLS.get(key)
     if pool is None or pool.capacity < packs:
         cap = max(MIN_CAPACITY, pool.capacity if pool is not None else 0)
@@ -102,16 +163,16 @@ def _pool(real_name, dim, packs):
         t = kernel_types(real_name, dim)
         if pool is not None:
             pool.tree.destroy()
-        pool = _POOLS[key] = _Pool(t.ti, t.real, dim, LANES[real_name], cap)
+        pool = _POOLS[key] = _Pool(t.ti, t.real, dim, L, cap)
     return pool
 
 
 @cached_variants
-def lane_kernels(real_name, dim, colliders, spring_damping, medium_damping):
-    """``(pack, run, unpack)``: ``run[nsub]`` advances nsub in {1, 2, SUBSTEPS_PER_LAUNCH} substeps."""
+def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
+    """``(pack, run, unpack)`` for vectors of L lanes: ``run[nsub]`` advances nsub in {1, 2,
+    SUBSTEPS_PER_LAUNCH} substeps, ``run["serial"]`` any number on one thread."""
     t = kernel_types(real_name, dim)
     ti, real = t.ti, t.real
-    L = LANES[real_name]
     lane_vec = ti.types.vector(L, real)
     respond = contact_response(real_name, dim)
     h = dim + 1  # prm: gravity[dim], rho, k[12], rest[12], damp[12] (the P layout of kernels.py)
@@ -313,20 +374,21 @@ def lane_kernels(real_name, dim, colliders, spring_damping, medium_damping):
 PATHS = ("auto", "serial", "parallel")
 
 
-def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto") -> None:
+def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto", lanes="auto") -> None:
     """Advance ``state`` by ``substeps`` symplectic Euler steps of ``dt`` in the lanes layout
     (no validation: :func:`tianim.physics.solvers.launch` is the caller). ``data`` is
     ``model.kernel_data(state.dtype)``. ``path``: ``"serial"`` (one thread, the whole call in one
     launch), ``"parallel"`` (parallel loops, :data:`SUBSTEPS_PER_LAUNCH` substeps per launch) or
-    ``"auto"`` (serial up to :data:`SERIAL_MAX_PARTICLES` batch x padded grid); bit-identical."""
+    ``"auto"`` (serial up to :data:`SERIAL_MAX_PARTICLES` batch x padded grid). ``lanes``: particles per
+    vector (:func:`lanes_for`; "auto": from the host CPU). Every path and lane count is bit-identical."""
     g = model.grid
     real_name = state.dtype.name
-    L = LANES[real_name]
+    L = lanes_for(state.dtype, g.ny, lanes)
     H = -(-g.ny // L)
     npk = H * g.nx
     packs = state.batch * npk
-    pool = _pool(real_name, model.dim, packs)
-    pack, runs, unpack = lane_kernels(real_name, model.dim, len(model.colliders) > 0,
+    pool = _pool(real_name, model.dim, L, packs)
+    pack, runs, unpack = lane_kernels(real_name, model.dim, L, len(model.colliders) > 0,
                                       model.has_spring_damping, model.medium_damping > 0)
     S, M, prm, off = pool.state, pool.mass, pool.prm, pool.off
     pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], g.nx, H)

@@ -36,6 +36,7 @@ import numpy as np
 
 from tianim._checks import check_choice, check_finite_scalar, check_positive_int
 from tianim.physics import lanes, theory
+from tianim.physics.lanes import check_lanes as lanes_option
 from tianim.physics.kernels import WORK, frame_kernel, substeps_per_launch
 from tianim.physics.passes import has_passes, run_with_passes
 from tianim.physics.selfcollision import SelfCollision, as_self_collision
@@ -240,6 +241,10 @@ class _Explicit(Solver):
         scene size); all give bit-identical results. With passes (below), ``"serial"`` and
         ``"lanes_serial"`` run the passes' loops serially, ``"substep"`` and ``"lanes_parallel"`` in
         parallel; otherwise the scene size decides.
+    lanes : "auto" or int
+        Particles per SIMD vector in the lanes layouts (:func:`tianim.physics.lanes.lanes_for`:
+        ``"auto"`` from the host CPU's flags, or 4, 8, 16 float32 / 2, 4, 8 float64 lanes); every
+        count gives bit-identical results. Ignored by the other layouts.
     self_collision : SelfCollision, optional
         Particle-particle self-collision after every substep (:mod:`tianim.physics.selfcollision`).
     strain_limit : float or StrainLimit, optional
@@ -252,23 +257,27 @@ class _Explicit(Solver):
     substeps inside the contact kernel, several per launch); without them nothing changes.
     """
 
-    def __init__(self, layout: str = "auto", watchdog=True, self_collision=None, strain_limit=None):
+    def __init__(self, layout: str = "auto", watchdog=True, self_collision=None, strain_limit=None, lanes="auto"):
         super().__init__(watchdog)
         self.layout = check_choice("layout", layout, LAYOUTS)
+        self.lanes = lanes_option(lanes)
         self.self_collision = as_self_collision(self_collision)
         self.strain_limit = as_strain_limit(strain_limit)
 
     def options(self) -> dict:
-        return _with_passes({"layout": self.layout}, self)
+        opts = {"layout": self.layout}
+        if self.lanes != "auto":
+            opts["lanes"] = self.lanes
+        return _with_passes(opts, self)
 
     def _advance(self, model, state, dt, substeps):
         if not has_passes(model, self.self_collision, self.strain_limit):
-            launch(model, state, dt, substeps, self.name, self.layout, self._buffer)
+            launch(model, state, dt, substeps, self.name, self.layout, self._buffer, self.lanes)
             return
         if self.self_collision is not None:
             check_sc_model(self.self_collision, model)
         run_with_passes(model, state, dt, substeps,
-                        lambda: launch(model, state, dt, 1, self.name, self.layout, self._buffer),
+                        lambda: launch(model, state, dt, 1, self.name, self.layout, self._buffer, self.lanes),
                         True, self.self_collision, self.strain_limit, self._buffer, method=self.name,
                         loops=_PASS_LOOPS.get(self.layout, "auto"))
 
@@ -327,7 +336,7 @@ def choose_layout(model, batch: int, method: str = "symplectic_euler", substeps:
     return "serial" if batch == 1 or n * batch <= 256 else "frame"
 
 
-def launch(model, state, dt, substeps, method, layout, buffer):
+def launch(model, state, dt, substeps, method, layout, buffer, lane_count="auto"):
     """Run the kernels of explicit ``method`` on ``state`` (no validation: callers validate).
 
     Returns the work array (its first block: the accelerations), or None for the lanes layout."""
@@ -335,11 +344,13 @@ def launch(model, state, dt, substeps, method, layout, buffer):
         layout = choose_layout(model, state.batch, method, substeps, state.dtype)
     data = model.kernel_data(state.dtype)
     if layout.startswith("lanes"):
-        if method != "symplectic_euler" or not lanes.supports(model, state.dtype):
+        lane_count = lanes.check_lanes(lane_count, state.dtype)
+        if method != "symplectic_euler" or not lanes.supports(model, state.dtype, lane_count):
+            L = lanes.lanes_for(state.dtype, None if model.grid is None else model.grid.ny, lane_count)
             raise ValueError(f"layout={layout!r} runs symplectic_euler on a cloth grid of at least "
-                             f"{lanes.lanes_for(state.dtype) + 1} rows; got method={method!r} on model "
+                             f"{L + 1} rows (with {L} lanes); got method={method!r} on model "
                              f"{model.name!r}; use layout='auto' or 'substep'")
-        lanes.launch_lanes(model, state, dt, substeps, data, path=layout[len("lanes_"):] or "auto")
+        lanes.launch_lanes(model, state, dt, substeps, data, path=layout[len("lanes_"):] or "auto", lanes=lane_count)
         return None
     pre, kernel, multi = frame_kernel(
         state.dtype, model.dim, method, layout,
