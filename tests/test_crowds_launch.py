@@ -65,3 +65,40 @@ def test_unsupported_arguments_take_the_ordinary_call():
     _launch.launch(kernel, np.zeros(3), True)
     _launch.launch(kernel, [1.0])
     assert len(seen) == 2 and not any(k[0] == id(kernel) for k in _launch._entries)
+
+
+def test_a_one_off_call_keeps_nothing_and_the_second_keeps_a_context():
+    _launch.clear()
+    a, g = circle_scenario(6, 3.0)
+    m = ORCA(goals=g, radius=0.2)
+    st, s = m.state(a), CrowdSolver()
+    s.step(m, st, 0.25)
+    assert not _launch._entries
+    s.step(m, st, 0.25)
+    assert len(_launch._entries) == 1
+
+
+def _boids_run(calls):
+    from tianim.crowds import Alignment, Avoid, Boids, Cohesion, Separation, Wander
+    from tianim.physics import Sphere
+
+    a = Agents.random(60, (0, 0, 0), (6, 6, 6), speed=1.0, seed=3, dtype=np.float64, batch=2)
+    m = Boids([Separation(1.5, radius=0.6), Alignment(1.0, radius=1.5), Cohesion(0.5, radius=1.5), Wander(0.5, 0.3),
+               Avoid([Sphere((3.0, 3.0, 3.0), 1.0)])], max_speed=2.0, max_force=3.0, seeds=[5, 6])
+    st, s = m.state(a), CrowdSolver()
+    for dt, substeps in calls:
+        s.step(m, st, dt, substeps)
+    return st
+
+
+def test_boids_through_kept_launch_contexts_equal_the_ordinary_call_bit_for_bit(monkeypatch):
+    """Wander noise, an obstacle table and dt changing between calls: the kept contexts give the same bits."""
+    calls = [(0.05, 5)] * 3 + [(0.02, 1), (0.05, 4)]
+    _launch.clear()
+    fast = _boids_run(calls)
+    assert _launch._entries
+    with monkeypatch.context() as mp:
+        _ordinary(mp)
+        slow = _boids_run(calls)
+    for name in ("x", "v", "heading", "wander", "rng", "t", "ticks"):
+        assert np.array_equal(getattr(fast, name), getattr(slow, name)), name

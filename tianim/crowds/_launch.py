@@ -8,8 +8,9 @@ fixed cost is most of its step.
 
 :func:`launch` calls the kernel the ordinary way the first time it sees a set of arguments (Taichi
 checks and compiles them), then keeps that call's launch context and compiled kernel, keyed by the
-kernel, the program and each array argument's identity, shape and dtype (the entry holds the arrays,
-so their ids and buffers stay theirs). A later call with the same arrays only writes its scalar
+kernel, the program and each array argument's identity, shape and dtype (the entry holds the kernel
+and the arrays, so their ids and buffers stay theirs); it keeps one at the second call with the same
+arrays, so one-off calls keep nothing. A later call with the same arrays only writes its scalar
 arguments into the kept context and launches: the same compiled kernel reads the same buffers, so the
 results are the ones the ordinary call gives, bit for bit (``tests/test_crowds_launch.py``).
 
@@ -31,16 +32,18 @@ from tianim import _ti
 MAX_ENTRIES = 32
 
 _entries: dict = {}
+_seen: dict = {}  # keys launched once the ordinary way (an entry is made at the second sighting)
 _lock = threading.Lock()
 _unsupported = set()  # ids of kernels (held in _held) whose arguments the shortcut cannot take
 _held = []
 
 
 class _Entry:
-    __slots__ = ("prog", "compiled", "ctx", "scalars", "arrays")
+    __slots__ = ("kernel", "prog", "compiled", "ctx", "scalars", "arrays")
 
-    def __init__(self, prog, compiled, ctx, scalars, arrays):
-        self.prog, self.compiled, self.ctx, self.scalars, self.arrays = prog, compiled, ctx, scalars, arrays
+    def __init__(self, kernel, prog, compiled, ctx, scalars, arrays):
+        self.kernel, self.prog, self.compiled, self.ctx = kernel, prog, compiled, ctx
+        self.scalars, self.arrays = scalars, arrays
 
 
 def _key(kernel, args) -> tuple | None:
@@ -100,7 +103,7 @@ def _build(kernel, args):
     if primal.return_type is not None or primal.has_print:
         return None
     arrays = tuple(a for a in args if isinstance(a, np.ndarray))
-    return _Entry(prog, compiled, ctx, tuple(scalars), arrays)
+    return _Entry(kernel, prog, compiled, ctx, tuple(scalars), arrays)
 
 
 def launch(kernel, *args) -> None:
@@ -121,6 +124,12 @@ def launch(kernel, *args) -> None:
                 prog.launch_kernel(entry.compiled, entry.ctx)
             return
     kernel(*args)  # the ordinary call: checks, compiles, launches
+    if key not in _seen:  # a one-off set of arrays costs no context: keep one only when they come back
+        with _lock:
+            if len(_seen) >= 4 * MAX_ENTRIES:
+                _seen.pop(next(iter(_seen)))
+            _seen[key] = True
+        return
     try:
         entry = _build(kernel, args)
     except (AttributeError, ImportError, KeyError, TypeError):  # another Taichi: keep the ordinary call
@@ -139,3 +148,4 @@ def clear() -> None:
     """Forget every kept launch context (tests; after ``ti.reset`` the program check drops them anyway)."""
     with _lock:
         _entries.clear()
+        _seen.clear()
