@@ -16,12 +16,14 @@
   distance is taken at every step (tianim: the kernel's own nearest-neighbour record, ``ORCA.closest``;
   pyrvo: a grid query after each step). First, tianim with ``safety=0, perturbation=0`` (RVO2 exactly) and pyrvo run the
   same scenario for 150 steps and must agree to 1e-3 m.
+* **ORCA per call** (CrowdNav's pattern: one 0.25 s step per call, N = 1, 5, 20, 100 on a 4 m circle):
+  milliseconds per call through kept launch contexts and through Taichi's ordinary kernel call, in turn.
 * **Mesa** (ABMFrameworksComparison flocking: 200 birds, 100 steps): Mesa's own ``BoidFlockers``
   example (its own rules and parameters) where Mesa is importable, otherwise skipped with the reason
   printed; beside it tianim's benchmark flock at the same size (indicative: the rules differ).
 
 Summary keys: ``boids_agent_steps_per_s``, ``speedup_vs_numpy`` and ``speedup_vs_sparse_numpy`` (N = 10 k; ``--quick``: 4 k),
-``orca_ms_per_step``, ``pyrvo_ms_per_step``, ``orca_speedup_vs_pyrvo``, ``orca_min_distance_over_2r``
+``orca_ms_per_step``, ``pyrvo_ms_per_step``, ``orca_ms_per_call_5_agents`` (and ``orca_ordinary_ms_per_call_5_agents``), ``orca_speedup_vs_pyrvo``, ``orca_min_distance_over_2r``
 (and ``pyrvo_min_distance_over_2r``); pyrvo's keys are null where it is not importable.
 """
 
@@ -34,7 +36,7 @@ import numpy as np
 
 from tianim.bench._numpy_boids import numpy_boids_step
 from tianim.bench._numpy_boids_sparse import sparse_boids_step
-from tianim.bench.common import median_time, parser, print_table, write_json
+from tianim.bench.common import median_time, median_times, parser, print_table, write_json
 from tianim.crowds.solver import CrowdSolver
 
 #: The benchmark flock's rules: (weight, radius [m], full field of view [rad]).
@@ -176,6 +178,50 @@ def run_orca(n, R, max_steps=6000, chunk=4):
             "all_arrived": bool(agents.arrived().all())}
 
 
+def run_orca_per_call(sizes=(1, 5, 20, 100), repeats=200):
+    """ORCA's cost per call as CrowdNav pays it (one step of 0.25 s per call, CrowdNav-v0's humans'
+    settings, N agents on a 4 m circle), through kept launch contexts (:mod:`tianim.crowds._launch`)
+    and through Taichi's ordinary kernel call, timed in turn (medians [ms]); at each N also the
+    kernel call alone both ways (the rest of a call is tianim's checks, buffers and bookkeeping)."""
+    from tianim.crowds import ORCA, _launch
+    from tianim.crowds.orca import circle_scenario
+
+    ordinary = _launch.launch
+
+    def plain(kernel, *args):
+        kernel(*args)
+
+    rows = []
+    for n in sizes:
+        a, g = circle_scenario(n, 4.0)
+        model = ORCA(goals=g, pref_speed=1.0, radius=0.3, time_horizon=2.0, max_speed=1.0)
+        state, solver = model.state(a), CrowdSolver()
+        solver.step(model, state, ORCA_DT, 3)
+        solver.step(model, state, ORCA_DT)  # compiled, kept context made
+        captured = []
+        _launch.launch = lambda kernel, *args: captured.append((kernel, args))
+        try:
+            solver.step(model, state, ORCA_DT)
+        finally:
+            _launch.launch = ordinary
+        kernel, args = captured[0]
+
+        def step_ordinary():
+            _launch.launch = plain
+            try:
+                solver.step(model, state, ORCA_DT)
+            finally:
+                _launch.launch = ordinary
+
+        t = median_times({"kept": lambda: solver.step(model, state, ORCA_DT), "ordinary": step_ordinary,
+                          "kernel_kept": lambda: ordinary(kernel, *args), "kernel_ordinary": lambda: kernel(*args)},
+                         repeats=repeats, warmup=3)
+        rows.append({"n_agents": n, "ms_per_call": 1e3 * t["kept"], "ordinary_ms_per_call": 1e3 * t["ordinary"],
+                     "kernel_ms": 1e3 * t["kernel_kept"], "ordinary_kernel_ms": 1e3 * t["kernel_ordinary"],
+                     "speedup": t["ordinary"] / t["kept"]})
+    return rows
+
+
 def run_pyrvo(n, R, max_steps=6000):
     from tianim.crowds import circle_scenario, pair_distances
 
@@ -238,6 +284,10 @@ def main(argv=None) -> int:
         orca_rows.append(run_pyrvo(n_orca, R))
     print(f"ORCA circle scenario: {n_orca} agents, r = 1.5 m, circle radius {R:g} m, dt = {ORCA_DT} s")
     print_table(orca_rows)
+    per_call = run_orca_per_call(repeats=30 if args.quick else 200)
+    print("ORCA per call as CrowdNav makes it (one 0.25 s step a call; medians [ms]): kept launch contexts "
+          "against Taichi's ordinary kernel call")
+    print_table(per_call)
     mesa_s, why = run_mesa()
     agents, model = flock(200)
     solver = CrowdSolver()
@@ -262,8 +312,10 @@ def main(argv=None) -> int:
         "pyrvo_min_distance_over_2r": pr["min_distance_over_2r"] if pr else None,
         "mesa_agent_steps_per_s": 200 * 100 / mesa_s if mesa_s else None,
         "boids_200_agent_steps_per_s": 200 * 100 / ti_s,
+        "orca_ms_per_call_5_agents": next(r["ms_per_call"] for r in per_call if r["n_agents"] == 5),
+        "orca_ordinary_ms_per_call_5_agents": next(r["ordinary_ms_per_call"] for r in per_call if r["n_agents"] == 5),
     }
-    write_json(args.json, summary, boids=rows, orca=orca_rows, mesa_skipped=why)
+    write_json(args.json, summary, boids=rows, orca=orca_rows, orca_per_call=per_call, mesa_skipped=why)
     return 0
 
 
