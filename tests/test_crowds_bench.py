@@ -23,3 +23,14 @@ def test_boids_bench_float32_tracks_the_float64_reference():
         solver.step(model, agents, DT)
         x, v, h = numpy_boids_step(x, v, h, DT, _numpy_rules(), MAX_SPEED, MAX_FORCE, MIN_SPEED)
     assert np.abs(agents.x[0] - x).max() < 1e-4
+
+
+def test_orca_per_call_bench_runs_both_paths_and_restores_the_launcher():
+    from tianim.bench.crowds import run_orca_per_call
+    from tianim.crowds import _launch
+
+    before = _launch.launch
+    rows = run_orca_per_call(sizes=(3,), repeats=2)
+    assert _launch.launch is before
+    assert rows[0]["n_agents"] == 3 and all(rows[0][k] > 0 for k in ("ms_per_call", "ordinary_ms_per_call",
+                                                                       "kernel_ms", "ordinary_kernel_ms"))
