@@ -4,7 +4,9 @@
   degrees; N = 1 k, 10 k, 100 k; ``--quick``: 1 k, 4 k): tianim's :class:`tianim.crowds.Boids`
   (float32, Taichi CPU; ``step(dt, steps=10)`` per timed call) against
   :mod:`tianim.bench._numpy_boids` (the same rules in NumPy + ``scipy.spatial.cKDTree``, float64).
-  First, at N = 400 in float64, both run 5 steps from the same state and must agree to 1e-9 m.
+  and :mod:`tianim.bench._numpy_boids_sparse` (a second reference written from the documented rules:
+  sparse pair matrices and matrix products instead of gathers and ``np.bincount``). First, at N = 400
+  in float64, all three run 5 steps from the same state and must agree to 1e-9 m.
 * **ORCA** (RVO2's Circle example: 250 agents of radius 1.5 m on a 200 m circle to their
   antipodes, time step 0.25 s, neighbour distance 15 m, 10 neighbours, time horizon 10 s, max speed
   2 m/s, preferred speed 1 m/s; ``--quick``: 60 agents on 50 m): tianim's :class:`tianim.crowds.ORCA`
@@ -14,12 +16,14 @@
   distance is taken at every step (tianim: the kernel's own nearest-neighbour record, ``ORCA.closest``;
   pyrvo: a grid query after each step). First, tianim with ``safety=0, perturbation=0`` (RVO2 exactly) and pyrvo run the
   same scenario for 150 steps and must agree to 1e-3 m.
+* **ORCA per call** (CrowdNav's pattern: one 0.25 s step per call, N = 1, 5, 20, 100 on a 4 m circle):
+  milliseconds per call through kept launch contexts and through Taichi's ordinary kernel call, in turn.
 * **Mesa** (ABMFrameworksComparison flocking: 200 birds, 100 steps): Mesa's own ``BoidFlockers``
   example (its own rules and parameters) where Mesa is importable, otherwise skipped with the reason
   printed; beside it tianim's benchmark flock at the same size (indicative: the rules differ).
 
-Summary keys: ``boids_agent_steps_per_s`` and ``speedup_vs_numpy`` (N = 10 k; ``--quick``: 4 k),
-``orca_ms_per_step``, ``pyrvo_ms_per_step``, ``orca_speedup_vs_pyrvo``, ``orca_min_distance_over_2r``
+Summary keys: ``boids_agent_steps_per_s``, ``speedup_vs_numpy`` and ``speedup_vs_sparse_numpy`` (N = 10 k; ``--quick``: 4 k),
+``orca_ms_per_step``, ``pyrvo_ms_per_step``, ``orca_ms_per_call_5_agents`` (and ``orca_ordinary_ms_per_call_5_agents``), ``orca_speedup_vs_pyrvo``, ``orca_min_distance_over_2r``
 (and ``pyrvo_min_distance_over_2r``); pyrvo's keys are null where it is not importable.
 """
 
@@ -31,7 +35,8 @@ import time
 import numpy as np
 
 from tianim.bench._numpy_boids import numpy_boids_step
-from tianim.bench.common import median_time, parser, print_table, write_json
+from tianim.bench._numpy_boids_sparse import sparse_boids_step
+from tianim.bench.common import median_time, median_times, parser, print_table, write_json
 from tianim.crowds.solver import CrowdSolver
 
 #: The benchmark flock's rules: (weight, radius [m], full field of view [rad]).
@@ -56,19 +61,23 @@ def _numpy_rules():
     return {k: (w, r, -1.0 if f >= 2 * math.pi else math.cos(f / 2)) for k, (w, r, f) in RULES.items()}
 
 
-def check_boids_agreement(n=400, steps=5, tol=1e-9) -> float:
-    """Max |x_tianim - x_numpy| [m] after ``steps`` float64 steps from the same state (raises above ``tol``)."""
+def check_boids_agreement(n=400, steps=5, tol=1e-9) -> tuple[float, float]:
+    """Max |x_tianim - x_ref| [m] after ``steps`` float64 steps from the same state, for the NumPy
+    reference and the sparse one (raises above ``tol``)."""
     agents, model = flock(n, np.float64)
-    x, v, h = agents.x[0].copy(), agents.v[0].copy(), agents.heading[0].copy()
+    ref = [agents.x[0].copy(), agents.v[0].copy(), agents.heading[0].copy()]
+    ref2 = [a.copy() for a in ref]
     rules = _numpy_rules()
     solver = CrowdSolver()
     for _ in range(steps):
         solver.step(model, agents, DT)
-        x, v, h = numpy_boids_step(x, v, h, DT, rules, MAX_SPEED, MAX_FORCE, MIN_SPEED)
-    err = float(np.abs(agents.x[0] - x).max())
-    if not err <= tol:
-        raise AssertionError(f"tianim and the NumPy boids disagree by {err:.3g} m after {steps} steps (tol {tol:g})")
-    return err
+        ref = numpy_boids_step(*ref, DT, rules, MAX_SPEED, MAX_FORCE, MIN_SPEED)
+        ref2 = sparse_boids_step(*ref2, DT, RULES, MAX_SPEED, MAX_FORCE, MIN_SPEED)
+    errs = (float(np.abs(agents.x[0] - ref[0]).max()), float(np.abs(agents.x[0] - ref2[0]).max()))
+    for name, err in zip(("NumPy", "sparse NumPy"), errs):
+        if not err <= tol:
+            raise AssertionError(f"tianim and the {name} boids disagree by {err:.3g} m after {steps} steps (tol {tol:g})")
+    return errs
 
 
 def run_boids(n, repeats):
@@ -80,12 +89,20 @@ def run_boids(n, repeats):
     rules = _numpy_rules()
     state = [x, v, h]
 
+    state2 = [a.copy() for a in state]
+
     def numpy_step():
         state[:] = numpy_boids_step(*state, DT, rules, MAX_SPEED, MAX_FORCE, MIN_SPEED)
 
-    t_np = median_time(numpy_step, repeats=max(1, min(repeats, 3 if n >= 100_000 else repeats)), warmup=0)
+    def sparse_step():
+        state2[:] = sparse_boids_step(*state2, DT, RULES, MAX_SPEED, MAX_FORCE, MIN_SPEED)
+
+    r = max(1, min(repeats, 3 if n >= 100_000 else repeats))
+    t_np = median_time(numpy_step, repeats=r, warmup=0)
+    t_sp = median_time(sparse_step, repeats=r, warmup=0)
     return {"n_agents": n, "tianim_ms_per_step": 1e3 * t_ti, "numpy_ms_per_step": 1e3 * t_np,
-            "tianim_agent_steps_per_s": n / t_ti, "numpy_agent_steps_per_s": n / t_np, "speedup_vs_numpy": t_np / t_ti}
+            "sparse_ms_per_step": 1e3 * t_sp, "tianim_agent_steps_per_s": n / t_ti,
+            "numpy_agent_steps_per_s": n / t_np, "speedup_vs_numpy": t_np / t_ti, "speedup_vs_sparse": t_sp / t_ti}
 
 
 # --- ORCA ---------------------------------------------------------------------------------
@@ -161,6 +178,50 @@ def run_orca(n, R, max_steps=6000, chunk=4):
             "all_arrived": bool(agents.arrived().all())}
 
 
+def run_orca_per_call(sizes=(1, 5, 20, 100), repeats=200):
+    """ORCA's cost per call as CrowdNav pays it (one step of 0.25 s per call, CrowdNav-v0's humans'
+    settings, N agents on a 4 m circle), through kept launch contexts (:mod:`tianim.crowds._launch`)
+    and through Taichi's ordinary kernel call, timed in turn (medians [ms]); at each N also the
+    kernel call alone both ways (the rest of a call is tianim's checks, buffers and bookkeeping)."""
+    from tianim.crowds import ORCA, _launch
+    from tianim.crowds.orca import circle_scenario
+
+    ordinary = _launch.launch
+
+    def plain(kernel, *args):
+        kernel(*args)
+
+    rows = []
+    for n in sizes:
+        a, g = circle_scenario(n, 4.0)
+        model = ORCA(goals=g, pref_speed=1.0, radius=0.3, time_horizon=2.0, max_speed=1.0)
+        state, solver = model.state(a), CrowdSolver()
+        solver.step(model, state, ORCA_DT, 3)
+        solver.step(model, state, ORCA_DT)  # compiled, kept context made
+        captured = []
+        _launch.launch = lambda kernel, *args: captured.append((kernel, args))
+        try:
+            solver.step(model, state, ORCA_DT)
+        finally:
+            _launch.launch = ordinary
+        kernel, args = captured[0]
+
+        def step_ordinary():
+            _launch.launch = plain
+            try:
+                solver.step(model, state, ORCA_DT)
+            finally:
+                _launch.launch = ordinary
+
+        t = median_times({"kept": lambda: solver.step(model, state, ORCA_DT), "ordinary": step_ordinary,
+                          "kernel_kept": lambda: ordinary(kernel, *args), "kernel_ordinary": lambda: kernel(*args)},
+                         repeats=repeats, warmup=3)
+        rows.append({"n_agents": n, "ms_per_call": 1e3 * t["kept"], "ordinary_ms_per_call": 1e3 * t["ordinary"],
+                     "kernel_ms": 1e3 * t["kernel_kept"], "ordinary_kernel_ms": 1e3 * t["kernel_ordinary"],
+                     "speedup": t["ordinary"] / t["kept"]})
+    return rows
+
+
 def run_pyrvo(n, R, max_steps=6000):
     from tianim.crowds import circle_scenario, pair_distances
 
@@ -202,8 +263,9 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     repeats = 1 if args.quick else args.repeats
     sizes = [1_000, 4_000] if args.quick else [1_000, 10_000, 100_000]
-    err = check_boids_agreement()
-    print(f"boids: tianim and NumPy + cKDTree agree to {err:.2g} m after 5 steps (N = 400, float64)")
+    err, err2 = check_boids_agreement()
+    print(f"boids: tianim agrees with NumPy + cKDTree to {err:.2g} m and with the sparse NumPy + cKDTree reference "
+          f"to {err2:.2g} m after 5 steps (N = 400, float64)")
     rows = [run_boids(n, repeats) for n in sizes]
     print("tianim bench crowds: boids step (2D, 1 agent/m^2; medians)")
     print_table(rows)
@@ -222,6 +284,10 @@ def main(argv=None) -> int:
         orca_rows.append(run_pyrvo(n_orca, R))
     print(f"ORCA circle scenario: {n_orca} agents, r = 1.5 m, circle radius {R:g} m, dt = {ORCA_DT} s")
     print_table(orca_rows)
+    per_call = run_orca_per_call(repeats=30 if args.quick else 200)
+    print("ORCA per call as CrowdNav makes it (one 0.25 s step a call; medians [ms]): kept launch contexts "
+          "against Taichi's ordinary kernel call")
+    print_table(per_call)
     mesa_s, why = run_mesa()
     agents, model = flock(200)
     solver = CrowdSolver()
@@ -238,6 +304,7 @@ def main(argv=None) -> int:
     pr = orca_rows[1] if have_pyrvo else None
     summary = {
         "boids_agent_steps_per_s": ref["tianim_agent_steps_per_s"], "speedup_vs_numpy": ref["speedup_vs_numpy"],
+        "speedup_vs_sparse_numpy": ref["speedup_vs_sparse"],
         "boids_n_agents": ref["n_agents"],
         "orca_ms_per_step": o["ms_per_step"], "pyrvo_ms_per_step": pr["ms_per_step"] if pr else None,
         "orca_speedup_vs_pyrvo": pr["ms_per_step"] / o["ms_per_step"] if pr else None,
@@ -245,8 +312,10 @@ def main(argv=None) -> int:
         "pyrvo_min_distance_over_2r": pr["min_distance_over_2r"] if pr else None,
         "mesa_agent_steps_per_s": 200 * 100 / mesa_s if mesa_s else None,
         "boids_200_agent_steps_per_s": 200 * 100 / ti_s,
+        "orca_ms_per_call_5_agents": next(r["ms_per_call"] for r in per_call if r["n_agents"] == 5),
+        "orca_ordinary_ms_per_call_5_agents": next(r["ordinary_ms_per_call"] for r in per_call if r["n_agents"] == 5),
     }
-    write_json(args.json, summary, boids=rows, orca=orca_rows, mesa_skipped=why)
+    write_json(args.json, summary, boids=rows, orca=orca_rows, orca_per_call=per_call, mesa_skipped=why)
     return 0
 
 

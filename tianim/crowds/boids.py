@@ -267,13 +267,20 @@ class Boids(CrowdModel):
 
     def _advance(self, state: CrowdState, dt, steps, s) -> dict:
         from tianim.crowds._boids_kernels import boids_kernels
+        from tianim.crowds._launch import launch
 
         f = state.x.dtype
         name = np.dtype(f).name
         prm = np.array([self._prm.get(k, 0.0) for k in _prm_names()], f)
         prm[3] = dt
         coll, walls = obstacle_tables(list(self.obstacles), state.dim)
-        coll, walls = coll.astype(f), walls.astype(f).reshape(-1, 5)
+        tables = {"prm": prm, "coll": coll.astype(f), "walls": walls.astype(f).reshape(-1, 5)}
+        for key, table in tables.items():  # into the work's arrays: the same arguments every call (_launch)
+            if s.get(key) is None or s[key].shape != table.shape:
+                s[key] = table
+            else:
+                s[key][...] = table
+        prm, coll, walls = s["prm"], s["coll"], s["walls"]
         geom, dims, cell, start, order, xs = s["grid"].kernel_buffers
         r = self.radius if self.radius > 0 else -1.0
         s["over"].fill(0)
@@ -285,9 +292,9 @@ class Boids(CrowdModel):
                     with draw(state.rng, b) as rng:
                         for k in range(chunk):
                             s["noise"][k, b] = rng.standard_normal(s["noise"].shape[2:])
-            boids_kernels(name, state.dim, chunk)(
-                state.x, state.v, state.heading, state.goal, coll, walls, state.wander, s["noise"], prm,
-                geom, dims, cell, start, order, xs, s["vs"], s["over"], r, self.max_neighbours)
+            launch(boids_kernels(name, state.dim, chunk),
+                   state.x, state.v, state.heading, state.goal, coll, walls, state.wander, s["noise"], prm,
+                   geom, dims, cell, start, order, xs, s["vs"], s["over"], r, self.max_neighbours)
             left -= chunk
             for _ in range(chunk):
                 state.t += dt

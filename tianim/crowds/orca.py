@@ -113,10 +113,15 @@ class ORCA(PedestrianModel):
     def _squared(self) -> dict:
         return {"neighbour_dist": self.neighbour_dist}
 
-    def _prm(self, f, dt) -> np.ndarray:
+    def _prm(self, f, dt, out=None) -> np.ndarray:
+        """The kernels' parameter row (8,) in dtype ``f`` (see ``orca_steps``), written into ``out`` if given."""
         approach = dt if self.approach_time is None else self.approach_time
-        return np.array([self.radius * (1 + self.safety), self.time_horizon, dt, self.max_speed,
-                         self.neighbour_dist ** 2, self.arrival_radius, self.perturbation, approach], f)
+        prm = np.array([self.radius * (1 + self.safety), self.time_horizon, dt, self.max_speed,
+                        self.neighbour_dist ** 2, self.arrival_radius, self.perturbation, approach], f)
+        if out is None:
+            return prm
+        out[...] = prm
+        return out
 
     def _work_key(self, state: CrowdState) -> tuple:
         return super()._work_key(state) + (self.max_neighbors,)
@@ -126,16 +131,18 @@ class ORCA(PedestrianModel):
         f = state.x.dtype
         K = self.max_neighbors
         return dict(grid=self._grid(state), work=np.zeros((B, N, K, 8), f), out=np.zeros((B, N, 6), f),
-                    nd=np.zeros((B, N, K), f), ni=np.zeros((B, N, K), np.int32), target=np.zeros((B, N, 4), f))
+                    nd=np.zeros((B, N, K), f), ni=np.zeros((B, N, K), np.int32), target=np.zeros((B, N, 4), f),
+                    prm=np.zeros(8, f))
 
     def _advance(self, state: CrowdState, dt, steps, w) -> dict:
         f = state.x.dtype
-        prm = self._prm(f, dt)
+        prm = self._prm(f, dt, w["prm"])  # the same arrays every call: launches reuse their context
         geom, dims, cell, start, order, xs = w["grid"].kernel_buffers
         name = np.dtype(f).name
         args = (state.x, state.v, state.heading, self._target(state, w["target"]), prm, w["work"], w["nd"], w["ni"],
                 w["out"], state.arrival_time, state.t, state.ticks, state.closest, geom, dims, cell, start, order, xs,
                 self.neighbour_dist)
+        from tianim.crowds._launch import launch
         from tianim.crowds._orca_kernels import orca_copy_kernels, orca_kernels
 
         copy = self.path == "copy" or (self.path == "auto" and state.n <= COPY_KERNEL_MAX_AGENTS)
@@ -143,9 +150,9 @@ class ORCA(PedestrianModel):
         chunks = [steps] if copy else [k] * (steps // k) + [1] * (steps % k)
         for chunk in chunks:
             if copy:
-                orca_copy_kernels(name)(*args, chunk)
+                launch(orca_copy_kernels(name), *args, chunk)
             else:
-                orca_kernels(name, chunk)(*args)  # two compiled variants at most
+                launch(orca_kernels(name, chunk), *args)  # two compiled variants at most
             state.ticks += chunk
             for _ in range(chunk):  # step by step: the same times for any chunking
                 state.t += dt
