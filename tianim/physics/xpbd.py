@@ -199,6 +199,40 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
             i = row * nx + col
             project(b, i, rr * nx + cc, o, i * nf + c // 2, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h)
 
+    @ti.func
+    def grid_colour_rows(b, c: ti.template(), x: T, dx: T, rem: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T,
+                         damp: T, h, nx):
+        """Every spring of colour c of copy b, row by row and column by column (the per-copy layout).
+
+        The same springs as ``grid_colour`` over ``m in range(colour_count(c))``, visited in row-major
+        order of their start particle, without a runtime integer division per spring. Springs of one
+        colour share no particle, so the visiting order inside a colour does not change a bit."""
+        o, dc, dr, a, vertical, parity = ti.static(colour_geometry(c))
+        n = x.shape[1]
+        ny = n // nx
+        if ti.static(vertical):
+            for t in range(((ny + 2 * a - 1) // (2 * a)) * a):
+                row = 2 * a * (t // a) + a * parity + t % a
+                rr = row + dr
+                if row < ny and 0 <= rr < ny:
+                    for col in range(nx):
+                        cc = col + dc
+                        if 0 <= cc < nx:
+                            i = row * nx + col
+                            project(b, i, rr * nx + cc, o, i * nf + c // 2, x, dx, rem, lam, pinned, inv_mass, k,
+                                    rest, damp, h)
+        else:
+            for row in range(ny):
+                rr = row + dr
+                if 0 <= rr < ny:
+                    for t in range(((nx + 2 * a - 1) // (2 * a)) * a):
+                        col = 2 * a * (t // a) + a * parity + t % a
+                        cc = col + dc
+                        if col < nx and 0 <= cc < nx:
+                            i = row * nx + col
+                            project(b, i, rr * nx + cc, o, i * nf + c // 2, x, dx, rem, lam, pinned, inv_mass, k,
+                                    rest, damp, h)
+
     def sweep_order(sweeps):
         """Compile-time colour order of ``sweeps`` symmetric sweeps."""
         return (tuple(range(N_COLOURS)) + tuple(reversed(range(N_COLOURS)))) * sweeps
@@ -220,12 +254,10 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
                     if ti.static(grid):
                         if sweep % 2 == 0:
                             for c in ti.static(range(N_COLOURS)):
-                                for m in range(colour_count(c, n, nx)):
-                                    grid_colour(b, m, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
+                                grid_colour_rows(b, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
                         else:
                             for c in ti.static(tuple(reversed(range(N_COLOURS)))):
-                                for m in range(colour_count(c, n, nx)):
-                                    grid_colour(b, m, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
+                                grid_colour_rows(b, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
                     else:
                         for ss in range(n_springs):
                             s = ss if sweep % 2 == 0 else n_springs - 1 - ss
