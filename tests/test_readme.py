@@ -94,3 +94,12 @@ def test_readme_gymnasium_example_is_current_and_says_what_to_import(tmp_path):
                        timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     assert "out of date" not in r.stderr and "Warn" not in r.stderr, r.stderr
+
+
+def test_ci_runs_the_readme_test_command():
+    """`.ci/run` calls the very test command the README gives near its top (the second of its two commands)."""
+    text = README.read_text(encoding="utf-8")
+    commands = [m.group(2).strip() for m in FENCE.finditer(text) if m.group(1) == "bash"][:2]
+    assert len(commands) == 2 and "pytest" in commands[1], commands
+    ci = (README.parent / ".ci" / "run").read_text(encoding="utf-8").splitlines()
+    assert commands[1] in ci, f"{commands[1]!r} is not a line of .ci/run"
