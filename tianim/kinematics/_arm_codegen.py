@@ -100,6 +100,11 @@ class _Tape:
     def sqrt(self, x):
         return self._fn("sqrt", x)
 
+    @staticmethod
+    def let(x):
+        """Every recorded operation is already a variable of its own (``tK``)."""
+        return x
+
 
 def _acc_source(params: tuple, dt: float) -> str:
     """Source of ``_acc(q0.., v0.., u0..) -> (a0, ..)``: :func:`._arm_scalar.accelerations` as
@@ -111,15 +116,11 @@ def _acc_source(params: tuple, dt: float) -> str:
     vs = [_Sym(f"v{i}", tape) for i in range(n)]
     us = [_Sym(f"u{i}", tape) for i in range(n)]
     lo, r = scalar.factor(params, qs, vs, us, ops=tape)
-    acc = scalar._relative(scalar._solve(lo, r, n), n)
+    acc = scalar._relative(scalar._solve(lo, r, n, tape), n, tape)
     limited = [i for i in range(n) if soft is not None and (math.isfinite(lower[i]) or math.isfinite(upper[i]))]
     cols = {}
     for i in limited:
-        rhs = [0.0] * n
-        rhs[i] = 1.0
-        if i > 0:
-            rhs[i - 1] = -1.0
-        cols[i] = scalar._relative(scalar._solve(lo, rhs, n), n)
+        cols[i] = scalar.inverse_column(lo, i, n, tape)
     lines = list(tape.lines)
     lines += [f"a{k} = {_src(acc[k])}" for k in range(n)]
     if limited:

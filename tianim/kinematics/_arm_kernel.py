@@ -1,19 +1,27 @@
 """Taichi kernel: B planar arms stepped in one launch (one copy per loop iteration).
 
-The body mirrors :func:`tianim.kinematics._arm_scalar.accelerations`,
-:func:`~tianim.kinematics._arm_scalar.step` operation for operation (same order,
-float64 throughout, every constant read from the packed parameter array, see
-:func:`~tianim.kinematics._arm_scalar.packed`, since Taichi would round a float
-literal to float32), so copy ``b`` of a batch and a single arm stepped in plain
-floats agree bit for bit (tests/test_arm.py checks it). Loops over joints are
-unrolled at compile time (``ti.static``); the tip position is
-:mod:`tianim.kinematics.planar_fk`'s, the source the plain-float observation runs too: one kernel per link count and gravity
-pattern, built on first use by the cached factory :func:`arm_step_kernel` (no
-Taichi import when this module is imported).
+The dynamics are not written here: the kernel runs the one source,
+:func:`tianim.kinematics._arm_scalar.factor`, ``_solve``, ``_relative`` and ``inverse_column``
+(the mass matrix with armature, the Coriolis, gravity and damping terms, the Cholesky solve, the
+columns of ``M^-1``), in a static scope on lists of Taichi expressions (``ti.static(traced(...))``,
+as the tip position runs :mod:`tianim.kinematics.planar_fk`): Taichi executes those plain-Python
+functions while it compiles and records each operation, in their order, into the kernel (each
+stored value bound to a local variable through ``ops.let``). Written here are only the parts that
+branch on the state: the integrators' update (clamps, hard stops, the RK4 combination: as
+:func:`~tianim.kinematics._arm_scalar.step` / ``step_rk4``) and the soft limits' activity tests
+(as ``_arm_scalar._soft_limits``, whose linear algebra is traced). Float64 throughout, every
+constant read from the packed parameter array (:func:`~tianim.kinematics._arm_scalar.packed`:
+Taichi would round a float literal to float32), so copy ``b`` of a batch and a single arm stepped
+in plain floats agree bit for bit (tests/test_arm.py checks it). One kernel per link count and
+variant (:func:`~tianim.kinematics._arm_scalar.variant`), built on first use by the cached factory
+:func:`arm_step_kernel` (no Taichi import when this module is imported).
 """
 
 
+import types
+
 from tianim.kernels import cached_variants
+from tianim.kinematics import _arm_scalar as scalar
 from tianim.kinematics import planar_fk
 
 
@@ -41,26 +49,22 @@ def _arm_step_kernel(n: int, gy_on: bool, gx_on: bool, arm_on: bool, soft_on: bo
     o_ao, o_soft = o_ad + n, o_ad + 2 * n
     o_invw = o_soft + 8
 
-    @ti.func
-    def solve(lo, r):
-        y = ti.Vector.zero(f64, n)
-        for i in ti.static(range(n)):
-            acc = r[i]
-            for k in ti.static(range(i)):
-                acc = acc - lo[i, k] * y[k]
-            y[i] = acc / lo[i, i]
-        x = ti.Vector.zero(f64, n)
-        for ii in ti.static(range(n)):
-            i = ti.static(n - 1 - ii)
-            acc = y[i]
-            for k in ti.static(range(i + 1, n)):
-                acc = acc - lo[k, i] * x[k]
-            x[i] = acc / lo[i, i]
-        qdd = ti.Vector.zero(f64, n)
-        qdd[0] = x[0]
-        for i in ti.static(range(1, n)):
-            qdd[i] = x[i] - x[i - 1]
-        return qdd
+    # what Taichi runs for ``x = value`` and ``v[i]`` in a kernel, callable from a static scope
+    expr_init, subscript = ti.lang.impl.expr_init, ti.lang.impl.subscript
+    ops = types.SimpleNamespace(sin=ti.sin, cos=ti.cos, sqrt=ti.sqrt, let=expr_init)
+
+    def elems(v):
+        """A local vector's entries as a list of Taichi expressions (run in a static scope)."""
+        return [subscript(None, v, i) for i in range(n)]
+
+    def traced(c, gy, gx, damp, ad, ao, q, qd, tau):
+        """``_arm_scalar.factor`` and the solve, run on Taichi expressions while the kernel compiles
+        (``ti.static``): ``(L rows, q'' list)``, each value a local variable of the kernel."""
+        params = (n, [[subscript(None, c, j, k) for k in range(n)] for j in range(n)], elems(gy) if gy_on else None,
+                  elems(gx) if gx_on else None, elems(damp)) + (None,) * 5 + (
+                  elems(ad) if arm_on else None, elems(ao))
+        lo, r = scalar.factor(params, elems(q), elems(qd), elems(tau), ops)
+        return lo, scalar._relative(scalar._solve(lo, r, n, ops), n, ops)
 
     @ti.func
     def impedance(sp, r):
@@ -84,98 +88,48 @@ def _arm_step_kernel(n: int, gy_on: bool, gx_on: bool, arm_on: bool, soft_on: bo
         return imp
 
     @ti.func
-    def soft_limits(sp, invw, lo, lower, upper, q, qd, qdd0, dt):
-        """``_arm_scalar._soft_limits`` operation for operation."""
-        tc, dr, dmax = sp[0], sp[1], sp[3]
-        if tc < 2.0 * dt:
-            tc = 2.0 * dt
-        kk = 1.0 / (dmax * dmax * tc * tc * dr * dr)
-        bb = 2.0 / (dmax * tc)
-        qdd = qdd0
-        push = ti.Matrix.zero(f64, n, n)   # row i: f_i * column i of M^-1 (zero when joint i is free)
-        on = ti.Vector.zero(ti.i32, n)
-        for i in ti.static(range(n)):
-            r = q[i] - lower[i]
-            sign = 1.0
-            active = 1
-            if not r < 0.0:
-                r = upper[i] - q[i]
-                sign = -1.0
-                if not r < 0.0:
-                    active = 0
-            if active == 1:
-                imp = impedance(sp, r)
-                aref = -bb * (sign * qd[i]) - kk * imp * r
-                jar = sign * qdd0[i] - aref
-                if jar < 0.0:
-                    rhs = ti.Vector.zero(f64, n)
-                    rhs[i] = 1.0
-                    if ti.static(i > 0):
-                        rhs[i - 1] = -1.0
-                    col = solve(lo, rhs)
-                    rr = (1.0 - imp) * invw[i] / imp
-                    if rr < sp[7]:
-                        rr = sp[7]
-                    force = -jar / (col[i] + rr)
-                    for k in ti.static(range(n)):
-                        push[i, k] = (sign * force) * col[k]
-                    on[i] = 1
-        for i in ti.static(range(n)):
-            if on[i] == 1:
-                for k in ti.static(range(n)):
-                    qdd[k] = qdd[k] + push[i, k]
-        return qdd
-
-    @ti.func
     def accelerations(c, gy, gx, damp, ad, ao, sp, invw, lower, upper, q, qd, tau, dt):
-        phi = ti.Vector.zero(f64, n)
-        w = ti.Vector.zero(f64, n)
-        phi[0] = q[0]
-        w[0] = qd[0]
-        for j in ti.static(range(1, n)):
-            phi[j] = phi[j - 1] + q[j]
-            w[j] = w[j - 1] + qd[j]
-        u = ti.Vector.zero(f64, n)
+        """``_arm_scalar.accelerations``: the factor and the solves traced from its source; the soft
+        limits' branches (on the state, so not traceable) as ``_arm_scalar._soft_limits`` runs them."""
+        lo_qdd = ti.static(traced(c, gy, gx, damp, ad, ao, q, qd, tau))
+        qdd = ti.Vector.zero(f64, n)
         for i in ti.static(range(n)):
-            u[i] = tau[i] - damp[i] * qd[i]
-        r = ti.Vector.zero(f64, n)
-        for j in ti.static(range(n)):
-            qj = u[j]
-            if ti.static(j + 1 < n):
-                qj = u[j] - u[j + 1]
-            if ti.static(gy_on):
-                qj = qj - gy[j] * ti.cos(phi[j])
-            if ti.static(gx_on):
-                qj = qj + gx[j] * ti.sin(phi[j])
-            r[j] = qj
-        h = ti.Matrix.zero(f64, n, n)
-        for j in ti.static(range(n)):
-            h[j, j] = c[j, j]
-            if ti.static(arm_on):
-                h[j, j] = c[j, j] + ad[j]
-            for k in ti.static(range(j + 1, n)):
-                d = phi[j] - phi[k]
-                s = c[j, k] * ti.sin(d)
-                h[j, k] = c[j, k] * ti.cos(d)
-                if ti.static(arm_on and k == j + 1):
-                    h[j, k] = h[j, k] - ao[j]
-                r[j] = r[j] - s * w[k] * w[k]
-                r[k] = r[k] + s * w[j] * w[j]
-        lo = ti.Matrix.zero(f64, n, n)
-        for j in ti.static(range(n)):
-            acc = h[j, j]
-            for k in ti.static(range(j)):
-                acc = acc - lo[j, k] * lo[j, k]
-            dj = ti.sqrt(acc)
-            lo[j, j] = dj
-            for i in ti.static(range(j + 1, n)):
-                acc2 = h[j, i]
-                for k in ti.static(range(j)):
-                    acc2 = acc2 - lo[i, k] * lo[j, k]
-                lo[i, j] = acc2 / dj
-        qdd = solve(lo, r)
+            qdd[i] = lo_qdd[1][i]
         if ti.static(soft_on):
-            qdd = soft_limits(sp, invw, lo, lower, upper, q, qd, qdd, dt)
+            tc, dr, dmax = sp[0], sp[1], sp[3]
+            if tc < 2.0 * dt:
+                tc = 2.0 * dt
+            kk = 1.0 / (dmax * dmax * tc * tc * dr * dr)
+            bb = 2.0 / (dmax * tc)
+            qdd0 = qdd
+            push = ti.Matrix.zero(f64, n, n)   # row i: f_i * column i of M^-1 (zero when joint i is free)
+            on = ti.Vector.zero(ti.i32, n)
+            for i in ti.static(range(n)):
+                r = q[i] - lower[i]
+                sign = 1.0
+                active = 1
+                if not r < 0.0:
+                    r = upper[i] - q[i]
+                    sign = -1.0
+                    if not r < 0.0:
+                        active = 0
+                if active == 1:
+                    imp = impedance(sp, r)
+                    aref = -bb * (sign * qd[i]) - kk * imp * r
+                    jar = sign * qdd0[i] - aref
+                    if jar < 0.0:
+                        col = ti.static(scalar.inverse_column(lo_qdd[0], i, n, ops))   # traced
+                        rr = (1.0 - imp) * invw[i] / imp
+                        if rr < sp[7]:
+                            rr = sp[7]
+                        force = -jar / (col[i] + rr)
+                        for k in ti.static(range(n)):
+                            push[i, k] = (sign * force) * col[k]
+                        on[i] = 1
+            for i in ti.static(range(n)):
+                if on[i] == 1:
+                    for k in ti.static(range(n)):
+                        qdd[k] = qdd[k] + push[i, k]
         return qdd
 
     @ti.func

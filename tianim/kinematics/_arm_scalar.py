@@ -4,7 +4,9 @@ A single small environment must not pay a Taichi kernel launch (~60-150 us here)
 per step, so one :class:`~tianim.kinematics.PlanarChain` is stepped here in Python
 ``float`` (IEEE float64) arithmetic with :mod:`math`. The straight-line form of
 :mod:`._arm_codegen` is traced from :func:`accelerations`, and the batched kernel of
-:mod:`._arm_kernel` performs *exactly the same operations in the same order* on
+:mod:`._arm_kernel` runs :func:`factor`, :func:`_solve`, :func:`_relative` and
+:func:`inverse_column` themselves on Taichi expressions at compile time (the one source of the
+dynamics, see the note above :func:`factor`), so it performs *exactly the same operations in the same order* on
 float64 data (no fused multiply-adds; constants read from the packed parameter
 array, never written as float literals, which Taichi would round to float32;
 ``math.sin``/``cos``/``sqrt`` and Taichi's CPU ``ti.sin``/``cos``/``sqrt`` both call
@@ -104,13 +106,17 @@ def packed(chain) -> np.ndarray:
 def unpack(chain) -> tuple:
     """Parameters as Python floats: ``(n, C rows, Gy, Gx, b, lower, upper, lengths, max_torque, vmax,
     armature diagonal, armature off-diagonal (None without armature), soft limits (a 7-tuple, None
-    for hard limits), invweight0)``."""
+    for hard limits), invweight0)``; ``Gy`` (``Gx``) is None where it is all zero (a chain without
+    vertical (horizontal) gravity skips those terms: :func:`variant`)."""
     params = chain.__dict__.get("_arm_params")
     if params is None:
         n = chain.n
         p = packed(chain).tolist()
         o = n * n
         rows = [p[o + i * n:o + (i + 1) * n] for i in range(7)]
+        for i in (0, 1):                      # Gy, Gx
+            if not any(v != 0.0 for v in rows[i]):
+                rows[i] = None
         e = o + 7 * n + 1
         ad, ao, soft, invw = p[e:e + n], p[e + n:e + 2 * n], p[e + 2 * n:e + 2 * n + 7], p[e + 2 * n + 8:]
         params = (n, [p[j * n:(j + 1) * n] for j in range(n)], *rows, p[o + 7 * n],
@@ -120,90 +126,128 @@ def unpack(chain) -> tuple:
     return params
 
 
-def factor(params: tuple, q: list, qd: list, tau: list, ops=math) -> tuple[list, list]:
+def variant(params: tuple) -> tuple[bool, bool, bool, bool]:
+    """``(gy_on, gx_on, arm_on, soft_on)``: which optional terms of (1)-(3) a chain has (the
+    compile-time switches of the batched kernel, :mod:`._arm_kernel`)."""
+    return params[2] is not None, params[3] is not None, params[10] is not None, params[12] is not None
+
+
+class FloatOps:
+    """The ``ops`` of the plain-float path: :mod:`math`'s ``sin``, ``cos``, ``sqrt``, and ``let``
+    (bind a value to a variable; the identity on floats, a Taichi local variable in the kernel)."""
+
+    sin, cos, sqrt = staticmethod(math.sin), staticmethod(math.cos), staticmethod(math.sqrt)
+
+    @staticmethod
+    def let(x):
+        return x
+
+
+FLOAT_OPS = FloatOps()
+
+
+# The functions below are the one source of the arm's dynamics for every path: written in plain
+# Python over values indexed by Python ints, with the math functions passed in (``ops``), they run
+# on floats (this module), on a tracer that records straight-line code (:mod:`._arm_codegen`) and
+# inside the Taichi kernel in a static scope, on Taichi expressions (:mod:`._arm_kernel`), like
+# :mod:`.planar_fk`. Every value stored for later use goes through ``ops.let`` (in the kernel it
+# becomes a local variable, so a reused value is computed once and read, not re-evaluated).
+
+
+def factor(params: tuple, q, qd, tau, ops=FLOAT_OPS) -> tuple[list, list]:
     """The Cholesky factor ``L`` of ``H`` (lower triangle, list of rows) and the right-hand side ``r``
-    of equation (1) (with the armature (2)) at ``q``, ``qd``, ``tau``."""
+    of equation (1) (with the armature (2)) at ``q``, ``qd``, ``tau`` (each indexable by ``0..n-1``)."""
     n, c, gy, gx, b = params[:5]
     ad, ao = params[10], params[11]
+    let = ops.let
     phi = [q[0]] * n
     w = [qd[0]] * n
     for j in range(1, n):
-        phi[j] = phi[j - 1] + q[j]
-        w[j] = w[j - 1] + qd[j]
-    u = [tau[i] - b[i] * qd[i] for i in range(n)]
+        phi[j] = let(phi[j - 1] + q[j])
+        w[j] = let(w[j - 1] + qd[j])
+    u = [let(tau[i] - b[i] * qd[i]) for i in range(n)]
     r = [0.0] * n
-    gy_on = any(v != 0.0 for v in gy)  # a horizontal arm skips the gravity terms
-    gx_on = any(v != 0.0 for v in gx)
     for j in range(n):
         qj = u[j] - u[j + 1] if j + 1 < n else u[j]
-        if gy_on:
+        if gy is not None:                   # a horizontal arm skips the gravity terms
             qj = qj - gy[j] * ops.cos(phi[j])
-        if gx_on:
+        if gx is not None:
             qj = qj + gx[j] * ops.sin(phi[j])
-        r[j] = qj
+        r[j] = let(qj)
     h = [[0.0] * n for _ in range(n)]
     for j in range(n):
-        h[j][j] = c[j][j] if ad is None else c[j][j] + ad[j]
+        h[j][j] = c[j][j] if ad is None else let(c[j][j] + ad[j])
         for k in range(j + 1, n):
-            d = phi[j] - phi[k]
-            s = c[j][k] * ops.sin(d)
-            h[j][k] = c[j][k] * ops.cos(d)
+            d = let(phi[j] - phi[k])
+            s = let(c[j][k] * ops.sin(d))
+            h[j][k] = let(c[j][k] * ops.cos(d))
             if ad is not None and k == j + 1:
-                h[j][k] = h[j][k] - ao[j]
-            r[j] = r[j] - s * w[k] * w[k]
-            r[k] = r[k] + s * w[j] * w[j]
+                h[j][k] = let(h[j][k] - ao[j])
+            r[j] = let(r[j] - s * w[k] * w[k])
+            r[k] = let(r[k] + s * w[j] * w[j])
     # Cholesky H = L L^T (L stored in the lower triangle), then two triangular solves.
     lo = [[0.0] * n for _ in range(n)]
     for j in range(n):
         acc = h[j][j]
         for k in range(j):
             acc = acc - lo[j][k] * lo[j][k]
-        dj = ops.sqrt(acc)
+        dj = let(ops.sqrt(acc))
         lo[j][j] = dj
         for i in range(j + 1, n):
             acc = h[j][i]
             for k in range(j):
                 acc = acc - lo[i][k] * lo[j][k]
-            lo[i][j] = acc / dj
+            lo[i][j] = let(acc / dj)
     return lo, r
 
 
-def accelerations(params: tuple, q: list, qd: list, tau: list, ops=math, dt: float = 0.0) -> list:
+def accelerations(params: tuple, q, qd, tau, ops=FLOAT_OPS, dt: float = 0.0) -> list:
     """Joint accelerations ``q''`` [rad/s^2] (list of n floats) for angles ``q`` [rad],
     rates ``qd`` [rad/s] and joint torques ``tau`` [N m] (lists of n floats), with the
     armature (2) and, for a chain with soft limits, the limit torques (3) of the module
     docstring (``dt``: the integrator's step [s], which MuJoCo's soft limits read).
 
-    ``ops`` supplies ``sin``, ``cos`` and ``sqrt`` (:mod:`math`; :mod:`._arm_codegen`
-    passes a tracer to turn :func:`factor` and :func:`_solve` into straight-line code)."""
+    ``ops``: see :class:`FloatOps` (:mod:`._arm_codegen` passes a tracer to turn :func:`factor`
+    and :func:`_solve` into straight-line code)."""
     n = params[0]
     lo, r = factor(params, q, qd, tau, ops)
-    qdd = _relative(_solve(lo, r, n), n)
+    qdd = _relative(_solve(lo, r, n, ops), n, ops)
     if params[12] is not None:
         qdd = _soft_limits(params, lo, q, qd, qdd, dt)
     return qdd
 
 
-def _solve(lo: list, r: list, n: int) -> list:
+def _solve(lo: list, r: list, n: int, ops=FLOAT_OPS) -> list:
     """``x`` with ``L L^T x = r`` (forward, then backward substitution)."""
+    let = ops.let
     y = [0.0] * n
     for i in range(n):
         acc = r[i]
         for k in range(i):
             acc = acc - lo[i][k] * y[k]
-        y[i] = acc / lo[i][i]
+        y[i] = let(acc / lo[i][i])
     x = [0.0] * n
     for i in range(n - 1, -1, -1):
         acc = y[i]
         for k in range(i + 1, n):
             acc = acc - lo[k][i] * x[k]
-        x[i] = acc / lo[i][i]
+        x[i] = let(acc / lo[i][i])
     return x
 
 
-def _relative(x: list, n: int) -> list:
+def _relative(x: list, n: int, ops=FLOAT_OPS) -> list:
     """Relative joint accelerations from absolute link accelerations."""
-    return [x[0]] + [x[i] - x[i - 1] for i in range(1, n)]
+    return [x[0]] + [ops.let(x[i] - x[i - 1]) for i in range(1, n)]
+
+
+def inverse_column(lo: list, i: int, n: int, ops=FLOAT_OPS) -> list:
+    """Column ``i`` of ``M^-1`` (relative joint coordinates) from the Cholesky factor ``lo`` of the
+    absolute-angle ``H``: a unit torque at joint i acts on link i and reacts on link i-1."""
+    rhs = [0.0] * n
+    rhs[i] = 1.0
+    if i > 0:
+        rhs[i - 1] = -1.0
+    return _relative(_solve(lo, rhs, n, ops), n, ops)
 
 
 MINVAL = 1e-15  # MuJoCo's mjMINVAL
@@ -254,11 +298,7 @@ def _soft_limits(params, lo, q, qd, qdd, dt):
         jar = sign * qdd[i] - aref
         if not jar < 0.0:
             continue
-        rhs = [0.0] * n       # a unit torque at joint i acts on link i and reacts on link i-1
-        rhs[i] = 1.0
-        if i > 0:
-            rhs[i - 1] = -1.0
-        col = _relative(_solve(lo, rhs, n), n)   # column i of M^-1
+        col = inverse_column(lo, i, n)   # column i of M^-1
         rr = (1.0 - imp) * invw[i] / imp
         if rr < MINVAL:
             rr = MINVAL

@@ -37,9 +37,14 @@ Paths (``ArmSolver(path=...)``; every path gives the same bits):
 * ``"kernel"``: all copies in one Taichi kernel launch (:mod:`._arm_kernel`);
 * ``"auto"`` (default): ``"scalar"`` for ``B <= scalar_max_batch`` copies, else ``"kernel"``.
 
-How the three forms stay one: :mod:`._arm_scalar` is the reference (tested against
-:func:`~tianim.kinematics.forward_dynamics`), :mod:`._arm_codegen` is generated from it,
-:mod:`._arm_kernel` mirrors it operation for operation and is tested bit for bit against it.
+How the three forms stay one: the dynamics (mass matrix with armature, Coriolis and gravity terms,
+damping, the Cholesky solve, the columns of ``M^-1`` the soft limits need) are written once, in
+:mod:`._arm_scalar` (tested against :func:`~tianim.kinematics.forward_dynamics`), as plain Python
+over values indexed by Python ints with the math functions passed in; the plain floats run it,
+:mod:`._arm_codegen` traces it into straight-line Python, and :mod:`._arm_kernel` runs it in a
+static scope so Taichi records the same operations (as :mod:`.planar_fk`). What branches on the
+state (the integrators' clamps and stops, the RK4 combination, the soft limits' activity tests) is
+written beside the source in each form, and the tests check all paths bit for bit.
 
 Units: rad, rad/s, N m, s. Tips are relative to ``chain.base``.
 """
@@ -386,10 +391,7 @@ class ArmSolver:
             return hit[1]
         from tianim.kinematics._arm_kernel import arm_step_kernel
 
-        n, p = model.n, _arm_scalar.packed(model)
-        kernel = arm_step_kernel(n, bool(np.any(p[n * n:n * n + n] != 0.0)), bool(np.any(p[n * n + n:n * n + 2 * n] != 0.0)),
-                               bool(np.any(model.armature != 0.0)), model.limit_solref is not None,
-                               self.method == "rk4")
+        kernel = arm_step_kernel(model.n, *_arm_scalar.variant(_arm_scalar.unpack(model)), rk4=self.method == "rk4")
         self._kernels[id(model)] = (model, kernel)
         return kernel
 
