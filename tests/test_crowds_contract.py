@@ -77,20 +77,6 @@ def test_snapshot_restore_mid_run_continues_bit_identically(tmp_path, kind):
 
 
 @pytest.mark.parametrize("kind", MODELS)
-def test_batch_copy_k_equals_a_single_run_seeded_like_copy_k(kind):
-    model, agents = make(kind)
-    solver = CrowdSolver()
-    both = model.state(agents)
-    solver.step(model, both, 0.05, 6)
-    for b, seed in enumerate((5, 9)):
-        m1, a1 = make(kind, batch=1, seeds=(seed,))
-        one = m1.state(a1)
-        solver.step(m1, one, 0.05, 6)
-        row = both.snapshot(copies=[b])
-        assert same(row, one.snapshot()), (kind, b)
-
-
-@pytest.mark.parametrize("kind", MODELS)
 def test_restoring_one_copy_rolls_back_that_copy_only(kind):
     model, agents = make(kind)
     solver = CrowdSolver()

@@ -106,18 +106,6 @@ def test_snapshot_mid_run_restores_a_run_that_continues_bit_for_bit(case, tmp_pa
     assert all(np.array_equal(p, q) for p, q in zip(after, _bits(fresh)))
 
 
-def test_batch_copy_k_equals_a_single_run_seeded_like_copy_k(case):
-    model, dt, sub = case
-    solver = ParticleSolver()
-    both = ParticleState(model, batch=2, seeds=[5, 8])
-    _run(solver, model, both, 5, dt, sub)
-    for k, seed in enumerate((5, 8)):
-        one = ParticleState(model, seeds=[seed])
-        _run(solver, model, one, 5, dt, sub)
-        for name in one.ARRAYS:
-            assert np.array_equal(getattr(one, name)[0], getattr(both, name)[k]), name
-
-
 def test_model_is_read_only():
     model = _plain()
     with pytest.raises(AttributeError, match="read-only"):

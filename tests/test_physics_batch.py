@@ -18,22 +18,6 @@ def jittered(model, batch, seed, dtype=np.float32):
     return state
 
 
-@pytest.mark.parametrize("method", tp.EXPLICIT_METHODS)
-def test_batch_equals_separate_runs_bit_for_bit(method):
-    model = tp.rope(n=12, damping=0.01, colliders=[tp.Ground(height=-0.5, restitution=0.3, friction=0.4)])
-    batch = jittered(model, 5, seed=1)
-    singles = []
-    for b in range(5):
-        s = model.state()
-        s.x[...] = batch.x[b]
-        s.v[...] = batch.v[b]
-        singles.append(s)
-    tp.step(model, batch, 1e-4, substeps=300, method=method)
-    for b, s in enumerate(singles):
-        tp.step(model, s, 1e-4, substeps=300, method=method)
-        assert np.array_equal(s.x[0], batch.x[b]) and np.array_equal(s.v[0], batch.v[b])
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("method", tp.EXPLICIT_METHODS)
 def test_layouts_are_bit_identical(method):
