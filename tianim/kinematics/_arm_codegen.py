@@ -8,8 +8,9 @@ function of plain local floats. Because the recorded operations are the
 reference function's own, in its own order (operations on two constants are
 folded at trace time with the same IEEE arithmetic), the compiled function
 returns bit-identical results: the tests check it. Two parts are written out as text
-rather than traced, because they branch on the state: the integrator's update (clamps,
-hard stops, the RK4 combination: :func:`._arm_scalar.step` / :func:`~._arm_scalar.step_rk4`)
+rather than traced, because they branch on the state: the integrator's update (clamps and
+hard stops: :func:`._arm_scalar.step` / :func:`~._arm_scalar.step_rk4`; the RK4 combination in it
+is :func:`._arm_scalar.rk4_average` run on source text, :class:`_Text`)
 and the soft-limit branches of :func:`._arm_scalar._soft_limits` (their linear algebra, the
 column of ``M^-1``, is traced).
 
@@ -64,6 +65,38 @@ class _Sym:
 
     def __rtruediv__(self, o):
         return self._bin("/", o, self)
+
+
+class _Text:
+    """An expression as fully parenthesised Python source (each operation in the order it ran), for
+    the parts of a step written out rather than traced: ``rk4_average`` run on ``_Text`` gives its text."""
+
+    __slots__ = ("text",)
+
+    def __init__(self, text: str):
+        self.text = text
+
+    def _bin(self, op: str, a, b):
+        return _Text(f"({_text(a)} {op} {_text(b)})")
+
+    def __add__(self, o):
+        return self._bin("+", self, o)
+
+    def __radd__(self, o):
+        return self._bin("+", o, self)
+
+    def __mul__(self, o):
+        return self._bin("*", self, o)
+
+    def __rmul__(self, o):
+        return self._bin("*", o, self)
+
+    def __truediv__(self, o):
+        return self._bin("/", self, o)
+
+
+def _text(v) -> str:
+    return v.text if isinstance(v, _Text) else _src(v)
 
 
 def _src(v) -> str:
@@ -191,8 +224,9 @@ def compile_stepper(params: tuple, dt: float, substeps: int, method: str = "semi
         body.append(f"{', '.join(f'k4_{i}' for i in range(n))}, = "
                     f"{call([f'q4_{i}' for i in range(n)], [f'v4_{i}' for i in range(n)])}")
         for i in range(n):
-            body += finish(i, f"v{i} + {dt!r} * ((k1_{i} + 2.0 * k2_{i} + 2.0 * k3_{i} + k4_{i}) / 6.0)",
-                           f"q{i} + {dt!r} * ((v{i} + 2.0 * v2_{i} + 2.0 * v3_{i} + v4_{i}) / 6.0)")
+            w = scalar.rk4_average(*map(_Text, (f"v{i}", f"k1_{i}", f"k2_{i}", f"k3_{i}", f"k4_{i}", repr(dt))))
+            p = scalar.rk4_average(*map(_Text, (f"q{i}", f"v{i}", f"v2_{i}", f"v3_{i}", f"v4_{i}", repr(dt))))
+            body += finish(i, w.text, p.text)
     else:
         body.append(f"{', '.join(f'k1_{i}' for i in range(n))}, = {call(qn, vn)}")
         for i in range(n):

@@ -7,7 +7,8 @@ columns of ``M^-1``), in a static scope on lists of Taichi expressions (``ti.sta
 as the tip position runs :mod:`tianim.kinematics.planar_fk`): Taichi executes those plain-Python
 functions while it compiles and records each operation, in their order, into the kernel (each
 stored value bound to a local variable through ``ops.let``). Written here are only the parts that
-branch on the state: the integrators' update (clamps, hard stops, the RK4 combination: as
+branch on the state: the integrators' update (clamps and hard stops, around the traced
+:func:`~tianim.kinematics._arm_scalar.rk4_average`: as
 :func:`~tianim.kinematics._arm_scalar.step` / ``step_rk4``) and the soft limits' activity tests
 (as ``_arm_scalar._soft_limits``, whose linear algebra is traced). Float64 throughout, every
 constant read from the packed parameter array (:func:`~tianim.kinematics._arm_scalar.packed`:
@@ -237,9 +238,9 @@ def _arm_step_kernel(n: int, gy_on: bool, gx_on: bool, arm_on: bool, soft_on: bo
                                 vn[i] = vv[i] + coef * a[i]
                             vs = vn
                         for i in ti.static(range(n)):
-                            v = vv[i] + dt * ((ka[0, i] + 2.0 * ka[1, i] + 2.0 * ka[2, i] + ka[3, i]) / 6.0)
-                            pos = qv[i] + dt * ((kv[0, i] + 2.0 * kv[1, i] + 2.0 * kv[2, i] + kv[3, i]) / 6.0)
-                            pos, v = speed_and_stop(lower, upper, vmax, pos, v, i)
+                            v4, p4 = ti.static((scalar.rk4_average(vv[i], ka[0, i], ka[1, i], ka[2, i], ka[3, i], dt),
+                                                scalar.rk4_average(qv[i], kv[0, i], kv[1, i], kv[2, i], kv[3, i], dt)))
+                            pos, v = speed_and_stop(lower, upper, vmax, p4, v4, i)
                             qv[i] = pos
                             vv[i] = v
                 for i in ti.static(range(n)):

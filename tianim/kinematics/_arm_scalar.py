@@ -309,6 +309,13 @@ def _soft_limits(params, lo, q, qd, qdd, dt):
     return qdd
 
 
+def rk4_average(x, k1, k2, k3, k4, dt):
+    """The RK4 update ``x + dt (k1 + 2 k2 + 2 k3 + k4) / 6`` of one value from its four stage rates (one
+    source: the plain floats run it, the kernel traces it in a static scope, :mod:`._arm_codegen`
+    writes it out as text with the same operations in the same order)."""
+    return x + dt * ((k1 + 2.0 * k2 + 2.0 * k3 + k4) / 6.0)
+
+
 def step_rk4(params: tuple, q: list, qd: list, tau: list, dt: float, substeps: int) -> tuple[list, list]:
     """Advance one arm by ``substeps`` classical Runge-Kutta steps of ``dt`` [s] (MuJoCo's RK4:
     ``k = (v, a)`` at the start, the two midpoints and the end, combined ``(k1 + 2 k2 + 2 k3 + k4) / 6``),
@@ -336,8 +343,8 @@ def step_rk4(params: tuple, q: list, qd: list, tau: list, dt: float, substeps: i
         v4 = [qd[i] + dt * a3[i] for i in range(n)]
         a4 = accelerations(params, q4, v4, tau, dt=dt)
         for i in range(n):
-            v = qd[i] + dt * ((a1[i] + 2.0 * a2[i] + 2.0 * a3[i] + a4[i]) / 6.0)
-            p = q[i] + dt * ((qd[i] + 2.0 * v2[i] + 2.0 * v3[i] + v4[i]) / 6.0)
+            v = rk4_average(qd[i], a1[i], a2[i], a3[i], a4[i], dt)
+            p = rk4_average(q[i], qd[i], v2[i], v3[i], v4[i], dt)
             if v > vmax:
                 v = vmax
             if v < -vmax:

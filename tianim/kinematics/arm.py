@@ -43,8 +43,9 @@ damping, the Cholesky solve, the columns of ``M^-1`` the soft limits need) are w
 over values indexed by Python ints with the math functions passed in; the plain floats run it,
 :mod:`._arm_codegen` traces it into straight-line Python, and :mod:`._arm_kernel` runs it in a
 static scope so Taichi records the same operations (as :mod:`.planar_fk`). What branches on the
-state (the integrators' clamps and stops, the RK4 combination, the soft limits' activity tests) is
-written beside the source in each form, and the tests check all paths bit for bit.
+state (the integrators' clamps and stops, the soft limits' activity tests) is written beside the
+source in each form (around the one RK4 combination, ``_arm_scalar.rk4_average``), and the tests
+check all paths bit for bit.
 
 Units: rad, rad/s, N m, s. Tips are relative to ``chain.base``.
 """
