@@ -109,6 +109,76 @@ def grid_funcs(real_name: str, dim: int):
         return base * dims[0]
 
     @ti.func
+    def z_range(lo, hi):
+        """(first, last) z cell coordinate of a box (0, 0 in 2D, where rows are indexed by y alone)."""
+        z0, z1 = 0, 0
+        if ti.static(dim == 3):
+            z0, z1 = lo[2], hi[2]
+        return z0, z1
+
+    @ti.func
+    def cell_units(p, r, geom: ti.template(), dims: ti.template()):
+        """(t, padh): ``t_a = (p_a - lo_a) / h`` (float64, by one multiplication per axis) and the query
+        half-width ``r (1 + BOX_PAD) / h`` in cell units, widened by ``1e-12 (|t_a| + 1)`` so that the
+        multiplication's rounding (a few ulps of t) never moves a box edge inward past a point that the
+        division of :func:`coord` puts in a cell (spans and boxes from ``t`` stay supersets)."""
+        inv_h = 1.0 / geom[dim]
+        t = ti.Vector.zero(ti.f64, dim)
+        for a in ti.static(range(dim)):
+            t[a] = (ti.cast(p[a], ti.f64) - geom[a]) * inv_h
+        return t, r * (1 + BOX_PAD) * inv_h
+
+    @ti.func
+    def clamp_cell(u, a: ti.template(), dims: ti.template()):
+        return ti.cast(ti.min(ti.max(ti.floor(u), 0.0), ti.cast(dims[a] - 1, ti.f64)), ti.i32)
+
+    @ti.func
+    def box_t(t, padh, dims: ti.template()):
+        """(lo, hi) cell coordinates of the box ``[t - padh, t + padh]`` (cell units, see cell_units)."""
+        lo = ti.Vector.zero(ti.i32, dim)
+        hi = ti.Vector.zero(ti.i32, dim)
+        for a in ti.static(range(dim)):
+            w = padh + 1e-12 * (ti.abs(t[a]) + 1.0)
+            lo[a] = clamp_cell(t[a] - w, a, dims)
+            hi[a] = clamp_cell(t[a] + w, a, dims)
+        return lo, hi
+
+    @ti.func
+    def gap_t(ta, ua, a: ti.template(), dims: ti.template()):
+        """Distance in cell units from ``ta`` to the slab of cells ``ua`` along axis ``a`` (0 inside it;
+        border cells reach to infinity, as clamping puts outside points there)."""
+        g = ti.cast(0.0, ti.f64)
+        if ua > 0:
+            g = ti.max(g, ti.cast(ua, ti.f64) - ta)
+        if ua < dims[a] - 1:
+            g = ti.max(g, ta - ti.cast(ua + 1, ti.f64))
+        return g
+
+    @ti.func
+    def span(b, t, padh, y, z, lo, hi, dims: ti.template(), start: ti.template()):
+        """(k0, k1): the sorted positions of row (y, z) of the box (lo, hi) that can hold a point within
+        ``padh`` cell units of the point ``t`` (from :func:`cell_units`): the row's cells narrowed along x to
+        ``|x - t_x| <= sqrt(padh^2 - g^2)``, g the distance from t to the row across y and z; k0 = k1
+        (nothing) when g > padh. A subset of the row that holds every point within the radius (the cells
+        it drops are farther, with the margin of cell_units), in the same order."""
+        g = gap_t(t[1], y, 1, dims)
+        base = y
+        g2 = g * g
+        if ti.static(dim == 3):
+            gz = gap_t(t[2], z, 2, dims)
+            g2 += gz * gz
+            base = z * dims[1] + y
+        k0, k1 = 0, 0
+        reach = padh + 1e-12 * (ti.abs(t[0]) + ti.abs(t[1]) + ti.abs(t[dim - 1]) + 1.0)
+        if g2 <= reach * reach:
+            w = ti.sqrt(reach * reach - g2) + 1e-12 * (ti.abs(t[0]) + 1.0)
+            x0 = ti.max(clamp_cell(t[0] - w, 0, dims), lo[0])
+            x1 = ti.min(clamp_cell(t[0] + w, 0, dims), hi[0])
+            base = base * dims[0]
+            k0, k1 = start[b, base + x0], start[b, base + x1 + 1]
+        return k0, k1
+
+    @ti.func
     def before(d2a, ja, d2b, jb):
         """(d2a, ja) < (d2b, jb) lexicographically: nearer first, ties by the lower index."""
         return d2a < d2b or (d2a == d2b and ja < jb)
@@ -192,4 +262,5 @@ def grid_funcs(real_name: str, dim: int):
         return m
 
     return SimpleNamespace(coord=coord, cell_of=cell_of, sort_copy=sort_copy, box=box, n_rows=n_rows,
-                           row_base=row_base, nearest=nearest)
+                           row_base=row_base, z_range=z_range, cell_units=cell_units, box_t=box_t, span=span,
+                           nearest=nearest)

@@ -206,6 +206,10 @@ class NeighbourGrid:
         if x.shape != (self.batch, q, self.dim):
             want = f"({self.batch}, {n if n is not None else 'Q'}, {self.dim})"
             raise ValueError(f"{name} has shape {x.shape}; expected {want}")
+        with np.errstate(over="ignore", invalid="ignore"):
+            total = x.sum()
+        if (active is None or active.all()) and np.isfinite(total):
+            return np.ascontiguousarray(x)  # every point finite (one reduction; else the exact check below)
         finite = np.isfinite(x)
         if active is not None:
             finite |= active[..., None] == 0
@@ -230,7 +234,7 @@ class NeighbourGrid:
                                  f"expected ({self.batch}, {self.n_points}) uint8 or bool")
         active = active.view(np.uint8) if active.dtype == np.bool_ else active
         if check:
-            x = self._points("x", x, self.n_points, active)
+            x = self._points("x", x, self.n_points, None if active is self._all_active else active)
         cell_ids, counting_sort, _ = self._kernels()
         cell_ids(x, np.ascontiguousarray(active), self._geom, self.dims, self.cell)
         counting_sort(x, self.cell, self.start, self.order, self.sorted_x)
