@@ -171,9 +171,11 @@ def grid_funcs(real_name: str, dim: int):
         k0, k1 = 0, 0
         reach = padh + 1e-12 * (ti.abs(t[0]) + ti.abs(t[1]) + ti.abs(t[dim - 1]) + 1.0)
         if g2 <= reach * reach:
-            w = ti.sqrt(reach * reach - g2) + 1e-12 * (ti.abs(t[0]) + 1.0)
-            x0 = ti.max(clamp_cell(t[0] - w, 0, dims), lo[0])
-            x1 = ti.min(clamp_cell(t[0] + w, 0, dims), hi[0])
+            x0, x1 = lo[0], hi[0]
+            if g2 > 0:  # (the own row, g = 0, keeps the box's cells)
+                w = ti.sqrt(reach * reach - g2) + 1e-12 * (ti.abs(t[0]) + 1.0)
+                x0 = ti.max(clamp_cell(t[0] - w, 0, dims), lo[0])
+                x1 = ti.min(clamp_cell(t[0] + w, 0, dims), hi[0])
             base = base * dims[0]
             k0, k1 = start[b, base + x0], start[b, base + x1 + 1]
         return k0, k1
