@@ -34,8 +34,10 @@ Memory: ``4 B (3 N + M + 2) + 4 B Q (K + 1)`` bytes plus ``B N D`` reals for sor
 with M = prod(cells per axis), K = ``max_neighbours``, Q query points.
 Build: O(N + M) per copy, serial inside a copy, copies in parallel (a counting sort by cell id,
 stable in point index; Knuth, TAOCP vol. 3, 5.2 "distribution counting").
-Query: O(Q (C + S)) in parallel over (copy, point), C = cells visited (<= 3^D for r <= h),
-S = points in them (about 3^D rho h^D for density rho).
+Query: O(Q (C + S)) in parallel over (copy, point), C = rows of cells visited (<= 3^(D-1) for r <= h),
+S = points in them: each row is culled when it lies farther than r across y and z and otherwise narrowed
+along x to the ball (``grid_funcs.span``), so S is about 0.75 x 3^D rho h^D for density rho and r = h
+(24.0 candidates per point for ``query_half`` at 10 neighbours, r = h, where the half box holds about 32).
 """
 
 from __future__ import annotations
@@ -60,7 +62,8 @@ class NeighbourList:
     """Neighbours of Q query points in B copies.
 
     ``indices`` (B, Q, K) int32: the first ``min(counts, K)`` entries of row (b, i) are the
-    neighbours of query point i in copy b (indices of built points of copy b), in the grid's order;
+    neighbours of query point i in copy b (indices of built points of copy b), in the grid's order
+    (entries past them are unspecified);
     ``counts`` (B, Q) int32: the true number of neighbours (may exceed K: see ``overflow``).
     The arrays are the grid's buffers: the next ``query`` overwrites them (copy to keep).
     """
