@@ -376,9 +376,8 @@ DETERMINISM = {"spatial: grid query": _THREAD_SCRIPT, "spatial: nearest-k query"
 
 
 @pytest.mark.parametrize("dim, dtype", [(2, np.float32), (3, np.float32), (3, np.float64)])
-def test_rows_narrowed_to_the_ball_keep_pairs_at_the_radius_in_every_cell_direction(dim, dtype):
-    """Each query culls the rows of cells farther than r across y and z and narrows the rest along x
-    (``grid_funcs.span``): pairs at distance r (to rounding) in every direction, across cell borders, with
+def test_culled_rows_keep_pairs_at_the_radius_in_every_cell_direction(dim, dtype):
+    """Each query culls the rows of cells farther than r across y and z (``grid_funcs.span``): pairs at distance r (to rounding) in every direction, across cell borders, with
     radii below, at and above the cell size and points outside the domain, are all still found
     (brute force in the positions' dtype, the grid's own distance test)."""
     rng = np.random.default_rng(7)

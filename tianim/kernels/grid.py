@@ -156,11 +156,12 @@ def grid_funcs(real_name: str, dim: int):
 
     @ti.func
     def span(b, t, padh, y, z, lo, hi, dims: ti.template(), start: ti.template()):
-        """(k0, k1): the sorted positions of row (y, z) of the box (lo, hi) that can hold a point within
-        ``padh`` cell units of the point ``t`` (from :func:`cell_units`): the row's cells narrowed along x to
-        ``|x - t_x| <= sqrt(padh^2 - g^2)``, g the distance from t to the row across y and z; k0 = k1
-        (nothing) when g > padh. A subset of the row that holds every point within the radius (the cells
-        it drops are farther, with the margin of cell_units), in the same order."""
+        """(k0, k1): the sorted positions of row (y, z) of the box (lo, hi): the row's cells lo[0]..hi[0],
+        or nothing (k0 = k1) when the row lies farther than ``padh`` cell units from the point ``t`` (from
+        :func:`cell_units`) across y and z (a corner row of a 3x3 box, about a quarter of them in 3D).
+        Culled rows hold no point within the radius (with the margin of cell_units); the rest keep their
+        order. (Narrowing the kept rows along x to the ball as well, with a square root per row, cost
+        more than the candidates it saved: 195 against 165 ms for 1 M points on one thread.)"""
         g = gap_t(t[1], y, 1, dims)
         base = y
         g2 = g * g
@@ -169,13 +170,9 @@ def grid_funcs(real_name: str, dim: int):
             g2 += gz * gz
             base = z * dims[1] + y
         k0, k1 = 0, 0
-        reach = padh + 1e-12 * (ti.abs(t[0]) + ti.abs(t[1]) + ti.abs(t[dim - 1]) + 1.0)
+        reach = padh + 1e-12 * (ti.abs(t[1]) + ti.abs(t[dim - 1]) + 1.0)
         if g2 <= reach * reach:
             x0, x1 = lo[0], hi[0]
-            if g2 > 0:  # (the own row, g = 0, keeps the box's cells)
-                w = ti.sqrt(reach * reach - g2) + 1e-12 * (ti.abs(t[0]) + 1.0)
-                x0 = ti.max(clamp_cell(t[0] - w, 0, dims), lo[0])
-                x1 = ti.min(clamp_cell(t[0] + w, 0, dims), hi[0])
             base = base * dims[0]
             k0, k1 = start[b, base + x0], start[b, base + x1 + 1]
         return k0, k1

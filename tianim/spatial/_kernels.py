@@ -58,8 +58,8 @@ def grid_kernels(real_name: str, dim: int):
         """For each query point q[b, i]: the indices j with |x_j - q_i|^2 <= r^2 (in ``real``).
 
         Cells are visited in fixed order (z, then y ascending; a row of cells along x is one
-        contiguous span of the sorted arrays; rows farther than r across y and z are skipped and the rest
-        narrowed along x, ``grid_funcs.span``, which drops only cells without neighbours), within a cell by
+        contiguous span of the sorted arrays; rows farther than r across y and z are skipped, ``grid_funcs.span``,
+        which drops only rows without neighbours), within a cell by
         particle index. The first K =
         nbr.shape[2] neighbours are stored in nbr[b, i]; count[b, i] is the total (> K: overflow).
         With ``exclude_self`` the queries are the built points themselves (``q`` is ignored but must

@@ -35,9 +35,9 @@ with M = prod(cells per axis), K = ``max_neighbours``, Q query points.
 Build: O(N + M) per copy, serial inside a copy, copies in parallel (a counting sort by cell id,
 stable in point index; Knuth, TAOCP vol. 3, 5.2 "distribution counting").
 Query: O(Q (C + S)) in parallel over (copy, point), C = rows of cells visited (<= 3^(D-1) for r <= h),
-S = points in them: each row is culled when it lies farther than r across y and z and otherwise narrowed
-along x to the ball (``grid_funcs.span``), so S is about 0.75 x 3^D rho h^D for density rho and r = h
-(24.0 candidates per point for ``query_half`` at 10 neighbours, r = h, where the half box holds about 32).
+S = points in them: rows that lie farther than r across y and z are culled (``grid_funcs.span``),
+so S is about 0.88 x 3^D rho h^D for density rho and r = h (28.4 candidates per point for
+``query_half`` at 10 neighbours, where the half box holds about 32).
 """
 
 from __future__ import annotations
