@@ -373,3 +373,38 @@ _NEAREST_SCRIPT = textwrap.dedent("""
 
 #: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
 DETERMINISM = {"spatial: grid query": _THREAD_SCRIPT, "spatial: nearest-k query": _NEAREST_SCRIPT}
+
+
+@pytest.mark.parametrize("dim, dtype", [(2, np.float32), (3, np.float32), (3, np.float64)])
+def test_culled_rows_keep_pairs_at_the_radius_in_every_cell_direction(dim, dtype):
+    """Each query culls the rows of cells farther than r across y and z (``grid_funcs.span``): pairs at distance r (to rounding) in every direction, across cell borders, with
+    radii below, at and above the cell size and points outside the domain, are all still found
+    (brute force in the positions' dtype, the grid's own distance test)."""
+    rng = np.random.default_rng(7)
+    h = 0.1
+    for r in (0.6 * h, h, 1.7 * h):
+        c = (rng.random((300, dim)) * 1.2 - 0.1).astype(dtype)  # some outside [0, 1]
+        u = rng.normal(size=(300, dim))
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        x = np.concatenate([c, (c + r * u).astype(dtype)])  # partners at |d| = r up to rounding
+        d = x[:, None, :] - x[None, :, :]
+        d2 = (d * d).sum(-1, dtype=dtype)
+        np.fill_diagonal(d2, np.inf)
+        want = [sorted(np.flatnonzero(row <= dtype(r) * dtype(r)).tolist()) for row in d2]
+        grid = NeighbourGrid((0,) * dim, (1,) * dim, h, len(x), max_neighbours=64, dtype=dtype).build(x[None])
+        assert grid_sets(grid.query(r)) == want
+        pairs = {tuple(p) for p in grid.query_half(r).pairs().tolist()}
+        assert pairs == {(i, j) for i, row in enumerate(want) for j in row if i < j}
+
+
+def test_finite_check_fast_path_accepts_huge_finite_values_and_rejects_inf():
+    """build's NaN/inf check sums the positions first (one reduction) and falls back to the exact
+    element check when the sum is not finite: huge finite values whose sum overflows still build,
+    an inf is still named."""
+    x = np.full((1, 4, 3), 3e38, np.float32)  # the float32 sum overflows to inf
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.5, 4, dtype=np.float32)
+    grid.build(x)
+    assert np.array_equal(np.sort(grid.order[0]), np.arange(4))
+    x[0, 2, 0] = -np.inf
+    with pytest.raises(ValueError, match=r"x\[0, 2, 0\] = -inf is not finite"):
+        grid.build(x)

@@ -7,11 +7,15 @@ are checked equal (as sorted (i, j) pair keys) before anything is timed; times a
 
 * ``tianim`` - :class:`tianim.spatial.NeighbourGrid`, float64 and float32 positions, Taichi CPU
   (build + query into its (N, K) neighbour buffer; ``csr_s``: the extra time of NumPy CSR lists);
+* ``tianim_pairs`` - build + ``query_half`` + ``pairs()`` (float32): each pair once as a (P, 2) int64
+  array, the output of ``cKDTree.query_pairs(output_type="ndarray")``, timed against it
+  (``speedup_pairs_vs_ckdtree``, the headline ratio: the same output from the same points);
 * ``ckdtree_ball`` - ``scipy.spatial.cKDTree(x).query_ball_point(x, r, workers=-1)`` (all cores);
 * ``ckdtree_pairs`` - ``cKDTree(x).query_pairs(r, output_type="ndarray")`` (one core, each pair once);
 * ``numpy_cells`` - a vectorised NumPy cell list (sort by cell id, 27 offset passes).
 
-Summary keys (the largest N): ``grid_query_s`` (tianim float32 build + query), ``grid_query_f64_s``,
+Summary keys (the largest N): ``grid_pairs_s`` (tianim build + query_half + pairs), ``ckdtree_pairs_s``,
+``grid_speedup_pairs_vs_ckdtree``; ``grid_query_s`` (tianim float32 build + query), ``grid_query_f64_s``,
 ``ckdtree_query_s`` (the faster cKDTree method), ``numpy_cells_s``, ``grid_speedup_vs_ckdtree``,
 ``grid_speedup_vs_numpy``, ``n_points``, ``mean_neighbours``.
 """
@@ -108,8 +112,12 @@ def run_size(n, repeats, seed=0):
     ref32 = _pair_keys(cKDTree(x32[0].astype(np.float64)).query_pairs(r, output_type="ndarray"), n)
     if not np.array_equal(_keys_from_csr(c32, i32, n), ref32):
         raise AssertionError(f"N={n}: tianim float32 and cKDTree disagree")
+    hg = NeighbourGrid((0, 0, 0), (1, 1, 1), r, n, max_neighbours=32, dtype=np.float32)
+    got = hg.build(x32).query_half(r).pairs()
+    if not np.array_equal(_pair_keys(got, n), ref32):
+        raise AssertionError(f"N={n}: tianim query_half pairs and cKDTree.query_pairs disagree")
     # --- timed
-    slow = min(repeats, 2) if n >= 500_000 else repeats
+    slow = min(repeats, 3) if n >= 500_000 else repeats
     row = {"n_points": n, "radius": r, "mean_neighbours": float(counts.mean())}
     g = grids[np.float32]
     row["tianim_f32_s"] = median_time(lambda: g.build(x32).query(r), repeats=repeats)
@@ -117,11 +125,13 @@ def run_size(n, repeats, seed=0):
     row["csr_s"] = median_time(lambda: g.query(r).csr(), repeats=repeats) - median_time(lambda: g.query(r), repeats=repeats)
     row["build_f32_s"] = median_time(lambda: g.build(x32), repeats=repeats)
     row["query_f32_s"] = median_time(lambda: g.query(r), repeats=repeats)
+    row["tianim_pairs_s"] = median_time(lambda: hg.build(x32).query_half(r).pairs(), repeats=repeats)
     row["ckdtree_ball_s"] = median_time(lambda: _ckd_ball(x64[0], r), repeats=slow, warmup=0)
     row["ckdtree_pairs_s"] = median_time(lambda: _ckd_pairs(x64[0], r), repeats=slow, warmup=0)
     row["numpy_cells_s"] = median_time(lambda: numpy_cells(x64[0], r), repeats=slow, warmup=0)
     best_ckd = min(row["ckdtree_ball_s"], row["ckdtree_pairs_s"])
     row["speedup_vs_ckdtree"] = best_ckd / row["tianim_f32_s"]
+    row["speedup_pairs_vs_ckdtree"] = row["ckdtree_pairs_s"] / row["tianim_pairs_s"]
     row["speedup_vs_numpy"] = row["numpy_cells_s"] / row["tianim_f32_s"]
     return row
 
@@ -134,10 +144,14 @@ def main(argv=None) -> int:
     rows = [run_size(n, repeats) for n in sizes]
     print("tianim bench grid: build + query, neighbour sets checked equal first (seconds, medians)")
     print_table(rows, ["n_points", "mean_neighbours", "tianim_f32_s", "tianim_f64_s", "build_f32_s", "query_f32_s", "csr_s",
-                       "ckdtree_ball_s", "ckdtree_pairs_s", "numpy_cells_s", "speedup_vs_ckdtree", "speedup_vs_numpy"])
+                       "tianim_pairs_s",
+                       "ckdtree_ball_s", "ckdtree_pairs_s", "numpy_cells_s", "speedup_pairs_vs_ckdtree", "speedup_vs_ckdtree",
+                       "speedup_vs_numpy"])
     last = rows[-1]
     summary = {
         "n_points": last["n_points"], "mean_neighbours": last["mean_neighbours"],
+        "grid_pairs_s": last["tianim_pairs_s"], "ckdtree_pairs_s": last["ckdtree_pairs_s"],
+        "grid_speedup_pairs_vs_ckdtree": last["speedup_pairs_vs_ckdtree"],
         "grid_query_s": last["tianim_f32_s"], "grid_query_f64_s": last["tianim_f64_s"],
         "ckdtree_query_s": min(last["ckdtree_ball_s"], last["ckdtree_pairs_s"]), "numpy_cells_s": last["numpy_cells_s"],
         "grid_speedup_vs_ckdtree": last["speedup_vs_ckdtree"], "grid_speedup_vs_numpy": last["speedup_vs_numpy"],

@@ -109,6 +109,75 @@ def grid_funcs(real_name: str, dim: int):
         return base * dims[0]
 
     @ti.func
+    def z_range(lo, hi):
+        """(first, last) z cell coordinate of a box (0, 0 in 2D, where rows are indexed by y alone)."""
+        z0, z1 = 0, 0
+        if ti.static(dim == 3):
+            z0, z1 = lo[2], hi[2]
+        return z0, z1
+
+    @ti.func
+    def cell_units(p, r, geom: ti.template(), dims: ti.template()):
+        """(t, padh): ``t_a = (p_a - lo_a) / h`` (float64, by one multiplication per axis) and the query
+        half-width ``r (1 + BOX_PAD) / h`` in cell units, widened by ``1e-12 (|t_a| + 1)`` so that the
+        multiplication's rounding (a few ulps of t) never moves a box edge inward past a point that the
+        division of :func:`coord` puts in a cell (spans and boxes from ``t`` stay supersets)."""
+        inv_h = 1.0 / geom[dim]
+        t = ti.Vector.zero(ti.f64, dim)
+        for a in ti.static(range(dim)):
+            t[a] = (ti.cast(p[a], ti.f64) - geom[a]) * inv_h
+        return t, r * (1 + BOX_PAD) * inv_h
+
+    @ti.func
+    def clamp_cell(u, a: ti.template(), dims: ti.template()):
+        return ti.cast(ti.min(ti.max(ti.floor(u), 0.0), ti.cast(dims[a] - 1, ti.f64)), ti.i32)
+
+    @ti.func
+    def box_t(t, padh, dims: ti.template()):
+        """(lo, hi) cell coordinates of the box ``[t - padh, t + padh]`` (cell units, see cell_units)."""
+        lo = ti.Vector.zero(ti.i32, dim)
+        hi = ti.Vector.zero(ti.i32, dim)
+        for a in ti.static(range(dim)):
+            w = padh + 1e-12 * (ti.abs(t[a]) + 1.0)
+            lo[a] = clamp_cell(t[a] - w, a, dims)
+            hi[a] = clamp_cell(t[a] + w, a, dims)
+        return lo, hi
+
+    @ti.func
+    def gap_t(ta, ua, a: ti.template(), dims: ti.template()):
+        """Distance in cell units from ``ta`` to the slab of cells ``ua`` along axis ``a`` (0 inside it;
+        border cells reach to infinity, as clamping puts outside points there)."""
+        g = ti.cast(0.0, ti.f64)
+        if ua > 0:
+            g = ti.max(g, ti.cast(ua, ti.f64) - ta)
+        if ua < dims[a] - 1:
+            g = ti.max(g, ta - ti.cast(ua + 1, ti.f64))
+        return g
+
+    @ti.func
+    def span(b, t, padh, y, z, lo, hi, dims: ti.template(), start: ti.template()):
+        """(k0, k1): the sorted positions of row (y, z) of the box (lo, hi): the row's cells lo[0]..hi[0],
+        or nothing (k0 = k1) when the row lies farther than ``padh`` cell units from the point ``t`` (from
+        :func:`cell_units`) across y and z (a corner row of a 3x3 box, about a quarter of them in 3D).
+        Culled rows hold no point within the radius (with the margin of cell_units); the rest keep their
+        order. (Narrowing the kept rows along x to the ball as well, with a square root per row, cost
+        more than the candidates it saved: 195 against 165 ms for 1 M points on one thread.)"""
+        g = gap_t(t[1], y, 1, dims)
+        base = y
+        g2 = g * g
+        if ti.static(dim == 3):
+            gz = gap_t(t[2], z, 2, dims)
+            g2 += gz * gz
+            base = z * dims[1] + y
+        k0, k1 = 0, 0
+        reach = padh + 1e-12 * (ti.abs(t[1]) + ti.abs(t[dim - 1]) + 1.0)
+        if g2 <= reach * reach:
+            x0, x1 = lo[0], hi[0]
+            base = base * dims[0]
+            k0, k1 = start[b, base + x0], start[b, base + x1 + 1]
+        return k0, k1
+
+    @ti.func
     def before(d2a, ja, d2b, jb):
         """(d2a, ja) < (d2b, jb) lexicographically: nearer first, ties by the lower index."""
         return d2a < d2b or (d2a == d2b and ja < jb)
@@ -192,4 +261,5 @@ def grid_funcs(real_name: str, dim: int):
         return m
 
     return SimpleNamespace(coord=coord, cell_of=cell_of, sort_copy=sort_copy, box=box, n_rows=n_rows,
-                           row_base=row_base, nearest=nearest)
+                           row_base=row_base, z_range=z_range, cell_units=cell_units, box_t=box_t, span=span,
+                           nearest=nearest)

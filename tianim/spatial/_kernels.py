@@ -58,7 +58,9 @@ def grid_kernels(real_name: str, dim: int):
         """For each query point q[b, i]: the indices j with |x_j - q_i|^2 <= r^2 (in ``real``).
 
         Cells are visited in fixed order (z, then y ascending; a row of cells along x is one
-        contiguous span of the sorted arrays), within a cell by particle index. The first K =
+        contiguous span of the sorted arrays; rows farther than r across y and z are skipped, ``grid_funcs.span``,
+        which drops only rows without neighbours), within a cell by
+        particle index. The first K =
         nbr.shape[2] neighbours are stored in nbr[b, i]; count[b, i] is the total (> K: overflow).
         With ``exclude_self`` the queries are the built points themselves (``q`` is ignored but must
         have their shape), visited in cell order, and i is not its own neighbour. With ``half``
@@ -68,44 +70,46 @@ def grid_kernels(real_name: str, dim: int):
         point that comes first in the grid's (cell, index) order: about half the work of a full query.
         """
         r2 = ti.cast(r, real) * ti.cast(r, real)
-        pad = r * (1 + BOX_PAD)
         last = start.shape[1] - 2  # the extra cell of inactive points
+        cap = nbr.shape[2]
         for b, s in ti.ndrange(q.shape[0], q.shape[1]):
             i = s
             p = q[b, s]
             skip = 0
-            if exclude_self != 0:
-                skip = ti.cast(s >= start[b, last], ti.i32)  # an inactive point: no neighbours  # the built points, visited in sorted order (cache-friendly)
+            if exclude_self != 0:  # the built points, visited in sorted order (cache-friendly)
+                skip = ti.cast(s >= start[b, last], ti.i32)  # an inactive point: no neighbours
                 i = order[b, s]
                 p = xs[b, s]
-            lo, hi = g.box(p, pad, geom, dims)
-            own_base = 0  # flat id of the first cell of the point's own row (half shell)
-            for k in ti.static(range(1, dim)):
-                a = ti.static(dim - k)
-                own_base = own_base * dims[a] + g.coord(p[a], a, geom, dims)
-            own_base = own_base * dims[0]
             n = 0
-            cap = nbr.shape[2]
-            rows = g.n_rows(lo, hi)
-            if skip != 0:
-                rows = 0
-            for row in range(rows):
-                base = g.row_base(row, lo, hi, dims)
-                s0 = start[b, base + lo[0]]
-                s1 = start[b, base + hi[0] + 1]
+            if skip == 0:
+                t, padh = g.cell_units(p, r, geom, dims)
+                lo, hi = g.box_t(t, padh, dims)
+                z0, z1 = g.z_range(lo, hi)
+                own_y = g.coord(p[1], 1, geom, dims)
+                own_z = 0
+                if ti.static(dim == 3):
+                    own_z = g.coord(p[2], 2, geom, dims)
                 if half != 0:
-                    if base < own_base:
-                        s1 = s0  # a row before the point's own: its pairs were found from there
-                    elif base == own_base:
-                        s0 = s + 1
-                for k in range(s0, s1):
-                    j = order[b, k]
-                    if exclude_self == 0 or j != i:
-                        d = xs[b, k] - p
-                        if d.dot(d) <= r2:
+                    z0 = own_z  # rows before the point's own: their pairs were found from there
+                for z in range(z0, z1 + 1):
+                    y0 = lo[1]
+                    if half != 0 and z == own_z:
+                        y0 = own_y
+                    for y in range(y0, hi[1] + 1):
+                        k0, k1 = g.span(b, t, padh, y, z, lo, hi, dims, start)
+                        if half != 0 and z == own_z and y == own_y:
+                            k0 = s + 1
+                        for k in range(k0, k1):
+                            # branch-free compaction: every candidate is stored at slot n while the row has
+                            # room, n advances only on a hit (a miss is overwritten by the next hit or left
+                            # past the count); an unpredictable branch per candidate cost more than the store
+                            d = xs[b, k] - p
+                            hit = ti.cast(d.dot(d) <= r2, ti.i32)
+                            if ti.static(True):
+                                hit &= ti.cast(exclude_self == 0 or k != s, ti.i32)  # k == s: the point itself
                             if n < cap:
-                                nbr[b, i, n] = j
-                            n += 1
+                                nbr[b, i, n] = order[b, k]
+                            n += hit
             count[b, i] = n
 
     return cell_ids, counting_sort, query

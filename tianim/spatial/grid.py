@@ -34,8 +34,10 @@ Memory: ``4 B (3 N + M + 2) + 4 B Q (K + 1)`` bytes plus ``B N D`` reals for sor
 with M = prod(cells per axis), K = ``max_neighbours``, Q query points.
 Build: O(N + M) per copy, serial inside a copy, copies in parallel (a counting sort by cell id,
 stable in point index; Knuth, TAOCP vol. 3, 5.2 "distribution counting").
-Query: O(Q (C + S)) in parallel over (copy, point), C = cells visited (<= 3^D for r <= h),
-S = points in them (about 3^D rho h^D for density rho).
+Query: O(Q (C + S)) in parallel over (copy, point), C = rows of cells visited (<= 3^(D-1) for r <= h),
+S = points in them: rows that lie farther than r across y and z are culled (``grid_funcs.span``),
+so S is about 0.88 x 3^D rho h^D for density rho and r = h (28.4 candidates per point for
+``query_half`` at 10 neighbours, where the half box holds about 32).
 """
 
 from __future__ import annotations
@@ -60,7 +62,8 @@ class NeighbourList:
     """Neighbours of Q query points in B copies.
 
     ``indices`` (B, Q, K) int32: the first ``min(counts, K)`` entries of row (b, i) are the
-    neighbours of query point i in copy b (indices of built points of copy b), in the grid's order;
+    neighbours of query point i in copy b (indices of built points of copy b), in the grid's order
+    (entries past them are unspecified);
     ``counts`` (B, Q) int32: the true number of neighbours (may exceed K: see ``overflow``).
     The arrays are the grid's buffers: the next ``query`` overwrites them (copy to keep).
     """
@@ -206,6 +209,10 @@ class NeighbourGrid:
         if x.shape != (self.batch, q, self.dim):
             want = f"({self.batch}, {n if n is not None else 'Q'}, {self.dim})"
             raise ValueError(f"{name} has shape {x.shape}; expected {want}")
+        with np.errstate(over="ignore", invalid="ignore"):
+            total = x.sum()
+        if (active is None or active.all()) and np.isfinite(total):
+            return np.ascontiguousarray(x)  # every point finite (one reduction; else the exact check below)
         finite = np.isfinite(x)
         if active is not None:
             finite |= active[..., None] == 0
@@ -230,7 +237,7 @@ class NeighbourGrid:
                                  f"expected ({self.batch}, {self.n_points}) uint8 or bool")
         active = active.view(np.uint8) if active.dtype == np.bool_ else active
         if check:
-            x = self._points("x", x, self.n_points, active)
+            x = self._points("x", x, self.n_points, None if active is self._all_active else active)
         cell_ids, counting_sort, _ = self._kernels()
         cell_ids(x, np.ascontiguousarray(active), self._geom, self.dims, self.cell)
         counting_sort(x, self.cell, self.start, self.order, self.sorted_x)
