@@ -190,9 +190,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
                 for q in range(3 * _N_OFF):
                     prm[h + q] = P[h + 2 * n + q]
             b = k // npk
-            p = k - b * npk
-            r = p // nx
-            c = p - r * nx
+            kp, r, c = pack_index(k, nx, H)
             X = ti.Matrix.zero(real, 2 * dim + 3, L)  # x, v components, mass, inverse mass, free; one column per lane
             for lane in ti.static(range(L)):
                 row = lane * H + r
@@ -208,9 +206,10 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
                     if pinned[b, i] == 0:
                         X[2 * dim + 2, lane] = 1
             for a in ti.static(range(2 * dim)):
-                S[a, k] = ti.Vector([X[a, lane] for lane in range(L)])
+                S[a, kp] = ti.Vector([X[a, lane] for lane in range(L)])
             for a in ti.static(range(3)):
-                M[a, k] = ti.Vector([X[2 * dim + a, lane] for lane in range(L)])
+                M[a, kp] = ti.Vector([X[2 * dim + a, lane] for lane in range(L)])
+            write_ghosts(S, 0, kp, r, nx, H)
 
     @ti.kernel
     def unpack(S: ti.template(), src: ti.template(), x: t.vec_arr, v: t.vec_arr, nx: ti.i32, H: ti.i32):
@@ -219,10 +218,8 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
         npk = H * nx
         for k in range(x.shape[0] * npk):
             b = k // npk
-            p = k - b * npk
-            r = p // nx
-            c = p - r * nx
-            u = [S[src * 2 * dim + a, k] for a in ti.static(range(2 * dim))]
+            kp, r, c = pack_index(k, nx, H)
+            u = [S[src * 2 * dim + a, kp] for a in ti.static(range(2 * dim))]
             for lane in ti.static(range(L)):
                 row = lane * H + r
                 if row < ny:
@@ -231,20 +228,34 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
                     v[b, i] = ti.Vector([u[dim + a][lane] for a in range(dim)])
 
     @ti.func
-    def fetch(S: ti.template(), q, base, rr, cc, nx, H):
-        """Component row q of the neighbour packs at band row rr (may leave [0, H)), column cc."""
-        w = lane_vec(0)
-        if rr < 0:  # lane l reads lane l - 1, H rows further down
-            u = S[q, base + (rr + H) * nx + cc]
-            for lane in ti.static(range(L)):
-                w[lane] = u[max(lane - 1, 0)]
-        elif rr >= H:  # lane l reads lane l + 1, H rows further up
-            u = S[q, base + (rr - H) * nx + cc]
-            for lane in ti.static(range(L)):
-                w[lane] = u[min(lane + 1, L - 1)]
-        else:
-            w = S[q, base + rr * nx + cc]
-        return w
+    def pack_index(k, nx, H):
+        """(index in the pool, band row r, column c) of pack k of the call (copy by copy, row-major): each
+        copy holds H + 4 rows of nx packs, 2 ghost rows below and above its H band rows."""
+        npk = H * nx
+        b = k // npk
+        p = k - b * npk
+        r = p // nx
+        c = p - r * nx
+        return b * (npk + 4 * nx) + (r + 2) * nx + c, r, c
+
+    @ti.func
+    def write_ghosts(S: ti.template(), q0, kp, r, nx, H):
+        """Copy the x, v components (rows q0 .. q0 + 2 dim) of pack kp at band row r into the ghost packs
+        that stand for it: band row rr = r - H (r >= H - 2; lane l holds lane l - 1 of pack r, the particle
+        H rows further down) and rr = r + H (r < 2; lane l holds lane l + 1). A neighbour at any band row
+        rr in [-2, H + 2) is then the pack kp + (rr - r) nx, lane for lane: one vector load, no branch.
+        The lanes shifted in from beyond the band (lane 0 below, lane L - 1 above) repeat their neighbour and
+        are never used (their global row lies outside [0, ny): masked by add_spring)."""
+        if r >= H - 2:
+            g = kp - H * nx
+            for a in ti.static(range(2 * dim)):
+                u = S[q0 + a, kp]
+                S[q0 + a, g] = ti.Vector([u[max(lane - 1, 0)] for lane in range(L)])
+        if r < 2:
+            g = kp + H * nx
+            for a in ti.static(range(2 * dim)):
+                u = S[q0 + a, kp]
+                S[q0 + a, g] = ti.Vector([u[min(lane + 1, L - 1)] for lane in range(L)])
 
     @ti.func
     def spring_force(s, n, damp, dot):
@@ -256,18 +267,18 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     @ti.func
     def add_spring(S: ti.template(), prm: ti.template(), f0, f1, f2, xi: ti.template(), vi: ti.template(),
-                   xs: ti.template(), o, dc, dr, base, r, c, nx, ny, H):
+                   xs: ti.template(), o, dc, dr, kp, r, c, nx, ny, H):
         """(f0, f1, f2) plus the force of stencil offset o = (dc, dr) on the lanes of pack (r, c) (positions
         xi, velocities vi, buffer xs): kernels.pair_force lane by lane, nothing where the neighbour is off
         the grid."""
         zero = lane_vec(0)
         lane_row = ti.Vector([lane * H for lane in range(L)])
         cc = c + dc
-        rr = r + dr
+        j = kp + dr * nx + dc  # the neighbour pack (a ghost pack across a band edge)
         if 0 <= cc < nx:
-            g_row = lane_row + rr
+            g_row = lane_row + r + dr
             valid = (g_row >= 0) & (g_row < ny)
-            d = [xi[a] - fetch(S, xs + a, base, rr, cc, nx, H) for a in ti.static(range(dim))]
+            d = [xi[a] - S[xs + a, j] for a in ti.static(range(dim))]
             len2 = d[0] * d[0]
             for a in ti.static(range(1, dim)):
                 len2 += d[a] * d[a]
@@ -277,7 +288,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
             nrm = [d[a] * inv_len for a in ti.static(range(dim))]
             dot = zero
             if ti.static(spring_damping):
-                dv = [vi[a] - fetch(S, xs + dim + a, base, rr, cc, nx, H) for a in ti.static(range(dim))]
+                dv = [vi[a] - S[xs + dim + a, j] for a in ti.static(range(dim))]
                 dot = dv[0] * nrm[0]
                 for a in ti.static(range(1, dim)):
                     dot += dv[a] * nrm[a]
@@ -294,14 +305,10 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
         """One symplectic Euler substep of pack k, read from buffer src, written to the other."""
         xs = src * 2 * dim
         xd = (1 - src) * 2 * dim
-        b = k // npk
-        p = k - b * npk
-        base = b * npk
-        r = p // nx
-        c = p - r * nx
-        xi = [S[xs + a, k] for a in ti.static(range(dim))]
-        vi = [S[xs + dim + a, k] for a in ti.static(range(dim))]
-        m = M[0, k]
+        kp, r, c = pack_index(k, nx, H)
+        xi = [S[xs + a, kp] for a in ti.static(range(dim))]
+        vi = [S[xs + dim + a, kp] for a in ti.static(range(dim))]
+        m = M[0, kp]
         zero = lane_vec(0)
         # The force sum is carried across a runtime loop, so it lives in named variables (f2 unused in 2D).
         f0 = m * prm[0]  # m g
@@ -317,27 +324,28 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
         # The stencil in GRID_STENCIL order, as kernels.accel sums it. A runtime loop: unrolled (offsets as
         # constants) it ran about 1.2x faster but took 30-100 s to compile.
         for o in range(_N_OFF):
-            f0, f1, f2 = add_spring(S, prm, f0, f1, f2, xi, vi, xs, o, off[2 * o], off[2 * o + 1], base, r, c, nx, ny, H)
+            f0, f1, f2 = add_spring(S, prm, f0, f1, f2, xi, vi, xs, o, off[2 * o], off[2 * o + 1], kp, r, c, nx, ny, H)
         f = [f0, f1, f2]
-        free = M[2, k] > 0
-        im = M[1, k]
+        free = M[2, kp] > 0
+        im = M[1, kp]
         for a in ti.static(range(dim)):
             vn = vi[a] + dt * ti.select(free, f[a] * im, zero)
-            S[xd + dim + a, k] = vn
-            S[xd + a, k] = xi[a] + dt * vn
+            S[xd + dim + a, kp] = vn
+            S[xd + a, kp] = xi[a] + dt * vn
         if ti.static(colliders):  # per lane, on the stored values (exact: a float32 store and load)
             g2 = prm[0] * prm[0]
             for a in ti.static(range(1, dim)):
                 g2 += prm[a] * prm[a]
             g_norm = ti.sqrt(g2)
             for lane in range(L):  # a runtime loop: unrolled, the contact code would be copied L x nsub times
-                if M[2, k][lane] > 0:
-                    xl = ti.Vector([S[xd + a, k][lane] for a in range(dim)])
-                    vl = ti.Vector([S[xd + dim + a, k][lane] for a in range(dim)])
+                if M[2, kp][lane] > 0:
+                    xl = ti.Vector([S[xd + a, kp][lane] for a in range(dim)])
+                    vl = ti.Vector([S[xd + dim + a, kp][lane] for a in range(dim)])
                     xl, vl = respond(xl, vl, coll, g_norm, dt)
                     for a in ti.static(range(dim)):
-                        S[xd + a, k][lane] = xl[a]
-                        S[xd + dim + a, k][lane] = vl[a]
+                        S[xd + a, kp][lane] = xl[a]
+                        S[xd + dim + a, kp][lane] = vl[a]
+        write_ghosts(S, xd, kp, r, nx, H)  # after the contacts: the ghosts copy the stored values
 
     def make_run(nsub):
         @ti.kernel
@@ -387,7 +395,7 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     H = -(-g.ny // L)
     npk = H * g.nx
     packs = state.batch * npk
-    pool = _pool(real_name, model.dim, L, packs)
+    pool = _pool(real_name, model.dim, L, state.batch * (H + 4) * g.nx)  # with the ghost rows
     pack, runs, unpack = lane_kernels(real_name, model.dim, L, len(model.colliders) > 0,
                                       model.has_spring_damping, model.medium_damping > 0)
     S, M, prm, off = pool.state, pool.mass, pool.prm, pool.off
