@@ -301,11 +301,11 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     @ti.func
     def substep(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: ti.template(),
-                src: ti.template(), k, npk, nx, ny, H, dt):
-        """One symplectic Euler substep of pack k, read from buffer src, written to the other."""
+                src: ti.template(), kp, r, c, nx, ny, H, dt):
+        """One symplectic Euler substep of pack kp (band row r, column c), read from buffer src, written to
+        the other."""
         xs = src * 2 * dim
         xd = (1 - src) * 2 * dim
-        kp, r, c = pack_index(k, nx, H)
         xi = [S[xs + a, kp] for a in ti.static(range(dim))]
         vi = [S[xs + dim + a, kp] for a in ti.static(range(dim))]
         m = M[0, kp]
@@ -347,13 +347,24 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
                         S[xd + dim + a, kp][lane] = vl[a]
         write_ghosts(S, xd, kp, r, nx, H)  # after the contacts: the ghosts copy the stored values
 
+    @ti.func
+    def substep_row(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: ti.template(),
+                    src: ti.template(), q, nx, ny, H, dt):
+        """One substep of the nx packs of pack row q of the call (copy q // H, band row q % H), column by
+        column: one integer division per row, none per pack."""
+        b = q // H
+        r = q - b * H
+        k0 = b * (H + 4) * nx + (r + 2) * nx  # pack_index of column 0
+        for c in range(nx):
+            substep(S, M, prm, off, coll, src, k0 + c, r, c, nx, ny, H, dt)
+
     def make_run(nsub):
         @ti.kernel
         def run(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: t.real2_arr,
-                packs: ti.i32, npk: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real):
+                rows: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real):
             for s in ti.static(range(nsub)):  # each top-level loop ends in a barrier
-                for k in range(packs):
-                    substep(S, M, prm, off, coll, s % 2, k, npk, nx, ny, H, dt)
+                for q in range(rows):
+                    substep_row(S, M, prm, off, coll, s % 2, q, nx, ny, H, dt)
 
         return run
 
@@ -361,18 +372,18 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     @ti.kernel
     def run_serial(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: t.real2_arr,
-                   packs: ti.i32, npk: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real, nsub: ti.i32):
+                   rows: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real, nsub: ti.i32):
         # One thread, every substep of the call in one launch: no barriers, no worker wake-ups, and the
         # substep loop is a runtime loop (3 substep bodies to compile, not 8).
         ti.loop_config(serialize=True)
         for _pair in range(nsub // 2):
-            for k in range(packs):
-                substep(S, M, prm, off, coll, 0, k, npk, nx, ny, H, dt)
-            for k in range(packs):
-                substep(S, M, prm, off, coll, 1, k, npk, nx, ny, H, dt)
+            for q in range(rows):
+                substep_row(S, M, prm, off, coll, 0, q, nx, ny, H, dt)
+            for q in range(rows):
+                substep_row(S, M, prm, off, coll, 1, q, nx, ny, H, dt)
         if nsub % 2 == 1:
-            for k in range(packs):
-                substep(S, M, prm, off, coll, 0, k, npk, nx, ny, H, dt)
+            for q in range(rows):
+                substep_row(S, M, prm, off, coll, 0, q, nx, ny, H, dt)
 
     runs["serial"] = run_serial
     return pack, runs, unpack
@@ -401,7 +412,7 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     S, M, prm, off = pool.state, pool.mass, pool.prm, pool.off
     pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], g.nx, H)
     dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
-    args = (S, M, prm, off, data["coll"], packs, npk, g.nx, g.ny, H, dt)
+    args = (S, M, prm, off, data["coll"], state.batch * H, g.nx, g.ny, H, dt)
     if path == "serial" or (path == "auto" and packs * L <= SERIAL_MAX_PARTICLES):
         runs["serial"](*args, substeps)
         unpack(S, substeps % 2, state.x, state.v, g.nx, H)
