@@ -22,13 +22,20 @@ The state of a call lives in a pool of vector fields of L lanes:
 * the stencil neighbour ``(r + dr, c + dc)`` of every lane is lane for lane the pack
   ``(r + dr, c + dc)`` when ``0 <= r + dr < H``; across a band edge it is the pack
   ``(r + dr -/+ H, c + dc)`` with its lanes shifted by one (so ``H >= 2`` is needed for the
-  2-row bend springs); a lane whose neighbour row lies outside ``[0, ny)`` adds nothing (a select,
-  no branch); a column outside ``[0, nx)`` is the same for every lane (a branch);
+  2-row bend springs). Each copy stores ``H + 4`` rows of ``nx`` packs: 2 ghost rows below and above
+  the band rows hold those lane-shifted copies, written by the pack they stand for when it stores its
+  new state (so no extra loop or barrier). Every neighbour is then one vector load at the constant pack
+  offset ``dr nx + dc``: no branch per neighbour row, no lanes reassembled from scalars (the branchy
+  fetch it replaced made LLVM merge per-lane pointers and load each lane on its own: 1.4x slower).
+  A lane whose neighbour row lies outside ``[0, ny)`` adds nothing (a select, no branch); a column
+  outside ``[0, nx)`` is the same for every lane (a branch, predicted);
+* one parallel-loop index is a row of packs (``nx`` packs, an inner loop over columns): one integer
+  division per row, none per pack;
 * every operation is that of :func:`tianim.physics.kernels.substep_funcs` in the same order, so the
   results are bit-identical to the other layouts (tested), for any thread count and batch.
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
-the pool, and unpacks. Up to :data:`SERIAL_MAX_PARTICLES` (batch x padded grid) one thread runs every
+the pool, and unpacks. Up to :data:`SERIAL_MAX_PARTICLES` (batch x band rows x L x nx) one thread runs every
 substep of the call in one launch (path ``"serial"``, a runtime loop over the substeps); above it,
 :data:`SUBSTEPS_PER_LAUNCH` substeps per launch, one parallel loop each (path ``"parallel"``). The
 solver layouts ``"lanes_serial"`` / ``"lanes_parallel"`` force a path (``launch_lanes(path=)``).
