@@ -15,6 +15,11 @@ AVX-512 host of this project (taichi 1.7.4) the optimised IR holds ``<4 x float>
 (LLVM's vectoriser works to a 16-byte width there), so 8 lanes are two independent 4-wide chains:
 measured at 128x128, float32, one thread, 8 lanes ran 1.01-1.03x the speed of 4 (16: 0.89x) and compile
 in 4.9 s against 2.8 s (16: 9.3 s) cold; a session on an AVX2 host measured 8 lanes 1.19-1.22x faster.
+Why 16 bytes on this host: taichi's optimiser (``global_optimize_module_cpu`` in its source) builds its target machine
+from ``llvm::sys::getHostCPUName()`` with no feature string, and its LLVM 15 does not know this CPU (AMD
+family 26, Zen 5; numba's LLVM 22 calls it ``znver5``), so the vectorisers see generic x86-64 (SSE2,
+16-byte registers); numba's vectorising bench kernel runs 16 float32 lanes in zmm registers here
+(``vsqrtps``/``vdivps`` on zmm, ``inspect_asm``), 4x this layout's width per instruction.
 The state of a call lives in a pool of vector fields of L lanes:
 
 * the ``ny`` rows of each copy are cut into ``L`` bands of ``H = ceil(ny / L)`` rows (the last band
