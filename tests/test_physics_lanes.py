@@ -138,13 +138,13 @@ def test_pool_growth_keeps_results(lanes_mode):
     old = lanes.MIN_CAPACITY
     try:
         lanes._POOLS.clear()
-        lanes.MIN_CAPACITY = 8  # 16x16 in 4 lanes: 64 packs a copy (pool 8 -> 64); a batch of 5: 320 (-> 512)
+        lanes.MIN_CAPACITY = 8  # 16x16 in 4 lanes: 4 band rows + 4 ghost rows of 16 packs a copy (pool 8 -> 128); a batch of 5: 640 (-> 1024)
         for batch in (1, 5):
             a, b = loaded(model, batch, 9), loaded(model, batch, 9)
             tp.step(model, a, 2e-4, substeps=8, layout="substep", check=False)
             tp.step(model, b, 2e-4, substeps=8, layout=lanes_mode, lanes=4, check=False)
             assert np.array_equal(a.x, b.x) and np.array_equal(a.v, b.v)
-        assert lanes._POOLS[("float32", 3, 4)].capacity == 512
+        assert lanes._POOLS[("float32", 3, 4)].capacity == 1024
     finally:
         lanes.MIN_CAPACITY = old
         lanes._POOLS.clear()

@@ -15,6 +15,11 @@ AVX-512 host of this project (taichi 1.7.4) the optimised IR holds ``<4 x float>
 (LLVM's vectoriser works to a 16-byte width there), so 8 lanes are two independent 4-wide chains:
 measured at 128x128, float32, one thread, 8 lanes ran 1.01-1.03x the speed of 4 (16: 0.89x) and compile
 in 4.9 s against 2.8 s (16: 9.3 s) cold; a session on an AVX2 host measured 8 lanes 1.19-1.22x faster.
+Why 16 bytes on this host: taichi's optimiser (``global_optimize_module_cpu`` in its source) builds its target machine
+from ``llvm::sys::getHostCPUName()`` with no feature string, and its LLVM 15 does not know this CPU (AMD
+family 26, Zen 5; numba's LLVM 22 calls it ``znver5``), so the vectorisers see generic x86-64 (SSE2,
+16-byte registers); numba's vectorising bench kernel runs 16 float32 lanes in zmm registers here
+(``vsqrtps``/``vdivps`` on zmm, ``inspect_asm``), 4x this layout's width per instruction.
 The state of a call lives in a pool of vector fields of L lanes:
 
 * the ``ny`` rows of each copy are cut into ``L`` bands of ``H = ceil(ny / L)`` rows (the last band
@@ -22,13 +27,20 @@ The state of a call lives in a pool of vector fields of L lanes:
 * the stencil neighbour ``(r + dr, c + dc)`` of every lane is lane for lane the pack
   ``(r + dr, c + dc)`` when ``0 <= r + dr < H``; across a band edge it is the pack
   ``(r + dr -/+ H, c + dc)`` with its lanes shifted by one (so ``H >= 2`` is needed for the
-  2-row bend springs); a lane whose neighbour row lies outside ``[0, ny)`` adds nothing (a select,
-  no branch); a column outside ``[0, nx)`` is the same for every lane (a branch);
+  2-row bend springs). Each copy stores ``H + 4`` rows of ``nx`` packs: 2 ghost rows below and above
+  the band rows hold those lane-shifted copies, written by the pack they stand for when it stores its
+  new state (so no extra loop or barrier). Every neighbour is then one vector load at the constant pack
+  offset ``dr nx + dc``: no branch per neighbour row, no lanes reassembled from scalars (the branchy
+  fetch it replaced made LLVM merge per-lane pointers and load each lane on its own: 1.4x slower).
+  A lane whose neighbour row lies outside ``[0, ny)`` adds nothing (a select, no branch); a column
+  outside ``[0, nx)`` is the same for every lane (a branch, predicted);
+* one parallel-loop index is a row of packs (``nx`` packs, an inner loop over columns): one integer
+  division per row, none per pack;
 * every operation is that of :func:`tianim.physics.kernels.substep_funcs` in the same order, so the
   results are bit-identical to the other layouts (tested), for any thread count and batch.
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
-the pool, and unpacks. Up to :data:`SERIAL_MAX_PARTICLES` (batch x padded grid) one thread runs every
+the pool, and unpacks. Up to :data:`SERIAL_MAX_PARTICLES` (batch x band rows x L x nx) one thread runs every
 substep of the call in one launch (path ``"serial"``, a runtime loop over the substeps); above it,
 :data:`SUBSTEPS_PER_LAUNCH` substeps per launch, one parallel loop each (path ``"parallel"``). The
 solver layouts ``"lanes_serial"`` / ``"lanes_parallel"`` force a path (``launch_lanes(path=)``).
@@ -190,9 +202,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
                 for q in range(3 * _N_OFF):
                     prm[h + q] = P[h + 2 * n + q]
             b = k // npk
-            p = k - b * npk
-            r = p // nx
-            c = p - r * nx
+            kp, r, c = pack_index(k, nx, H)
             X = ti.Matrix.zero(real, 2 * dim + 3, L)  # x, v components, mass, inverse mass, free; one column per lane
             for lane in ti.static(range(L)):
                 row = lane * H + r
@@ -208,9 +218,10 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
                     if pinned[b, i] == 0:
                         X[2 * dim + 2, lane] = 1
             for a in ti.static(range(2 * dim)):
-                S[a, k] = ti.Vector([X[a, lane] for lane in range(L)])
+                S[a, kp] = ti.Vector([X[a, lane] for lane in range(L)])
             for a in ti.static(range(3)):
-                M[a, k] = ti.Vector([X[2 * dim + a, lane] for lane in range(L)])
+                M[a, kp] = ti.Vector([X[2 * dim + a, lane] for lane in range(L)])
+            write_ghosts(S, 0, kp, r, nx, H)
 
     @ti.kernel
     def unpack(S: ti.template(), src: ti.template(), x: t.vec_arr, v: t.vec_arr, nx: ti.i32, H: ti.i32):
@@ -219,10 +230,8 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
         npk = H * nx
         for k in range(x.shape[0] * npk):
             b = k // npk
-            p = k - b * npk
-            r = p // nx
-            c = p - r * nx
-            u = [S[src * 2 * dim + a, k] for a in ti.static(range(2 * dim))]
+            kp, r, c = pack_index(k, nx, H)
+            u = [S[src * 2 * dim + a, kp] for a in ti.static(range(2 * dim))]
             for lane in ti.static(range(L)):
                 row = lane * H + r
                 if row < ny:
@@ -231,20 +240,34 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
                     v[b, i] = ti.Vector([u[dim + a][lane] for a in range(dim)])
 
     @ti.func
-    def fetch(S: ti.template(), q, base, rr, cc, nx, H):
-        """Component row q of the neighbour packs at band row rr (may leave [0, H)), column cc."""
-        w = lane_vec(0)
-        if rr < 0:  # lane l reads lane l - 1, H rows further down
-            u = S[q, base + (rr + H) * nx + cc]
-            for lane in ti.static(range(L)):
-                w[lane] = u[max(lane - 1, 0)]
-        elif rr >= H:  # lane l reads lane l + 1, H rows further up
-            u = S[q, base + (rr - H) * nx + cc]
-            for lane in ti.static(range(L)):
-                w[lane] = u[min(lane + 1, L - 1)]
-        else:
-            w = S[q, base + rr * nx + cc]
-        return w
+    def pack_index(k, nx, H):
+        """(index in the pool, band row r, column c) of pack k of the call (copy by copy, row-major): each
+        copy holds H + 4 rows of nx packs, 2 ghost rows below and above its H band rows."""
+        npk = H * nx
+        b = k // npk
+        p = k - b * npk
+        r = p // nx
+        c = p - r * nx
+        return b * (npk + 4 * nx) + (r + 2) * nx + c, r, c
+
+    @ti.func
+    def write_ghosts(S: ti.template(), q0, kp, r, nx, H):
+        """Copy the x, v components (rows q0 .. q0 + 2 dim) of pack kp at band row r into the ghost packs
+        that stand for it: band row rr = r - H (r >= H - 2; lane l holds lane l - 1 of pack r, the particle
+        H rows further down) and rr = r + H (r < 2; lane l holds lane l + 1). A neighbour at any band row
+        rr in [-2, H + 2) is then the pack kp + (rr - r) nx, lane for lane: one vector load, no branch.
+        The lanes shifted in from beyond the band (lane 0 below, lane L - 1 above) repeat their neighbour and
+        are never used (their global row lies outside [0, ny): masked by add_spring)."""
+        if r >= H - 2:
+            g = kp - H * nx
+            for a in ti.static(range(2 * dim)):
+                u = S[q0 + a, kp]
+                S[q0 + a, g] = ti.Vector([u[max(lane - 1, 0)] for lane in range(L)])
+        if r < 2:
+            g = kp + H * nx
+            for a in ti.static(range(2 * dim)):
+                u = S[q0 + a, kp]
+                S[q0 + a, g] = ti.Vector([u[min(lane + 1, L - 1)] for lane in range(L)])
 
     @ti.func
     def spring_force(s, n, damp, dot):
@@ -256,18 +279,18 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     @ti.func
     def add_spring(S: ti.template(), prm: ti.template(), f0, f1, f2, xi: ti.template(), vi: ti.template(),
-                   xs: ti.template(), o, dc, dr, base, r, c, nx, ny, H):
+                   xs: ti.template(), o, dc, dr, kp, r, c, nx, ny, H):
         """(f0, f1, f2) plus the force of stencil offset o = (dc, dr) on the lanes of pack (r, c) (positions
         xi, velocities vi, buffer xs): kernels.pair_force lane by lane, nothing where the neighbour is off
         the grid."""
         zero = lane_vec(0)
         lane_row = ti.Vector([lane * H for lane in range(L)])
         cc = c + dc
-        rr = r + dr
+        j = kp + dr * nx + dc  # the neighbour pack (a ghost pack across a band edge)
         if 0 <= cc < nx:
-            g_row = lane_row + rr
+            g_row = lane_row + r + dr
             valid = (g_row >= 0) & (g_row < ny)
-            d = [xi[a] - fetch(S, xs + a, base, rr, cc, nx, H) for a in ti.static(range(dim))]
+            d = [xi[a] - S[xs + a, j] for a in ti.static(range(dim))]
             len2 = d[0] * d[0]
             for a in ti.static(range(1, dim)):
                 len2 += d[a] * d[a]
@@ -277,7 +300,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
             nrm = [d[a] * inv_len for a in ti.static(range(dim))]
             dot = zero
             if ti.static(spring_damping):
-                dv = [vi[a] - fetch(S, xs + dim + a, base, rr, cc, nx, H) for a in ti.static(range(dim))]
+                dv = [vi[a] - S[xs + dim + a, j] for a in ti.static(range(dim))]
                 dot = dv[0] * nrm[0]
                 for a in ti.static(range(1, dim)):
                     dot += dv[a] * nrm[a]
@@ -290,18 +313,14 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     @ti.func
     def substep(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: ti.template(),
-                src: ti.template(), k, npk, nx, ny, H, dt):
-        """One symplectic Euler substep of pack k, read from buffer src, written to the other."""
+                src: ti.template(), kp, r, c, nx, ny, H, dt):
+        """One symplectic Euler substep of pack kp (band row r, column c), read from buffer src, written to
+        the other."""
         xs = src * 2 * dim
         xd = (1 - src) * 2 * dim
-        b = k // npk
-        p = k - b * npk
-        base = b * npk
-        r = p // nx
-        c = p - r * nx
-        xi = [S[xs + a, k] for a in ti.static(range(dim))]
-        vi = [S[xs + dim + a, k] for a in ti.static(range(dim))]
-        m = M[0, k]
+        xi = [S[xs + a, kp] for a in ti.static(range(dim))]
+        vi = [S[xs + dim + a, kp] for a in ti.static(range(dim))]
+        m = M[0, kp]
         zero = lane_vec(0)
         # The force sum is carried across a runtime loop, so it lives in named variables (f2 unused in 2D).
         f0 = m * prm[0]  # m g
@@ -317,35 +336,47 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
         # The stencil in GRID_STENCIL order, as kernels.accel sums it. A runtime loop: unrolled (offsets as
         # constants) it ran about 1.2x faster but took 30-100 s to compile.
         for o in range(_N_OFF):
-            f0, f1, f2 = add_spring(S, prm, f0, f1, f2, xi, vi, xs, o, off[2 * o], off[2 * o + 1], base, r, c, nx, ny, H)
+            f0, f1, f2 = add_spring(S, prm, f0, f1, f2, xi, vi, xs, o, off[2 * o], off[2 * o + 1], kp, r, c, nx, ny, H)
         f = [f0, f1, f2]
-        free = M[2, k] > 0
-        im = M[1, k]
+        free = M[2, kp] > 0
+        im = M[1, kp]
         for a in ti.static(range(dim)):
             vn = vi[a] + dt * ti.select(free, f[a] * im, zero)
-            S[xd + dim + a, k] = vn
-            S[xd + a, k] = xi[a] + dt * vn
+            S[xd + dim + a, kp] = vn
+            S[xd + a, kp] = xi[a] + dt * vn
         if ti.static(colliders):  # per lane, on the stored values (exact: a float32 store and load)
             g2 = prm[0] * prm[0]
             for a in ti.static(range(1, dim)):
                 g2 += prm[a] * prm[a]
             g_norm = ti.sqrt(g2)
             for lane in range(L):  # a runtime loop: unrolled, the contact code would be copied L x nsub times
-                if M[2, k][lane] > 0:
-                    xl = ti.Vector([S[xd + a, k][lane] for a in range(dim)])
-                    vl = ti.Vector([S[xd + dim + a, k][lane] for a in range(dim)])
+                if M[2, kp][lane] > 0:
+                    xl = ti.Vector([S[xd + a, kp][lane] for a in range(dim)])
+                    vl = ti.Vector([S[xd + dim + a, kp][lane] for a in range(dim)])
                     xl, vl = respond(xl, vl, coll, g_norm, dt)
                     for a in ti.static(range(dim)):
-                        S[xd + a, k][lane] = xl[a]
-                        S[xd + dim + a, k][lane] = vl[a]
+                        S[xd + a, kp][lane] = xl[a]
+                        S[xd + dim + a, kp][lane] = vl[a]
+        write_ghosts(S, xd, kp, r, nx, H)  # after the contacts: the ghosts copy the stored values
+
+    @ti.func
+    def substep_row(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: ti.template(),
+                    src: ti.template(), q, nx, ny, H, dt):
+        """One substep of the nx packs of pack row q of the call (copy q // H, band row q % H), column by
+        column: one integer division per row, none per pack."""
+        b = q // H
+        r = q - b * H
+        k0 = b * (H + 4) * nx + (r + 2) * nx  # pack_index of column 0
+        for c in range(nx):
+            substep(S, M, prm, off, coll, src, k0 + c, r, c, nx, ny, H, dt)
 
     def make_run(nsub):
         @ti.kernel
         def run(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: t.real2_arr,
-                packs: ti.i32, npk: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real):
+                rows: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real):
             for s in ti.static(range(nsub)):  # each top-level loop ends in a barrier
-                for k in range(packs):
-                    substep(S, M, prm, off, coll, s % 2, k, npk, nx, ny, H, dt)
+                for q in range(rows):
+                    substep_row(S, M, prm, off, coll, s % 2, q, nx, ny, H, dt)
 
         return run
 
@@ -353,18 +384,18 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     @ti.kernel
     def run_serial(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: t.real2_arr,
-                   packs: ti.i32, npk: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real, nsub: ti.i32):
+                   rows: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real, nsub: ti.i32):
         # One thread, every substep of the call in one launch: no barriers, no worker wake-ups, and the
         # substep loop is a runtime loop (3 substep bodies to compile, not 8).
         ti.loop_config(serialize=True)
         for _pair in range(nsub // 2):
-            for k in range(packs):
-                substep(S, M, prm, off, coll, 0, k, npk, nx, ny, H, dt)
-            for k in range(packs):
-                substep(S, M, prm, off, coll, 1, k, npk, nx, ny, H, dt)
+            for q in range(rows):
+                substep_row(S, M, prm, off, coll, 0, q, nx, ny, H, dt)
+            for q in range(rows):
+                substep_row(S, M, prm, off, coll, 1, q, nx, ny, H, dt)
         if nsub % 2 == 1:
-            for k in range(packs):
-                substep(S, M, prm, off, coll, 0, k, npk, nx, ny, H, dt)
+            for q in range(rows):
+                substep_row(S, M, prm, off, coll, 0, q, nx, ny, H, dt)
 
     runs["serial"] = run_serial
     return pack, runs, unpack
@@ -387,13 +418,13 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     H = -(-g.ny // L)
     npk = H * g.nx
     packs = state.batch * npk
-    pool = _pool(real_name, model.dim, L, packs)
+    pool = _pool(real_name, model.dim, L, state.batch * (H + 4) * g.nx)  # with the ghost rows
     pack, runs, unpack = lane_kernels(real_name, model.dim, L, len(model.colliders) > 0,
                                       model.has_spring_damping, model.medium_damping > 0)
     S, M, prm, off = pool.state, pool.mass, pool.prm, pool.off
     pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], g.nx, H)
     dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
-    args = (S, M, prm, off, data["coll"], packs, npk, g.nx, g.ny, H, dt)
+    args = (S, M, prm, off, data["coll"], state.batch * H, g.nx, g.ny, H, dt)
     if path == "serial" or (path == "auto" and packs * L <= SERIAL_MAX_PARTICLES):
         runs["serial"](*args, substeps)
         unpack(S, substeps % 2, state.x, state.v, g.nx, H)
