@@ -28,16 +28,30 @@ after every substep, as v1. The plan from the scene:
   per 0.01 s frame (sqrt(3) cm = 17.3 mm diagonally), and 2 substeps keep that to 8.7 mm < t
   (1 substep: 17.3 mm > t, contacts could be passed through);
 * iterations: XPBD is stable at any step (``k h^2 / m`` = 2000 x (5 ms)^2 x 4096 / 0.5 kg = 410: the
-  springs act as near-rigid links at either plan), so the sweeps only set how far a picker's pull
-  propagates within a frame; one sweep per substep was measured to give the same scripted fold
-  (ClothFoldCorners) as v1's plan within the seeds' spread (the module's test and the numbers in
-  ``docs/bench/envs_softgym.json``'s note).
+  springs act as near-rigid links at either plan), so the sweeps set how far a picker's pull
+  propagates within a frame, i.e. how stiff the cloth looks.
+
+Measured against ClothFold-v1's 4 x 2 (2 shared cores, ``tests/test_envs_softgym_versions.py``):
+
+| quantity                                                        | v1 (4 x 2)       | v2 (2 x 1)       |
+|-----------------------------------------------------------------|------------------|------------------|
+| scripted ClothFoldCorners, final normalized_performance, seeds 0-19 (mean +- sd) | 0.368 +- 0.148 | 0.400 +- 0.033 |
+| paired difference v2 - v1 (mean +- standard error)             |                  | +0.032 +- 0.033  |
+| cloth hanging from one held particle (lifted 0.24 m, 11 env steps held): mean structural stretch | 0.74 % | 2.8 % |
+| same, 99th percentile / largest structural stretch              | 14 % / 171 %     | 52 % / 630 %     |
+| same, particles' distance from v1's hanging cloth, mean / max   |                  | 8.9 / 14 cm      |
+| scripted fold of 20 copies, 100 env steps, wall time (same machine, loaded) | 682 s | 196 s   |
+
+The fold scores the same (within the seeds' spread; v2's spread is smaller), but a cloth held by
+one particle stretches about 4x more: neither plan is converged (FleX runs 30 iterations), and
+the fewer sweeps propagate a pull less far per frame. Tasks that lift the cloth by one point
+and read its shape should stay on v1.
 
 ## Differences from SoftGym (what remains)
 
 | SoftGym (FleX)                                   | here                                                   |
 |--------------------------------------------------|--------------------------------------------------------|
-| 4 substeps x 30 iterations per frame             | XPBD, 2 substeps x 1 symmetric sweep                    |
+| 4 substeps x 30 iterations per frame             | XPBD, 2 substeps x 1 symmetric sweep: a cloth hung from one point stretches (table above) |
 | self-collision inside the constraint iterations, particle friction 1 | a projection after each substep, no particle friction |
 | 60..119 particles per side per variation, 1000 cached settled variations | 64 x 64 only, flat start (already at rest) |
 | pickers are collision spheres (they push the cloth) | pickers only carry the particle they hold          |

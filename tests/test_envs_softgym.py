@@ -18,7 +18,7 @@ import envs  # noqa: F401
 
 IDS = ("tianim/ClothFold-v1", "tianim/ClothFlatten-v0", "tianim/RopeFlatten-v0",
        "tianim/ClothFold-v2", "tianim/ClothFlatten-v1", "tianim/RopeFlatten-v1")
-FOLDS, FLATTENS, ROPES = IDS[0::3], IDS[1::3], IDS[2::3]
+FLATTENS, ROPES = IDS[1::3], IDS[2::3]
 R_CLOTH = 0.00625  # SoftGym's cloth particle radius (= spacing)
 
 
@@ -94,9 +94,9 @@ def _run(env_id, steps, seed=0, scripted=False):
     return env, start, sim.state.x[0].copy(), reward, info
 
 
-@pytest.mark.parametrize("env_id", FOLDS)
-def test_clothfold_metrics_equal_softgym_formulas(env_id):
-    env, start, pos, reward, info = _run(env_id, 6, scripted=True)
+@pytest.mark.parametrize("env_id,steps", [("tianim/ClothFold-v1", 6), ("tianim/ClothFold-v2", 12)])
+def test_clothfold_metrics_equal_softgym_formulas(env_id, steps):
+    env, start, pos, reward, info = _run(env_id, steps, scripted=True)
     p, group, fixation = softgym_fold(pos.astype(np.float64), start.astype(np.float64), 64, 64)
     p0 = softgym_fold(start.astype(np.float64), start.astype(np.float64), 64, 64)[0]
     assert p0 == pytest.approx(-0.2, abs=1e-6)  # flat cloth: mean |a - b| = 32 spacings
