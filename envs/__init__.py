@@ -12,6 +12,9 @@
 | tianim/ClothFold-v1   | :class:`envs.cloth_fold_v1.ClothFoldV1Env` | :class:`envs.cloth_fold_v1.ClothFoldV1VectorEnv` |
 | tianim/ClothFlatten-v0 | :class:`envs.cloth_flatten.ClothFlattenEnv` | :class:`envs.cloth_flatten.ClothFlattenVectorEnv` |
 | tianim/RopeFlatten-v0 | :class:`envs.rope_flatten.RopeFlattenEnv` | :class:`envs.rope_flatten.RopeFlattenVectorEnv` |
+| tianim/ClothFold-v2   | :class:`envs.cloth_fold_v2.ClothFoldV2Env` | :class:`envs.cloth_fold_v2.ClothFoldV2VectorEnv` |
+| tianim/ClothFlatten-v1 | :class:`envs.cloth_flatten_v1.ClothFlattenV1Env` | :class:`envs.cloth_flatten_v1.ClothFlattenV1VectorEnv` |
+| tianim/RopeFlatten-v1 | :class:`envs.rope_flatten_v1.RopeFlattenV1Env` | :class:`envs.rope_flatten_v1.RopeFlattenV1VectorEnv` |
 
 Two ways to make one (Gymnasium 1.x)::
 
@@ -45,6 +48,9 @@ _ENVS = {
     "ClothFold-v1": ("cloth_fold_v1", "ClothFoldV1Env", "ClothFoldV1VectorEnv", 100),  # SoftGym's ClothFold
     "ClothFlatten-v0": ("cloth_flatten", "ClothFlattenEnv", "ClothFlattenVectorEnv", 100),  # SoftGym's
     "RopeFlatten-v0": ("rope_flatten", "RopeFlattenEnv", "RopeFlattenVectorEnv", 75),  # SoftGym's
+    "ClothFold-v2": ("cloth_fold_v2", "ClothFoldV2Env", "ClothFoldV2VectorEnv", 100),  # v1, cheaper step plan
+    "ClothFlatten-v1": ("cloth_flatten_v1", "ClothFlattenV1Env", "ClothFlattenV1VectorEnv", 100),  # v0, cheaper
+    "RopeFlatten-v1": ("rope_flatten_v1", "RopeFlattenV1Env", "RopeFlattenV1VectorEnv", 75),  # SoftGym's rope
 }
 
 ENV_IDS = tuple(f"tianim/{name}" for name in _ENVS)

@@ -335,14 +335,15 @@ def make_baseline(env_id: str, env):
         return ClothFoldPickPlace()
     if env_id.endswith(("CrowdNav-v0", "CrowdNav-v1")):
         return CrowdNavVO()
-    if env_id.endswith("ClothFold-v1"):
+    if env_id.endswith(("ClothFold-v1", "ClothFold-v2")):  # v2: v1's task on a cheaper plan
         return ClothFoldCorners()
-    if env_id.endswith("ClothFlatten-v0"):
+    if env_id.endswith(("ClothFlatten-v0", "ClothFlatten-v1")):
         return ClothFlattenCorners()
-    if env_id.endswith("RopeFlatten-v0"):
+    if env_id.endswith(("RopeFlatten-v0", "RopeFlatten-v1")):
         return RopeFlattenEnds()
     raise ValueError(f"env_id={env_id!r} has no scripted baseline; known: tianim/ArmReach-v0, ArmReach-v1, ArmReach-v2, "
-                     "RopeSwing-v0, ClothFold-v0, CrowdNav-v0, CrowdNav-v1, ClothFold-v1, ClothFlatten-v0, RopeFlatten-v0")
+                     "RopeSwing-v0, ClothFold-v0, CrowdNav-v0, CrowdNav-v1, ClothFold-v1, ClothFold-v2, ClothFlatten-v0, "
+                     "ClothFlatten-v1, RopeFlatten-v0, RopeFlatten-v1")
 
 
 def evaluate(env, policy, episodes: int, seed: int = 0) -> np.ndarray:

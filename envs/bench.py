@@ -14,7 +14,8 @@ Measures, with pre-generated actions and medians over ``--repeats``:
 * per SoftGym task (:data:`SOFTGYM_IDS`) ``<id>_steps_per_s`` (one ``gym.make`` env),
   ``<id>_vec_steps_per_s`` (``gym.make_vec`` with ``--softgym-envs`` copies, env-steps/s) and
   ``<id>_vec_speedup`` (their ratio), with ``<id>`` the id in lower case without the namespace,
-  ``-`` as ``_`` (``clothfold_v1``). The single envs run the seeds and action streams of copies
+  ``-`` as ``_`` (``clothfold_v1``); ``<new>_speedup_vs_<old>`` and ``<new>_vec_speedup_vs_<old>`` for a later
+  version against the frozen one (:data:`SOFTGYM_SUCCESSORS`), same run; ``--softgym-ids`` picks tasks. The single envs run the seeds and action streams of copies
   0 .. 3 of the batch (a copy's cost depends on its state), each checked equal to its copy before
   timing; single and batch are timed in turn (:func:`median_times`), so a burst of load on a shared
   machine slows both alike;
@@ -73,7 +74,12 @@ def _vector_rate(venv, steps: int, repeats: int, seed: int = 0) -> float:
     return steps * venv.num_envs / median_time(run, repeats=repeats, warmup=1)
 
 
-SOFTGYM_IDS = ("tianim/ClothFold-v1", "tianim/ClothFlatten-v0", "tianim/RopeFlatten-v0")
+SOFTGYM_IDS = ("tianim/ClothFold-v1", "tianim/ClothFlatten-v0", "tianim/RopeFlatten-v0",
+               "tianim/ClothFold-v2", "tianim/ClothFlatten-v1", "tianim/RopeFlatten-v1")
+#: A SoftGym task's later version and the frozen one it speeds up: ``<new>_speedup_vs_<old>`` (single and
+#: ``_vec``) is the ratio of their env-steps/s measured in the same run (issue 25's "x today").
+SOFTGYM_SUCCESSORS = {"tianim/ClothFold-v2": "tianim/ClothFold-v1", "tianim/ClothFlatten-v1": "tianim/ClothFlatten-v0",
+                      "tianim/RopeFlatten-v1": "tianim/RopeFlatten-v0"}
 
 
 def key(env_id: str) -> str:
@@ -118,6 +124,9 @@ VEC_PROFILE = {
     "tianim/RopeFlatten-v0": ((1, 16, 64, 256), 10),
     "tianim/ClothFold-v1": ((1, 4, 16), 2),
     "tianim/ClothFlatten-v0": ((1, 4, 16), 2),
+    "tianim/ClothFold-v2": ((1, 4, 16), 2),
+    "tianim/ClothFlatten-v1": ((1, 4, 16), 2),
+    "tianim/RopeFlatten-v1": ((1, 16, 64, 256), 10),
 }
 QUICK_SIZES = (1, 2)
 
@@ -175,6 +184,8 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--only-softgym", action="store_true", help="measure only the SoftGym tasks")
     p.add_argument("--only-vec", action="store_true", help="measure only the per-N vector profiles (VEC_PROFILE)")
     p.add_argument("--vec-repeats", type=int, default=3, help="timed repeats of each per-N profile (default 3)")
+    p.add_argument("--softgym-ids", default=None,
+                   help="comma-separated SoftGym ids to measure (default: all of SOFTGYM_IDS)")
     args = p.parse_args(argv)
     quick = args.quick
     repeats = 2 if quick else args.repeats
@@ -182,20 +193,31 @@ def main(argv: list[str] | None = None) -> int:
     rows, summary = [], {}
     summary["loadavg_1min"] = os.getloadavg()[0]
     vec_rows: list = []
-    profiled = [i for i in VEC_PROFILE if i in gym.registry and (i in SOFTGYM_IDS or not args.only_softgym)]
+    softgym_ids = SOFTGYM_IDS if args.softgym_ids is None else tuple(
+        i if "/" in i else f"tianim/{i}" for i in args.softgym_ids.split(","))
+    for i in softgym_ids:
+        if i not in SOFTGYM_IDS:
+            raise SystemExit(f"--softgym-ids: {i!r} is not a SoftGym task; choose from {', '.join(SOFTGYM_IDS)}")
+    profiled = [i for i in VEC_PROFILE if i in gym.registry and (i in softgym_ids or not args.only_softgym)]
     summary.update(vector_profiles(profiled, quick, 1 if quick else args.vec_repeats, vec_rows))
     if args.only_vec:
         print_table(vec_rows)
         write_json(args.json, summary, rows=vec_rows)
         return 0
 
-    for env_id in SOFTGYM_IDS:
+    for env_id in softgym_ids:
         nv = 2 if quick else args.softgym_envs
         rates = _softgym_rates(env_id, nv, 2 if quick else 10, repeats)
         summary.update(rates)
         k = key(env_id)
         rows.append({"benchmark": f"{env_id.split('/')[-1]} single", "steps_per_s": rates[f"{k}_steps_per_s"]})
         rows.append({"benchmark": f"{env_id.split('/')[-1]} make_vec N={nv}", "steps_per_s": rates[f"{k}_vec_steps_per_s"]})
+    for new, old in SOFTGYM_SUCCESSORS.items():
+        if new in softgym_ids and old in softgym_ids:
+            kn, ko = key(new), key(old)
+            for tail in ("_steps_per_s", "_vec_steps_per_s"):
+                side = "_vec" if tail.startswith("_vec") else ""
+                summary[f"{kn}{side}_speedup_vs_{ko}"] = summary[f"{kn}{tail}"] / summary[f"{ko}{tail}"]
     if args.only_softgym:
         print_table(rows)
         print_table(vec_rows)

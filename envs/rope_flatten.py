@@ -117,8 +117,9 @@ CAMERA = dict(eye=(0.0, 0.75, 0.45), target=(0.0, 0.0, 0.0), fov=50.0)
 
 
 @lru_cache(maxsize=None)
-def make_model() -> tp.Model:
-    """The straight rope along x, centred, at rest on the table (shared)."""
+def make_model(particle_mass: float = MASS / N, damping: float = DAMPING) -> tp.Model:
+    """The straight rope along x, centred, at rest on the table (shared): ``particle_mass`` [kg] per
+    particle and viscous ``damping`` [1/s] (defaults: version 0's, 0.5 kg in all and 1/s)."""
     seg = LENGTH / SEGMENTS
     x = np.zeros((N, 3))
     x[:, 0] = np.arange(N) * seg - LENGTH / 2
@@ -126,25 +127,27 @@ def make_model() -> tp.Model:
     stretch = np.stack([np.arange(N - 1), np.arange(1, N)], axis=1)
     bend = np.stack([np.arange(N - 2), np.arange(2, N)], axis=1)
     k = np.r_[np.full(N - 1, STIFFNESS), np.full(N - 2, BEND_STIFFNESS)]
-    return tp.from_edges(x, np.vstack([stretch, bend]), mass=MASS / N, stiffness=k,
-                         medium_damping=DAMPING * MASS / N, gravity=sg.GRAVITY,
+    return tp.from_edges(x, np.vstack([stretch, bend]), mass=particle_mass, stiffness=k,
+                         medium_damping=damping * particle_mass, gravity=sg.GRAVITY,
                          colliders=[tp.Ground(height=REST_HEIGHT, restitution=0.0, friction=FRICTION)],
                          name="softgym_rope")
 
 
 @lru_cache(maxsize=None)
-def start_variations() -> np.ndarray:
+def start_variations(sim_class=None) -> np.ndarray:
     """The tangled starts (VARIATIONS, N, 3) float32, centred in (x, z): SoftGym's
     ``random_pick_and_place`` (module docstring) with ``np.random.default_rng(j)`` for variation j,
-    all variations in one batched run (each settling phase lasts until every variation is still)."""
-    model = make_model()
+    all variations in one batched run (each settling phase lasts until every variation is still),
+    on the model and XPBD plan of ``sim_class`` (default :class:`RopeFlattenSim`, version 0)."""
+    sim_class = RopeFlattenSim if sim_class is None else sim_class
+    model = sim_class.MODEL()
     g = model.state(batch=VARIATIONS, dtype=np.float32)
-    solver = tp.XPBD(iterations=RopeFlattenSim.ITERATIONS, watchdog=False, **ROPE_SOLVER)
+    solver = tp.XPBD(iterations=sim_class.ITERATIONS, watchdog=False, **ROPE_SOLVER)
     rows = np.arange(VARIATIONS)
     rngs = [np.random.default_rng(j) for j in range(VARIATIONS)]
 
     def frame():
-        solver.step(model, g, sg.FRAME_DT / RopeFlattenSim.SUBSTEPS, RopeFlattenSim.SUBSTEPS)
+        solver.step(model, g, sg.FRAME_DT / sim_class.SUBSTEPS, sim_class.SUBSTEPS)
 
     def settle(frames):
         for _ in range(frames):

@@ -1,4 +1,4 @@
-"""SoftGym-faithful tasks (ClothFold-v1, ClothFlatten-v0, RopeFlatten-v0).
+"""SoftGym-faithful tasks (ClothFold-v1/-v2, ClothFlatten-v0/-v1, RopeFlatten-v0/-v1).
 
 The metrics are checked against SoftGym's formulas written out here, independently of
 ``envs._softgym`` (transcribed from softgym/envs/cloth_fold.py, cloth_flatten.py with
@@ -16,7 +16,9 @@ from gymnasium.utils.env_checker import check_env
 
 import envs  # noqa: F401
 
-IDS = ("tianim/ClothFold-v1", "tianim/ClothFlatten-v0", "tianim/RopeFlatten-v0")
+IDS = ("tianim/ClothFold-v1", "tianim/ClothFlatten-v0", "tianim/RopeFlatten-v0",
+       "tianim/ClothFold-v2", "tianim/ClothFlatten-v1", "tianim/RopeFlatten-v1")
+FLATTENS, ROPES = IDS[1::3], IDS[2::3]
 R_CLOTH = 0.00625  # SoftGym's cloth particle radius (= spacing)
 
 
@@ -92,8 +94,9 @@ def _run(env_id, steps, seed=0, scripted=False):
     return env, start, sim.state.x[0].copy(), reward, info
 
 
-def test_clothfold_metrics_equal_softgym_formulas():
-    env, start, pos, reward, info = _run("tianim/ClothFold-v1", 6, scripted=True)
+@pytest.mark.parametrize("env_id,steps", [("tianim/ClothFold-v1", 6), ("tianim/ClothFold-v2", 12)])
+def test_clothfold_metrics_equal_softgym_formulas(env_id, steps):
+    env, start, pos, reward, info = _run(env_id, steps, scripted=True)
     p, group, fixation = softgym_fold(pos.astype(np.float64), start.astype(np.float64), 64, 64)
     p0 = softgym_fold(start.astype(np.float64), start.astype(np.float64), 64, 64)[0]
     assert p0 == pytest.approx(-0.2, abs=1e-6)  # flat cloth: mean |a - b| = 32 spacings
@@ -105,8 +108,9 @@ def test_clothfold_metrics_equal_softgym_formulas():
     assert info["normalized_performance"] == pytest.approx((p - p0) / (0.0 - p0), rel=1e-10, abs=1e-12)
 
 
-def test_clothflatten_metrics_equal_softgym_formulas():
-    env, start, pos, reward, info = _run("tianim/ClothFlatten-v0", 3, seed=4)
+@pytest.mark.parametrize("env_id", FLATTENS)
+def test_clothflatten_metrics_equal_softgym_formulas(env_id):
+    env, start, pos, reward, info = _run(env_id, 3, seed=4)
     area, a0, a_max = softgym_covered_area(pos), softgym_covered_area(start), softgym_flat_area(64, 64)
     assert softgym_covered_area(pos, method=2) == area  # SoftGym's two methods agree here
     assert 0.0 < a0 < a_max and area > 0.0
@@ -131,8 +135,9 @@ def test_covered_area_on_hand_made_layouts():
     assert softgym_covered_area(far[0]) == pytest.approx(2e-4, rel=1e-5)
 
 
-def test_ropeflatten_metrics_equal_softgym_formulas():
-    env, start, pos, reward, info = _run("tianim/RopeFlatten-v0", 5)
+@pytest.mark.parametrize("env_id", ROPES)
+def test_ropeflatten_metrics_equal_softgym_formulas(env_id):
+    env, start, pos, reward, info = _run(env_id, 5)
     length = 40 * 0.025 * 0.5  # segment * radius * 0.5
     d = np.linalg.norm(pos[0].astype(np.float64) - pos[-1].astype(np.float64))
     p = -np.abs(d - length)
@@ -190,7 +195,8 @@ def test_picker_moves_one_cm_per_axis_per_repeat_and_carries_its_particle():
     assert lifted > 0.07 and sim.state.x[0, held, 1] < 0.04
 
 
-@pytest.mark.parametrize("env_id", ["tianim/ClothFold-v1", "tianim/RopeFlatten-v0"])
+@pytest.mark.parametrize("env_id", ["tianim/ClothFold-v1", "tianim/RopeFlatten-v0", "tianim/ClothFold-v2",
+                                    "tianim/RopeFlatten-v1"])
 def test_picker_never_moves_more_than_8_cm_per_axis_per_step_nor_leaves_its_box(env_id):
     env = gym.make(env_id).unwrapped
     obs, _ = env.reset(seed=5)
@@ -254,7 +260,8 @@ def test_the_seed_matters(env_id):
 
 
 # ------------------------------------------------------------------ scripted baselines
-@pytest.mark.parametrize("env_id,steps", [("tianim/ClothFold-v1", 12), ("tianim/RopeFlatten-v0", 40)])
+@pytest.mark.parametrize("env_id,steps", [("tianim/ClothFold-v1", 12), ("tianim/RopeFlatten-v0", 40),
+                                          ("tianim/ClothFold-v2", 12), ("tianim/RopeFlatten-v1", 40)])
 def test_scripted_baseline_beats_random(env_id, steps):
     from envs.baselines import evaluate, make_baseline
 
@@ -334,9 +341,15 @@ def test_env_bench_summary_keys_at_a_tiny_size(tmp_path):
 
     assert bench.main(["--quick", "--only-softgym", "--repeats", "1", "--json", str(tmp_path / "b.json")]) == 0
     summary = json.loads((tmp_path / "b.json").read_text())["summary"]
-    for prefix in ("clothfold_v1", "clothflatten_v0", "ropeflatten_v0"):
+    for prefix in ("clothfold_v1", "clothflatten_v0", "ropeflatten_v0", "clothfold_v2", "clothflatten_v1",
+                   "ropeflatten_v1"):
         for suffix in ("_steps_per_s", "_vec_steps_per_s", "_vec_speedup"):
             assert summary[prefix + suffix] > 0, prefix + suffix
+    for new, old in (("clothfold_v2", "clothfold_v1"), ("clothflatten_v1", "clothflatten_v0"),
+                     ("ropeflatten_v1", "ropeflatten_v0")):
+        for side in ("", "_vec"):
+            ratio = summary[f"{new}{side}_speedup_vs_{old}"]
+            assert ratio == pytest.approx(summary[f"{new}{side}_steps_per_s"] / summary[f"{old}{side}_steps_per_s"])
 
 
 def test_a_diverged_copy_goes_back_to_the_start_of_its_step_and_ends_alone():
@@ -407,4 +420,5 @@ def test_energy_the_solver_creates_in_one_copy_ends_that_copy_alone(env_id):
 
 
 #: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
-DETERMINISM = {"envs: ClothFold-v1 (XPBD on a grid)": _DIGEST.format(env_id="tianim/ClothFold-v1"), "envs: RopeFlatten-v0 (XPBD on edges)": _DIGEST.format(env_id="tianim/RopeFlatten-v0")}
+DETERMINISM = {"envs: ClothFold-v1 (XPBD on a grid)": _DIGEST.format(env_id="tianim/ClothFold-v1"), "envs: RopeFlatten-v0 (XPBD on edges)": _DIGEST.format(env_id="tianim/RopeFlatten-v0"),
+               "envs: ClothFold-v2 (XPBD 2x1 on a grid)": _DIGEST.format(env_id="tianim/ClothFold-v2")}

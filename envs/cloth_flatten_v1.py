@@ -1,0 +1,80 @@
+"""ClothFlatten-v1: ClothFlatten-v0's task (SoftGym's ClothFlatten) on a cheaper step plan.
+
+## Description
+
+The task of ClothFlatten-v0 (:mod:`envs.cloth_flatten`) unchanged: the 64 x 64 cloth starts from
+one of the same :data:`envs.cloth_flatten.VARIATIONS` crumpled starts (generated once per process by
+v0's code and physics, so both versions start alike), turned about the vertical by an angle uniform
+in [-pi, pi); two SoftGym pickers spread it. Spaces, rewards, ``info``, seeds (copy k = seed k) and
+episode end are v0's (see its docstring for the tables); only the physics plan per frame differs.
+
+| space / quantity       | value                                                              |
+|------------------------|--------------------------------------------------------------------|
+| action                 | ``Box(-1, 1, (8,), float32)``: per picker (dx, dy, dz) x 1 cm per repeat, pick > 0 |
+| observation            | ``Box(-3, 3, (18,), float32)``: 4 corners then 2 pickers [m]      |
+| reward = performance A | covered area on SoftGym's 100 x 100 grid [m^2]                      |
+| normalized_performance | ``(A - A0) / (A_max - A0)``                                        |
+| horizon                | 100 env steps, 8 repeats of 0.01 s each                            |
+
+## Physics (fixed for version 1)
+
+XPBD with :data:`SUBSTEPS` = 4 substeps x :data:`ITERATIONS` = 1 symmetric sweep per 0.01 s frame
+(v0: 4 x 2), no self-collision (as v0). Half of v0's sweeps, and not ClothFold-v2's 2 x 1: the
+coverage reward grows when the cloth stretches, and the cheaper plans stretch a pulled cloth more.
+Measured with the scripted ClothFlattenCorners over seeds 0-19 (final normalized performance, mean
++- sd; paired difference to v0 +- its standard error; 2 shared cores):
+
+| plan (substeps x sweeps) | score           | difference to v0 | largest score | 20 copies x 100 steps |
+|--------------------------|-----------------|------------------|---------------|-----------------------|
+| 4 x 2 (v0)               | 0.214 +- 0.331  |                  | 0.93          | 314 s                 |
+| 4 x 1 (v1)               | 0.327 +- 0.347  | +0.11 +- 0.09    | 1.02          | 247 s (loaded)        |
+| 2 x 1 (ClothFold-v2's)   | 0.482 +- 0.402  | +0.27 +- 0.12    | 1.03          | 79 s                  |
+
+At 2 x 1 the stretchier cloth is spread noticeably further by the same script (the task gets
+easier), so v1 keeps 4 substeps; the scores above 1 (coverage beyond the flat layout's A_max) are
+the stretch, at 4 x 1 as at 2 x 1. The script's score is bimodal per seed, so 20 seeds resolve
+only differences of ~0.2.
+
+## Differences from SoftGym (what remains)
+
+| SoftGym (FleX)                                   | here                                                   |
+|--------------------------------------------------|--------------------------------------------------------|
+| 4 substeps x 30 iterations per frame             | XPBD, 4 substeps x 1 symmetric sweep (stretchier)       |
+| the cloth self-collides                          | no self-collision: crumpled layers interpenetrate       |
+| 60..119 particles per side, 1000 cached variations settled by velocity thresholds | 64 x 64, 8 variations from fixed frame counts, turned at random |
+| pickers are collision spheres                    | pickers only carry the particle they hold              |
+| an extra frame before A0 is read; unbounded observations | none; ``Box(-3, 3)``                           |
+
+## Version History
+
+* v1: ClothFlatten-v0 on 4 x 1 XPBD sweeps per frame instead of 4 x 2 (same starts and task; new bits,
+  ``tests/golden/ClothFlatten-v1.npz``).
+* v0: SoftGym's ClothFlatten re-created (``envs/cloth_flatten.py``, frozen).
+"""
+
+from __future__ import annotations
+
+from . import _softgym as sg
+from .cloth_flatten import MAX_EPISODE_STEPS, ClothFlattenSim
+
+#: XPBD per 0.01 s frame (module docstring).
+SUBSTEPS, ITERATIONS = 4, 1
+
+
+class ClothFlattenV1Sim(ClothFlattenSim):
+    """B copies of ClothFlatten-v1: ClothFlatten-v0's task on the plan of the module docstring."""
+
+    SUBSTEPS, ITERATIONS = SUBSTEPS, ITERATIONS
+
+
+class ClothFlattenV1Env(sg.PickerEnv):
+    """Single ClothFlatten-v1 environment (see the module docstring)."""
+
+    sim_class = ClothFlattenV1Sim
+
+
+class ClothFlattenV1VectorEnv(sg.PickerVectorEnv):
+    """``num_envs`` ClothFlatten-v1 copies, all stepped in one physics launch per frame."""
+
+    sim_class = ClothFlattenV1Sim
+    default_max_episode_steps = MAX_EPISODE_STEPS
