@@ -17,7 +17,9 @@ flying with no event yet (an event ends its launch), where it is inside the coll
 friction is on. The operations of each particle are those of the scalar response of
 :mod:`tianim.kernels.contact` in the same order, so results are unchanged bit for bit (tested
 against digests of the former per-particle kernel); collider kinds and modes are compile-time
-constants of a variant, so no branch depends on them.
+constants of a variant, so no branch depends on them. The one branch of a substep is per group and
+per collider: its response runs only when some lane of the group is inside it (elsewhere the selects
+would keep every value), which skips the costliest part for particles in flight.
 """
 
 from tianim.kernels import cached_variants, kernel_types
@@ -185,36 +187,33 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
         return vsel(vn < 0, scale * vt - e * vn * n, vi)
 
     @ti.func
-    def collide(xi, vi, coll: ti.template(), g_norm, h, prad):
-        """Collider response of tianim.kernels.contact (restitution, Coulomb friction as an impulse,
-        e = 0 below the resting speed 2 |g| h; the position follows the friction's tangential velocity
-        change over the substep, so that static friction holds a particle on a slope below the friction
-        angle instead of creeping g sin(a) h^2 per substep), plus the modes: returns (x, v, event, hit),
+    def collide_one(xi, vi, coll: ti.template(), c: ti.template(), event, g_norm, h, prad):
+        """Collider row ``c``'s response of tianim.kernels.contact (restitution, Coulomb friction as an
+        impulse, e = 0 below the resting speed 2 |g| h; the position follows the friction's tangential
+        velocity change over the substep, so that static friction holds a particle on a slope below the
+        friction angle instead of creeping g sin(a) h^2 per substep), plus the modes, for a particle with
+        ``event`` so far this substep (an event ends the colliders' loop): returns (x, v, event, hit),
         hit = 1 when the particle bounced with a normal speed above the resting speed (resting contact is
         no event). ``prad`` [m]: the particle's radius (contact when phi < prad). Branch-free."""
-        event = 0
         hit = 0
         v_rest = 2 * g_norm * h
-        for c in ti.static(range(len(colliders))):
-            phi, n = surface(xi, coll, c, colliders[c][0])
-            phi -= prad
-            inside = (phi < 0) & (event == 0)
-            if ti.static(colliders[c][1] == KILL):
-                event = ti.select(inside, 2, event)
+        phi, n = surface(xi, coll, c, colliders[c][0])
+        phi -= prad
+        inside = (phi < 0) & (event == 0)
+        if ti.static(colliders[c][1] == KILL):
+            event = ti.select(inside, 2, event)
+        else:
+            xi = vsel(inside, xi - phi * n, xi)
+            if ti.static(colliders[c][1] == STICK):
+                vi = vsel(inside, ti.Vector.zero(real, dim), vi)
+                event = ti.select(inside, 3, event)
             else:
-                xi = vsel(inside, xi - phi * n, xi)
-                if ti.static(colliders[c][1] == STICK):
-                    vi = vsel(inside, ti.Vector.zero(real, dim), vi)
-                    event = ti.select(inside, 3, event)
-                else:
-                    hit = ti.select(inside & (vi.dot(n) < -v_rest), 1, hit)  # an impact, not resting contact
-                    vb = bounce(vi, n, coll[c, 1], coll[c, 2], v_rest)
-                    dv = vb - vi
-                    xi = vsel(inside & (coll[c, 2] > 0), xi + h * (dv - dv.dot(n) * n), xi)
-                    vi = vsel(inside, vb, vi)
+                hit = ti.select(inside & (vi.dot(n) < -v_rest), 1, hit)  # an impact, not resting contact
+                vb = bounce(vi, n, coll[c, 1], coll[c, 2], v_rest)
+                dv = vb - vi
+                xi = vsel(inside & (coll[c, 2] > 0), xi + h * (dv - dv.dot(n) * n), xi)
+                vi = vsel(inside, vb, vi)
         return xi, vi, event, hit
-
-
 
     @ti.kernel
     def step(x: t.vec_arr, v: t.vec_arr, age: real2d, life: real2d, alive: t.mask_arr, event: t.mask_arr,
@@ -254,8 +253,9 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
                         lives[u] = life[b, i]
             for _ in range(substeps):
                 acc_f = accel_lanes(xs, vs, forces, noise)
+                nx = ti.Matrix.zero(real, L, dim)
+                nv = ti.Matrix.zero(real, L, dim)
                 for u in ti.static(range(L)):
-                    act = (run[u] == 1) & (evs[u] == 0)  # flying and no event yet (an event ends its launch)
                     xi = row_of(xs, u)
                     vi = row_of(vs, u)
                     acc = gv + row_of(acc_f, u)
@@ -263,15 +263,38 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
                         acc += row_of(es, u)
                     vi += h * acc
                     xi += h * vi
-                    xi, vi, ev, hit = collide(xi, vi, coll, g_norm, h, prad)
+                    for a in ti.static(range(dim)):
+                        nx[u, a] = xi[a]
+                        nv[u, a] = vi[a]
+                evl = ti.Vector.zero(ti.i32, L)
+                hitl = ti.Vector.zero(ti.i32, L)
+                for c in ti.static(range(len(colliders))):
+                    # the response only where some lane is inside (one branch for the L lanes; outside it
+                    # the selects would keep every value, so skipping it changes no bit)
+                    touch = 0
+                    for u in ti.static(range(L)):
+                        phi_c, n_c = surface(row_of(nx, u), coll, c, colliders[c][0])
+                        touch |= ti.cast(phi_c - prad < 0, ti.i32)
+                    if touch != 0:
+                        for u in ti.static(range(L)):
+                            xi, vi, ev, hit = collide_one(row_of(nx, u), row_of(nv, u), coll, c, evl[u], g_norm,
+                                                          h, prad)
+                            evl[u] = ev
+                            hitl[u] = ti.max(hitl[u], hit)
+                            for a in ti.static(range(dim)):
+                                nx[u, a] = xi[a]
+                                nv[u, a] = vi[a]
+                for u in ti.static(range(L)):
+                    act = (run[u] == 1) & (evs[u] == 0)  # flying and no event yet (an event ends its launch)
+                    ev = evl[u]
                     age_u = ages[u] + h
                     ev = ti.select((age_u >= lives[u]) & (ev == 0), 1, ev)
-                    hits[u] += ti.select(act, hit, 0)
+                    hits[u] += ti.select(act, hitl[u], 0)
                     ages[u] = ti.select(act, age_u, ages[u])
                     evs[u] = ti.select(act, ev, evs[u])
                     for a in ti.static(range(dim)):
-                        xs[u, a] = ti.select(act, xi[a], xs[u, a])
-                        vs[u, a] = ti.select(act, vi[a], vs[u, a])
+                        xs[u, a] = ti.select(act, nx[u, a], xs[u, a])
+                        vs[u, a] = ti.select(act, nv[u, a], vs[u, a])
             for u in ti.static(range(L)):
                 i = q * L + u
                 if i < n:
