@@ -10,6 +10,7 @@ import pytest
 from tianim.bench import particles as bench
 
 KEYS = {"particle_steps_per_s", "numpy_particle_steps_per_s", "speedup_vs_numpy", "dem_particle_steps_per_s",
+        "curl_particle_steps_per_s", "curl_numpy_particle_steps_per_s", "curl_speedup_vs_numpy",
         "grid_query_s", "ckdtree_query_s", "grid_speedup_vs_ckdtree"}
 
 
@@ -24,6 +25,18 @@ def test_numpy_reference_agrees_with_tianim_through_ground_bounces():
     assert touched > 300
     assert np.max(np.abs(ps.x[0] - xr)) < 1e-4 and np.max(np.abs(ps.v[0] - vr)) < 2e-3
     assert np.all(xr[:, 1] >= 0)
+
+
+def test_numpy_curl_reference_agrees_with_tianim_and_the_noise_matters():
+    x, v = bench.initial_state(2000, seed=6)
+    ps = bench.make_system(x, v, curl=True)
+    for _ in range(3):
+        ps.step(bench.H, bench.SUBSTEPS)
+    xr, vr = bench.numpy_steps(x, v, 3 * bench.SUBSTEPS, curl=True)
+    assert np.max(np.abs(ps.x[0] - xr)) < 1e-4 and np.max(np.abs(ps.v[0] - vr)) < 2e-3
+    _, v_plain = bench.numpy_steps(x, v, 3 * bench.SUBSTEPS)
+    # the noise changed the velocities by far more than the tolerance: h * 30 substeps * ~amplitude
+    assert np.median(np.linalg.norm(vr - v_plain, axis=1)) > 0.02
 
 
 @pytest.mark.slow

@@ -8,7 +8,10 @@ Three parts, each checked for agreement before anything is timed; times are medi
   tianim: :class:`tianim.particles.ParticleSystem.step`. NumPy: :func:`numpy_steps`, the same model
   written as a skeptic would (structure of arrays, in-place ufuncs into preallocated buffers, the
   drag folded into one factor per particle, the contact response only on the particles below the
-  ground). Positions and velocities are compared (float32 tolerance) after the check run.
+  ground). Positions and velocities are compared (float32 tolerance) after the check run. Two
+  workloads, each at 100,000 and N particles: gravity + drag, and the same with curl noise
+  (:func:`curl_force`: 8 modes, 24 cosines per particle-substep in both). The two candidates are
+  timed in turn within each repeat (:func:`tianim.bench.common.median_times`).
 * **DEM** - 100,000 (``--quick``: 5,000) granular particles falling as a block onto the ground
   (:class:`tianim.particles.Granular`, the neighbour grid rebuilt every substep): particle-steps/s.
 * **Grid** - 1,000,000 (``--quick``: 20,000) uniform points in the unit cube, radius for about 10
@@ -17,7 +20,8 @@ Three parts, each checked for agreement before anything is timed; times are medi
   ``pairs()`` (each pair once) against ``cKDTree(x).query_pairs(r, output_type="ndarray")``; the same
   neighbour sets are checked first. Both include building the structure.
 
-Summary keys: ``particle_steps_per_s``, ``numpy_particle_steps_per_s``, ``speedup_vs_numpy``,
+Summary keys: ``particle_steps_per_s``, ``numpy_particle_steps_per_s``, ``speedup_vs_numpy`` (gravity +
+drag at N), ``curl_particle_steps_per_s``, ``curl_numpy_particle_steps_per_s``, ``curl_speedup_vs_numpy``,
 ``dem_particle_steps_per_s``, ``grid_query_s`` and ``ckdtree_query_s`` (the faster cKDTree method and
 the grid's time for the same output), ``grid_speedup_vs_ckdtree``; plus the other pairing.
 """
@@ -26,9 +30,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from tianim.bench.common import median_time, parser, print_table, write_json
+from tianim.bench.common import median_time, median_times, parser, print_table, write_json
 
 G, K_LIN, K_QUAD, E, MU, H, SUBSTEPS = -9.81, 0.2, 0.05, 0.5, 0.3, 1e-3, 10
+#: The curl-noise workload's field (:class:`tianim.particles.CurlNoise` options): amplitude [m/s^2], scale [m], modes.
+CURL_AMPLITUDE, CURL_SCALE, CURL_MODES = 3.0, 0.5, 8
 
 
 def initial_state(n, seed=0):
@@ -40,11 +46,19 @@ def initial_state(n, seed=0):
     return x, v
 
 
-def make_system(x, v):
+def curl_force():
+    from tianim.particles import CurlNoise
+
+    return CurlNoise(amplitude=CURL_AMPLITUDE, scale=CURL_SCALE, modes=CURL_MODES, seed=0)
+
+
+def make_system(x, v, curl=False):
+    """The bench model in tianim (``curl``: curl noise before the drag, as :class:`NumpyParticles`)."""
     from tianim.particles import Drag, ParticleSystem
     from tianim.physics import Ground
 
-    ps = ParticleSystem(len(x), forces=[Drag(linear=K_LIN, quadratic=K_QUAD)],
+    forces = ([curl_force()] if curl else []) + [Drag(linear=K_LIN, quadratic=K_QUAD)]
+    ps = ParticleSystem(len(x), forces=forces,
                         colliders=[Ground(restitution=E, friction=MU)], gravity=(0, G, 0))
     ps.x[0], ps.v[0] = x, v
     ps.alive[0] = 1
@@ -54,9 +68,11 @@ def make_system(x, v):
 
 class NumpyParticles:
     """The same model in NumPy: SoA float32 arrays and preallocated buffers (no temporaries per step
-    but the contact subset, which holds only the particles below the ground)."""
+    but the contact subset, which holds only the particles below the ground). ``curl``: add the
+    curl-noise acceleration of :func:`curl_force` (:func:`tianim.particles.forces.curl_noise`, in
+    float32, one mode at a time into preallocated buffers)."""
 
-    def __init__(self, x, v):
+    def __init__(self, x, v, curl=False):
         self.x = [np.ascontiguousarray(x[:, a]) for a in range(3)]
         self.v = [np.ascontiguousarray(v[:, a]) for a in range(3)]
         n = len(x)
@@ -66,6 +82,44 @@ class NumpyParticles:
         self.s = np.empty(n, np.float32)
         self.t = np.empty(n, np.float32)
         self.below = np.empty(n, bool)
+        self.curl = None
+        if curl:
+            from tianim.particles.forces import noise_table
+
+            tab = noise_table(curl_force(), 3).astype(np.float32)
+            self.curl = [tuple(np.float32(c) for c in row) for row in tab]
+            self.arg = np.empty(n, np.float32)
+            self.w = np.empty(n, np.float32)
+            self.tmp = np.empty(n, np.float32)
+            self.g = [np.empty(n, np.float32) for _ in range(9)]  # d psi_c / d y_a at 3 c + a
+            self.y = [np.empty(n, np.float32) for _ in range(3)]
+            self.a = [np.empty(n, np.float32) for _ in range(3)]
+
+    def _curl(self, h):
+        """h times the curl-noise accelerations into ``self.a`` (3 arrays (n,)): a = amplitude curl psi(x / scale)."""
+        y, g, arg, w, a = self.y, self.g, self.arg, self.w, self.a
+        for k in range(3):
+            np.divide(self.x[k], np.float32(CURL_SCALE), out=y[k])
+        for gi in g:
+            gi.fill(0)
+        for row in self.curl:
+            k, phi, amp = row[0:3], row[3:6], row[6:9]
+            np.multiply(y[0], k[0], out=arg)
+            for j in (1, 2):
+                np.multiply(y[j], k[j], out=w)
+                arg += w
+            for c in range(3):
+                np.add(arg, phi[c], out=w)
+                np.cos(w, out=w)
+                w *= amp[c]
+                for j in range(3):
+                    np.multiply(w, k[j], out=self.tmp)
+                    g[3 * c + j] += self.tmp
+        # curl: (g_zy - g_yz, g_xz - g_zx, g_yx - g_xy), times the amplitude and, for the update, h
+        scale = np.float32(CURL_AMPLITUDE * h)
+        for j, (p, q) in enumerate(((7, 5), (2, 6), (3, 1))):
+            np.subtract(g[p], g[q], out=a[j])
+            a[j] *= scale
 
     def step(self, h=H, substeps=SUBSTEPS):
         vx, vy, vz = self.v
@@ -74,6 +128,8 @@ class NumpyParticles:
         h32 = np.float32(h)
         v_rest = np.float32(2 * abs(G) * h)
         for _ in range(substeps):
+            if self.curl is not None:
+                self._curl(h)  # at the substep's start, as the kernel (a(x, v) before the update)
             # v += h (g - k v - c |v| v) = v (1 - h k - h c |v|) + h g
             np.multiply(vx, vx, out=s)
             np.multiply(vy, vy, out=t)
@@ -87,6 +143,9 @@ class NumpyParticles:
             vy *= s
             vz *= s
             vy += np.float32(h * G)
+            if self.curl is not None:
+                for q, a in zip(self.v, self.a):
+                    q += a
             for p, q in ((x, vx), (y, vy), (z, vz)):
                 np.multiply(q, h32, out=t)
                 p += t
@@ -114,34 +173,37 @@ class NumpyParticles:
                 self.alive &= self.age < self.life
 
 
-def numpy_steps(x, v, substeps=SUBSTEPS):
+def numpy_steps(x, v, substeps=SUBSTEPS, curl=False):
     """Positions and velocities after ``substeps`` substeps of the NumPy model ((n, 3) each)."""
-    ref = NumpyParticles(x, v)
+    ref = NumpyParticles(x, v, curl)
     ref.step(H, substeps)
     return np.stack(ref.x, 1), np.stack(ref.v, 1)
 
 
-def check_particles(n, seed=0, substeps=3 * SUBSTEPS):
+def check_particles(n, seed=0, substeps=3 * SUBSTEPS, curl=False):
     """Max |x_tianim - x_numpy| and |v| difference after the check run; raises if beyond float32 tolerance."""
     x, v = initial_state(n, seed)
-    ps = make_system(x, v)
+    ps = make_system(x, v, curl)
     for _ in range(substeps // SUBSTEPS):
         ps.step(H, SUBSTEPS)
-    xr, vr = numpy_steps(x, v, substeps)
+    xr, vr = numpy_steps(x, v, substeps, curl)
     dx, dv = float(np.max(np.abs(ps.x[0] - xr))), float(np.max(np.abs(ps.v[0] - vr)))
     if dx > 1e-4 or dv > 2e-3:
         raise AssertionError(f"N={n}: tianim and NumPy particles disagree (max |dx| {dx:.3g} m, |dv| {dv:.3g} m/s)")
     return dx, dv
 
 
-def run_particles(n, repeats):
-    dx, dv = check_particles(n)
+def run_particles(n, repeats, curl=False):
+    """One workload (gravity + drag + ground; ``curl``: and curl noise) at ``n`` particles: checked, then
+    timed with the two candidates interleaved within each repeat (medians)."""
+    dx, dv = check_particles(min(n, 100_000), curl=curl)
     x, v = initial_state(n, 1)
-    ps = make_system(x, v)
-    ref = NumpyParticles(x, v)
-    t_ti = median_time(lambda: ps.step(H, SUBSTEPS), repeats=repeats)
-    t_np = median_time(lambda: ref.step(H, SUBSTEPS), repeats=repeats)
-    return {"n_particles": n, "max_dx": dx, "max_dv": dv, "tianim_s": t_ti, "numpy_s": t_np,
+    ps = make_system(x, v, curl)
+    ref = NumpyParticles(x, v, curl)
+    t = median_times({"tianim": lambda: ps.step(H, SUBSTEPS), "numpy": lambda: ref.step(H, SUBSTEPS)}, repeats=repeats)
+    t_ti, t_np = t["tianim"], t["numpy"]
+    return {"workload": "gravity+drag+curl" if curl else "gravity+drag", "n_particles": n, "max_dx": dx, "max_dv": dv,
+            "tianim_s": t_ti, "numpy_s": t_np,
             "particle_steps_per_s": n * SUBSTEPS / t_ti, "numpy_particle_steps_per_s": n * SUBSTEPS / t_np,
             "speedup_vs_numpy": t_np / t_ti}
 
@@ -210,11 +272,13 @@ def main(argv=None) -> int:
     args = p.parse_args(argv)
     repeats = 1 if args.quick else args.repeats
     n_p, n_dem, n_grid = (20_000, 5_000, 20_000) if args.quick else (1_000_000, 100_000, 1_000_000)
-    prow = run_particles(n_p, repeats)
+    sizes = (n_p,) if args.quick else (100_000, n_p)
+    prows = [run_particles(n, repeats, curl) for curl in (False, True) for n in sizes]
+    prow, crow = prows[len(sizes) - 1], prows[-1]
     drow = run_dem(n_dem, repeats)
     grow = run_grid(n_grid, repeats)
     print("tianim bench particles (results checked equal first; medians; seconds)")
-    print_table([prow])
+    print_table(prows)
     print_table([drow])
     print_table([grow])
     pairs_faster = grow["ckdtree_pairs_s"] < grow["ckdtree_ball_s"]
@@ -224,6 +288,9 @@ def main(argv=None) -> int:
         "particle_steps_per_s": prow["particle_steps_per_s"],
         "numpy_particle_steps_per_s": prow["numpy_particle_steps_per_s"],
         "speedup_vs_numpy": prow["speedup_vs_numpy"],
+        "curl_particle_steps_per_s": crow["particle_steps_per_s"],
+        "curl_numpy_particle_steps_per_s": crow["numpy_particle_steps_per_s"],
+        "curl_speedup_vs_numpy": crow["speedup_vs_numpy"],
         "dem_particle_steps_per_s": drow["dem_particle_steps_per_s"],
         "grid_query_s": grid_s, "ckdtree_query_s": ckd_s, "grid_speedup_vs_ckdtree": ckd_s / grid_s,
         "ckdtree_method": "query_pairs" if pairs_faster else "query_ball_point",
@@ -231,7 +298,7 @@ def main(argv=None) -> int:
         "grid_speedup_half_vs_pairs": grow["speedup_half_vs_pairs"],
         "n_particles": n_p, "n_dem": n_dem, "n_points": n_grid,
     }
-    write_json(args.json, summary, particles=prow, dem=drow, grid=grow)
+    write_json(args.json, summary, particles=prow, particles_curl=crow, particle_runs=prows, dem=drow, grid=grow)
     return 0
 
 

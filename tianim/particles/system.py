@@ -280,6 +280,8 @@ class ParticleModel:
         for i, row in enumerate(coll):
             _check_magnitude(f"colliders[{i}]", row, self.dtype)
         self.colliders = tuple(colliders)
+        #: (kind, mode) per collider row: the step kernel's collider loop is unrolled for these
+        self.collider_kinds = tuple((int(row[0]), int(mode)) for row, mode in zip(coll, modes))
         if granular is not None and not isinstance(granular, Granular):
             raise TypeError(f"granular={fmt(granular)} must be a Granular(...)")
         self.granular = granular.check() if granular is not None else None
@@ -610,7 +612,8 @@ class ParticleSolver:
         snap = state.snapshot() if self.on_divergence == "rollback" else None
         from tianim.particles._kernels import particle_kernels
 
-        step, dem_accel = particle_kernels(np.dtype(model.dtype).name, model.dim, model.kinds, len(model.tables["modes"]))
+        step, dem_accel = particle_kernels(np.dtype(model.dtype).name, model.dim, model.kinds, model.collider_kinds,
+                                           model.granular is not None)
         B = state.batch
         t0 = state.t.copy()
         t1 = t0 + h * substeps
@@ -631,13 +634,13 @@ class ParticleSolver:
                 c["spawned"] += p
                 sub_dropped[:] += d
 
-        args = (k["g"], k["forces"], k["noise"], k["coll"], k["modes"], h)
+        args = (k["g"], k["forces"], k["noise"], k["coll"], h)
         if model.granular is None and not model.sub_emitters:
-            step(state.x, state.v, state.age, state.lifetime, state.alive, ev, extra, 0, *args, substeps, prad)
+            step(state.x, state.v, state.age, state.lifetime, state.alive, ev, extra, *args, substeps, prad)
             tally(substeps - 1)
         elif model.granular is None:  # sub-emitters: one substep per launch, so events are found where they happen
             for s in range(substeps):
-                step(state.x, state.v, state.age, state.lifetime, state.alive, ev, extra, 0, *args, 1, prad)
+                step(state.x, state.v, state.age, state.lifetime, state.alive, ev, extra, *args, 1, prad)
                 tally(s)
         else:
             grid = self._grid(model, B)
@@ -646,7 +649,7 @@ class ParticleSolver:
                                                                                on_overflow="report")
                 c["contact_overflow"] += np.count_nonzero(nb.counts > nb.max_neighbours, axis=1)
                 dem_accel(state.x, state.v, state.alive, nb.indices, nb.counts, model.dem, extra)
-                step(state.x, state.v, state.age, state.lifetime, state.alive, ev, extra, 1, *args, 1, prad)
+                step(state.x, state.v, state.age, state.lifetime, state.alive, ev, extra, *args, 1, prad)
                 tally(s)
             if c["contact_overflow"].any():
                 state.contact_overflow += c["contact_overflow"]
