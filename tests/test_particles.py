@@ -279,6 +279,24 @@ def test_bad_step_changes_nothing():
     assert np.array_equal(ps.x, x) and np.array_equal(ps.t, t)
 
 
+def test_solver_lanes_option_auto_rule_and_bad_values():
+    """lanes="auto" takes one particle per body below LANES_MIN_PARTICLES slots (batch x capacity) and the
+    host's lanes from it on; an explicit count is kept; anything else is refused naming the argument."""
+    from tianim.particles import system
+    from tianim.particles._kernels import step_lanes
+
+    small = ParticleSystem(1000).model
+    big = ParticleSystem(system.LANES_MIN_PARTICLES // 4).model
+    auto = system.ParticleSolver()
+    assert auto.lanes_for(small, 1) == 1 and auto.lanes_for(big, 3) == 1
+    assert auto.lanes_for(big, 4) == step_lanes("float32") > 1
+    assert system.ParticleSolver(lanes=8).lanes_for(small, 1) == 8
+    for bad in (3, 0, "8", 8.0, True, None):
+        with pytest.raises(ValueError, match="lanes="):
+            system.ParticleSolver(lanes=bad)
+
+
+@pytest.mark.slow  # path equality: compiles the lanes kernel with every collider mode twice (~1-2 min cold)
 def test_lane_kernel_equals_one_particle_per_body_bit_for_bit():
     """The SIMD-lane step (step_lanes particles per body, branch-free selects) against the same kernel with
     one particle per body, on a pool whose size is no multiple of the lanes, with every collider kind and
