@@ -44,17 +44,17 @@ def test_sb3_check_env_and_adapter(env_id):
         warnings.simplefilter("always")
         sb3_check_env(env, warn=True)
     assert not [w for w in caught if "stable_baselines3" in str(w.filename)], [str(w.message) for w in caught]
-    venv = SB3VecEnv(env_id, num_envs=3, seed=5)
+    steps = 6  # a shortened episode: the time-limit convention is the same at any horizon
+    venv = SB3VecEnv(env_id, num_envs=3, seed=5, max_episode_steps=steps)
     obs = venv.reset()
     assert obs.shape == (3, *env.observation_space.shape)
-    steps = env.spec.max_episode_steps
     for t in range(steps):
         obs, rew, dones, infos = venv.step(np.zeros((3, *env.action_space.shape), np.float32))
         if t < steps - 1:
             assert not dones.any()
     # SB3 convention: reset in the same step, last observation in the infos.
     assert dones.all() and all(i["TimeLimit.truncated"] for i in infos)
-    single = gym.make(env_id)
+    single = gym.make(env_id, max_episode_steps=steps)
     single.reset(seed=6)  # copy 1 of a batch seeded with 5
     for _ in range(steps):
         last, *_ = single.step(np.zeros(env.action_space.shape, np.float32))
