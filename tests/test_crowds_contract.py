@@ -167,6 +167,25 @@ def test_bad_input_names_the_argument(make, exc, match):
         make()
 
 
+@pytest.mark.parametrize("n", [3, 700, 5000])  # one fused test (<= 4096 entries in all), and the sum path
+def test_all_finite_finds_any_non_finite_entry_in_any_argument(n):
+    """``_all_finite`` (the per-step finiteness test) against ``np.isfinite`` entry by entry: mixed float32 /
+    float64 arguments, one nan, inf or -inf placed in each argument at its first, middle and last entry."""
+    from tianim.crowds.agents import _all_finite
+
+    rng = np.random.default_rng(n)
+    base = [rng.normal(size=(1, n, 2)).astype(np.float32), rng.normal(size=(1, n, 2)), rng.normal(size=1)]
+    assert _all_finite(*base) and _all_finite()
+    for k, a in enumerate(base):
+        for pos in (0, a.size // 2, a.size - 1):
+            for bad in (np.nan, np.inf, -np.inf):
+                arrays = [b.copy() for b in base]
+                arrays[k].reshape(-1)[pos] = bad
+                assert not _all_finite(*arrays) and not all(np.isfinite(b).all() for b in arrays), (k, pos, bad)
+    big = [np.full(10, 3e38, np.float32), np.full(3, 1e308)]  # finite entries whose sums overflow
+    assert _all_finite(*big)
+
+
 @pytest.mark.parametrize("kind", MODELS)
 @pytest.mark.parametrize("call, exc, match", [
     (lambda m, s, o: CrowdSolver().step(m, s, float("nan")), ValueError, "dt=nan"),

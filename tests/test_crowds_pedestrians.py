@@ -185,6 +185,59 @@ def test_orca_copy_kernel_equals_agent_kernel_and_any_chunking_bit_for_bit():
         assert all(np.array_equal(p, q, equal_nan=True) for p, q in zip(ref, got)), (copy_kernel, calls)
 
 
+def _one_copy_run(calls, solver=None, model_kw=None):
+    a, g = circle_scenario(7, 2.0)
+    g[:, ::3] = 0.6 * a.x[:, ::3]  # some arrive within the run: arrival times are compared too
+    m = ORCA(goals=g, radius=0.2, pref_speed=1.0, arrival_radius=0.3, **(model_kw or {}))
+    st, s = m.state(a), solver or CrowdSolver()
+    for dt, substeps in calls:
+        s.step(m, st, dt, substeps)
+    return st
+
+
+_CALLS = [(0.25, 1)] * 5 + [(0.1, 3), (0.25, 1)]
+_OUT = ("x", "v", "heading", "t", "ticks", "arrival_time", "closest")
+
+
+def test_orca_one_copy_serial_kernel_equals_the_parallel_copy_kernel_bit_for_bit(monkeypatch):
+    """One copy steps in the serial variant of the copy kernel (no thread-pool dispatch): the same bits as
+    the parallel variant it replaces, with dt and substeps changing between calls."""
+    from tianim.crowds import _orca_kernels
+
+    real = _orca_kernels.orca_copy_kernels
+    used = []
+    monkeypatch.setattr(_orca_kernels, "orca_copy_kernels", lambda name, serial=False: used.append(serial) or
+                        real(name, serial))
+    fast = _one_copy_run(_CALLS)
+    assert used and all(used)  # one copy: the serial variant every call
+    monkeypatch.setattr(_orca_kernels, "orca_copy_kernels", lambda name, serial=False: used.append(serial) or
+                        real(name, False))
+    slow = _one_copy_run(_CALLS)
+    for name in _OUT:
+        assert np.array_equal(getattr(fast, name), getattr(slow, name), equal_nan=True), name
+
+
+def test_orca_parameter_row_follows_the_model_and_dt_when_a_solver_steps_two_models():
+    """The kernels' parameter row is kept between calls and rewritten only for another model or dt: two
+    models of the same shapes stepped in turn by one solver (they share its buffers) give the bits each
+    gives with a solver of its own."""
+    kws = [dict(time_horizon=1.0), dict(time_horizon=3.0, max_speed=1.5)]
+    a, g = circle_scenario(7, 2.0)
+    models = [ORCA(goals=g, radius=0.2, pref_speed=1.0, neighbour_dist=3.0, **kw) for kw in kws]  # one grid
+    shared, states = CrowdSolver(), [m.state(a) for m in models]
+    for dt, substeps in _CALLS:
+        for m, st in zip(models, states):
+            shared.step(m, st, dt, substeps)
+    assert len(shared._work) == 1  # the two did share the buffers
+    for m, st in zip(models, states):
+        own, alone = m.state(a), CrowdSolver()
+        for dt, substeps in _CALLS:
+            alone.step(m, own, dt, substeps)
+        for name in _OUT:
+            assert np.array_equal(getattr(st, name), getattr(own, name), equal_nan=True), name
+    assert not np.array_equal(states[0].x, states[1].x)  # the two models do differ
+
+
 @pytest.mark.parametrize("copy_kernel", [True, False])
 def test_orca_takes_the_max_neighbors_nearest_within_neighbour_dist(copy_kernel):
     """RVO2's neighbour rule, checked by brute force: each agent's K nearest others strictly closer than

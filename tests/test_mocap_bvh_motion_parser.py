@@ -47,6 +47,8 @@ def _variants():
     yield "runs_of_spaces", head + b"\n" + b"\n".join(b"  " + r.strip().replace(b" ", b"   ") + b"  " for r in rows)
     yield "trailing_blank_lines", cmu.rstrip() + b"\n\n\n"
     yield "no_final_newline", cmu.rstrip()
+    yield "blank_line_before_frames", head + b"\n\n \n" + b"\n".join(rows) + b"\n"
+    yield "long_trailing_blanks", cmu.rstrip() + b"\n" + b" \t\n" * 2000  # past the fast path's edge scan
     sk = random_skeleton(9, seed=2)
     motion = random_motion(sk, 40, seed=2)
     motion = motion * np.array([1e-7, -3e5, 1.0])[np.arange(motion.shape[1]) % 3]
@@ -67,6 +69,19 @@ def test_fast_parser_equals_loadtxt_on_every_layout(name, data):
     got = parse_bvh(data).motion
     want = loadtxt_motion(data)
     assert got.shape == want.shape and np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("name,fast", [("as_is", True), ("trailing_blank_lines", True),
+                                       ("long_trailing_blanks", False), ("tabs", False)])
+def test_which_layouts_take_the_fast_path(monkeypatch, name, fast):
+    """Short blank runs at the ends stay on the fast path (found without copying the body); a blank run
+    longer than the edge scan, or tabs, leave it (and still read as loadtxt reads them, above)."""
+    data = dict(_variants())[name]
+    calls = []
+    real = bvh._fast_values
+    monkeypatch.setattr(bvh, "_fast_values", lambda *a: calls.append(r := real(*a)) or r)
+    parse_bvh(data)
+    assert len(calls) == 1 and (calls[0] is not None) == fast
 
 
 def test_the_cmu_file_takes_the_fast_path(monkeypatch):

@@ -16,14 +16,17 @@
   distance is taken at every step (tianim: the kernel's own nearest-neighbour record, ``ORCA.closest``;
   pyrvo: a grid query after each step). First, tianim with ``safety=0, perturbation=0`` (RVO2 exactly) and pyrvo run the
   same scenario for 150 steps and must agree to 1e-3 m.
-* **ORCA per call** (CrowdNav's pattern: one 0.25 s step per call, N = 1, 5, 20, 100 on a 4 m circle):
-  milliseconds per call through kept launch contexts and through Taichi's ordinary kernel call, in turn.
+* **ORCA per call** (CrowdNav's pattern: one 0.25 s step per call of one copy, N = 1, 5, 10, 50, 100 on
+  a 4 m circle): milliseconds per call through kept launch contexts and through Taichi's ordinary kernel
+  call, in turn, and the kernel call alone both ways (``kernel_ms``; ``ms_per_call - kernel_ms`` is
+  tianim's per-call Python: argument and state checks, the rollback snapshot, the counts).
 * **Mesa** (ABMFrameworksComparison flocking: 200 birds, 100 steps): Mesa's own ``BoidFlockers``
   example (its own rules and parameters) where Mesa is importable, otherwise skipped with the reason
   printed; beside it tianim's benchmark flock at the same size (indicative: the rules differ).
 
 Summary keys: ``boids_agent_steps_per_s``, ``speedup_vs_numpy`` and ``speedup_vs_sparse_numpy`` (N = 10 k; ``--quick``: 4 k),
-``orca_ms_per_step``, ``pyrvo_ms_per_step``, ``orca_ms_per_call_5_agents`` (and ``orca_ordinary_ms_per_call_5_agents``), ``orca_speedup_vs_pyrvo``, ``orca_min_distance_over_2r``
+``orca_ms_per_step``, ``pyrvo_ms_per_step``, ``orca_ms_per_call_5_agents`` (and ``_10_agents``, ``_50_agents``,
+``orca_ordinary_ms_per_call_5_agents``), ``orca_speedup_vs_pyrvo``, ``orca_min_distance_over_2r``
 (and ``pyrvo_min_distance_over_2r``); pyrvo's keys are null where it is not importable.
 """
 
@@ -178,7 +181,7 @@ def run_orca(n, R, max_steps=6000, chunk=4):
             "all_arrived": bool(agents.arrived().all())}
 
 
-def run_orca_per_call(sizes=(1, 5, 20, 100), repeats=200):
+def run_orca_per_call(sizes=(1, 5, 10, 50, 100), repeats=200):
     """ORCA's cost per call as CrowdNav pays it (one step of 0.25 s per call, CrowdNav-v0's humans'
     settings, N agents on a 4 m circle), through kept launch contexts (:mod:`tianim.crowds._launch`)
     and through Taichi's ordinary kernel call, timed in turn (medians [ms]); at each N also the
@@ -312,7 +315,8 @@ def main(argv=None) -> int:
         "pyrvo_min_distance_over_2r": pr["min_distance_over_2r"] if pr else None,
         "mesa_agent_steps_per_s": 200 * 100 / mesa_s if mesa_s else None,
         "boids_200_agent_steps_per_s": 200 * 100 / ti_s,
-        "orca_ms_per_call_5_agents": next(r["ms_per_call"] for r in per_call if r["n_agents"] == 5),
+        **{f"orca_ms_per_call_{n}_agents": next(r["ms_per_call"] for r in per_call if r["n_agents"] == n)
+           for n in (5, 10, 50)},
         "orca_ordinary_ms_per_call_5_agents": next(r["ordinary_ms_per_call"] for r in per_call if r["n_agents"] == 5),
     }
     write_json(args.json, summary, boids=rows, orca=orca_rows, orca_per_call=per_call, mesa_skipped=why)

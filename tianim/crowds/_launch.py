@@ -36,6 +36,7 @@ _seen: dict = {}  # keys launched once the ordinary way (an entry is made at the
 _lock = threading.Lock()
 _unsupported = set()  # ids of kernels (held in _held) whose arguments the shortcut cannot take
 _held = []
+_ndarray = np.ndarray
 
 
 class _Entry:
@@ -49,7 +50,12 @@ class _Entry:
 def _key(kernel, args) -> tuple | None:
     key = [id(kernel)]
     for a in args:
-        if isinstance(a, np.ndarray):
+        t = type(a)  # the common exact types first (a call's key is built every launch)
+        if t is _ndarray:
+            key.append((id(a), a.shape, a.dtype))
+        elif t is float or t is int:
+            key.append(t)
+        elif isinstance(a, np.ndarray):
             key.append((id(a), a.shape, a.dtype))
         elif isinstance(a, (bool, np.bool_)):
             return None

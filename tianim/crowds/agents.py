@@ -225,11 +225,13 @@ class CrowdState(Agents):
 
 
 def _all_finite(*arrays) -> bool:
-    """True when every entry is finite: small arrays by the exact test, large ones by one sum per array
-    first (the exact test only when a sum is not finite; the error-state switch costs more than a
-    small array's test, about 3 us a call)."""
-    if all(a.size <= _SMALL for a in arrays):
-        return all(np.isfinite(a).all() for a in arrays)
+    """True when every entry is finite: small arrays by the exact test, on all of them at once (one
+    flattened concatenation: one isfinite and one all instead of two calls per array, about 1 us each
+    at CrowdNav's sizes; float32 values are finite exactly when their float64 casts are), large ones by
+    one sum per array first (the exact test only when a sum is not finite; the error-state switch costs
+    more than a small array's test, about 3 us a call)."""
+    if sum(a.size for a in arrays) <= _SMALL:
+        return not arrays or bool(np.isfinite(np.concatenate(arrays, axis=None)).all())
     with np.errstate(invalid="ignore", over="ignore"):  # inf - inf in a sum: the exact test decides
         for a in arrays:
             if a.size and not math.isfinite(a.sum()) and not np.all(np.isfinite(a)):
@@ -252,15 +254,16 @@ def check_agents(agents, dim=None, name="agents") -> Agents:
         if a.shape != x.shape or a.dtype != x.dtype or not a.flags.c_contiguous:
             raise ValueError(f"{name}.{a_name} has shape {a.shape}, dtype {a.dtype}; expected a C-contiguous "
                              f"{x.shape} {x.dtype} array (assign into it, x[...] = ..., not over it)")
-    if not _all_finite(x, agents.v, agents.heading):
+    t = agents.t
+    t_ok = isinstance(t, np.ndarray) and t.shape == (agents.batch,) and t.dtype == np.float64
+    if not (t_ok and _all_finite(x, agents.v, agents.heading, t)):  # one test; on failure the messages in order
         for a_name in ("x", "v", "heading"):
             a = getattr(agents, a_name)
             if not np.all(np.isfinite(a)):
                 bad = np.argwhere(~np.isfinite(a))[0]
                 raise ValueError(f"{name}.{a_name}{[int(i) for i in bad]} is not finite; give finite values")
-    t = agents.t
-    if not (isinstance(t, np.ndarray) and t.shape == (agents.batch,) and t.dtype == np.float64 and _all_finite(t)):
-        raise ValueError(f"{name}.t must be a finite ({agents.batch},) float64 array of times [s]")
+        if not (t_ok and _all_finite(t)):
+            raise ValueError(f"{name}.t must be a finite ({agents.batch},) float64 array of times [s]")
     return agents
 
 

@@ -16,7 +16,8 @@ max_speed``, by RVO2's linear programs (:mod:`tianim.crowds._orca_kernels`); the
 ``x += dt v``.
 
 Launches: crowds of at most :data:`COPY_KERNEL_MAX_AGENTS` agents per copy run all the steps of a
-call in one launch, parallel over copies (``orca_copy_kernels``); larger ones run up to
+call in one launch, parallel over copies (``orca_copy_kernels``; a single copy in the launching thread,
+without the thread pool's dispatch); larger ones run up to
 :data:`MAX_STEPS_PER_LAUNCH` unrolled steps per launch, parallel over agents; both give the same
 bits. Neighbours: before every step the launch rebuilds a :class:`tianim.spatial.NeighbourGrid` (cells of ``neighbour_dist / 2``) and each agent
 takes its ``max_neighbors`` nearest within ``neighbour_dist`` straight from the cells
@@ -132,13 +133,16 @@ class ORCA(PedestrianModel):
         K = self.max_neighbors
         return dict(grid=self._grid(state), work=np.zeros((B, N, K, 8), f), out=np.zeros((B, N, 6), f),
                     nd=np.zeros((B, N, K), f), ni=np.zeros((B, N, K), np.int32), target=np.zeros((B, N, 4), f),
-                    prm=np.zeros(8, f))
+                    prm=np.zeros(8, f), prm_of=(None, None), name=np.dtype(f).name)
 
     def _advance(self, state: CrowdState, dt, steps, w) -> dict:
-        f = state.x.dtype
-        prm = self._prm(f, dt, w["prm"])  # the same arrays every call: launches reuse their context
+        made_for = w["prm_of"]  # (model, dt) the row was written for (a solver's buffers serve any model)
+        if made_for[0] is not self or made_for[1] != dt:  # the same array every call: launches reuse their
+            self._prm(state.x.dtype, dt, w["prm"])  # kept context; rewritten only for another model or dt
+            w["prm_of"] = (self, dt)
+        prm = w["prm"]
         geom, dims, cell, start, order, xs = w["grid"].kernel_buffers
-        name = np.dtype(f).name
+        name = w["name"]
         args = (state.x, state.v, state.heading, self._target(state, w["target"]), prm, w["work"], w["nd"], w["ni"],
                 w["out"], state.arrival_time, state.t, state.ticks, state.closest, geom, dims, cell, start, order, xs,
                 self.neighbour_dist)
@@ -149,8 +153,8 @@ class ORCA(PedestrianModel):
         k = self.steps_per_launch  # agent path: k unrolled steps a launch; copy path: all steps in one launch
         chunks = [steps] if copy else [k] * (steps // k) + [1] * (steps % k)
         for chunk in chunks:
-            if copy:
-                launch(orca_copy_kernels(name), *args, chunk)
+            if copy:  # one copy: the serial variant (no thread-pool dispatch; same bits)
+                launch(orca_copy_kernels(name, state.batch == 1), *args, chunk)
             else:
                 launch(orca_kernels(name, chunk), *args)  # two compiled variants at most
             state.ticks += chunk
