@@ -142,6 +142,7 @@ class ClothFlattenSim(sg.PickerSim):
     SUBSTEPS, ITERATIONS = sg.CLOTH_SUBSTEPS, sg.CLOTH_ITERATIONS
     PICKER = sg.CLOTH_PICKER
     KEYPOINTS = KEYPOINTS
+    OPTIONS = ("picker_colliders",)  # envs._softgym_variations.configure
     A_MAX = None
     RESET_DRAWS = 2
 

@@ -182,6 +182,7 @@ class RopeFlattenSim(sg.PickerSim):
     PICKER = PICKER
     KEYPOINTS = KEYPOINTS
     RESET_DRAWS = 2
+    OPTIONS = ("picker_colliders", "self_collision")  # envs._softgym_variations.configure
 
     def _start(self, idx, u):
         x = self.state.x
