@@ -136,12 +136,15 @@ def cache_path(sim_class) -> Path:
     return cache_dir() / f"cloth-{m.grid.nx}x{m.grid.ny}-{digest}.npy"
 
 
-def settle(sim_class) -> tuple:
-    """SoftGym's settling (module docstring) of ``sim_class``'s flat cloth on its physics, uncached:
-    ``(positions (N, 3) float32 [m] centred in x and z, frames run)``. The last frame's largest
-    |velocity component| is below :data:`STILL` unless ``frames == FIRST_FRAMES + MAX_WAIT``."""
+def settle(sim_class, start=None) -> tuple:
+    """SoftGym's settling (module docstring) of ``sim_class``'s cloth on its physics, uncached, from
+    ``start`` (N, 3) [m] at rest (default the model's flat layout on the table, as SoftGym sets it):
+    ``(positions (N, 3) float32 [m] centred in x and z, frames run, largest |velocity component| [m/s]
+    after the last frame)``; that speed is below :data:`STILL` unless ``frames == FIRST_FRAMES + MAX_WAIT``."""
     model = sim_class.MODEL()
     state = model.state(batch=1, dtype=np.float32)
+    if start is not None:
+        state.x[0] = np.asarray(start, np.float32)
     solver = tp.XPBD(iterations=sim_class.ITERATIONS, watchdog=False, **sim_class.SOLVER_OPTIONS)
     h = sg.FRAME_DT / sim_class.SUBSTEPS
     frames = 0
@@ -155,7 +158,7 @@ def settle(sim_class) -> tuple:
             break
     x = state.x[0].copy()
     x[:, [0, 2]] -= x[:, [0, 2]].mean(axis=0, keepdims=True)  # center_object
-    return x.astype(np.float32), frames
+    return x.astype(np.float32), frames, float(np.abs(state.v).max())
 
 
 _MEMO: dict = {}
@@ -281,6 +284,7 @@ class CollidingPickers(sg.Pickers):
 
     DISTANCE = sg.CLOTH_REST_HEIGHT
     FLOOR = sg.CLOTH_REST_HEIGHT
+    MU = sg.CLOTH_FRICTION
     PROJECTIONS = 32
 
     def __init__(self, batch: int, **kwargs):
@@ -295,20 +299,24 @@ class CollidingPickers(sg.Pickers):
         self.before = self.pos.copy()
         super().act(state, action)
 
-    def push(self, state, centres: np.ndarray, previous: np.ndarray, h: float) -> None:
+    def push(self, state, centres: np.ndarray, previous: np.ndarray, h: float, start: np.ndarray) -> None:
         """Push the free particles of ``state`` out of the spheres at ``centres`` (B, P, 3) [m], which were
-        at ``previous`` (B, P, 3) one substep ``h`` [s] earlier.
+        at ``previous`` (B, P, 3) one substep ``h`` [s] earlier, when the particles were at ``start`` (B, N, 3).
 
         Every free particle closer than ``R = radius + DISTANCE`` to a centre c (``DISTANCE`` FleX's
         particle-shape collision distance: the table's rest height in these tasks) is projected onto that
         sphere along ``n = (x - c) / |x - c|`` (straight up from the centre when x = c), alternating with the
         table's half-space ``y >= FLOOR`` (:data:`PROJECTIONS` rounds, Gauss-Seidel between the two
         constraints as FleX's iterations resolve a particle squeezed between a shape and the table; it ends
-        on the table's side), and its velocity gets the inelastic kinematic-contact response, the normal
-        component at least the sphere's own: ``v += max(0, (u - v) . n) n``, ``u = (c - c_prev) / h``
-        (Mueller et al. 2007, "Position Based Dynamics", section 3.5), then on the table no downward velocity
-        (the table's inelastic response). Pinned particles (the held ones,
-        inverse mass 0 as in FleX) do not move. In float64, written back in the state's dtype."""
+        on the table's side). Friction as FleX's particle-shape contacts (Macklin et al. 2014, "Unified
+        Particle Physics for Real-Time Applications", eq. 24, with FleX's ``dynamicFriction`` = the table's
+        friction ``MU`` here): the particle's displacement over the substep relative to the sphere,
+        tangential part ``dx_t``, is taken back by ``dx_t min(1, MU d / |dx_t|)``, d the depth pushed out.
+        Velocity: the inelastic kinematic-contact response (Mueller et al. 2007, "Position Based Dynamics",
+        section 3.5), the normal component at least the sphere's, ``v += max(0, (u - v) . n) n`` with
+        ``u = (c - c_prev) / h``, the tangential velocity relative to the sphere scaled by the same friction
+        factor, and on the table no downward velocity. Pinned particles (the held ones, inverse mass 0 as in
+        FleX) do not move. In float64, written back in the state's dtype."""
         x, v = state.x, state.v
         R = self.radius + self.DISTANCE
         c = np.asarray(centres, np.float64)                               # (B, P, 3)
@@ -318,23 +326,40 @@ class CollidingPickers(sg.Pickers):
             return
         bs, ps, ns = np.nonzero(near)
         ctr = c[bs, ps]
-        p = x[bs, ns].astype(np.float64)
         up = np.array([0.0, 1.0, 0.0])
-        for _ in range(self.PROJECTIONS):
+
+        def normal(p):
             dd = p - ctr
             dist = np.sqrt(np.einsum("ki,ki->k", dd, dd))
-            inside = dist < R
-            if not inside.any():
-                break
-            n = np.where((dist > 0)[:, None], dd / np.where(dist > 0, dist, 1.0)[:, None], up)
-            p = np.where(inside[:, None], ctr + n * R, p)
-            p[:, 1] = np.maximum(p[:, 1], self.FLOOR)
-        dd = p - ctr
-        dist = np.sqrt(np.einsum("ki,ki->k", dd, dd))
-        n = np.where((dist > 0)[:, None], dd / np.where(dist > 0, dist, 1.0)[:, None], up)
-        u = (ctr - np.asarray(previous, np.float64)[bs, ps]) / h           # sphere velocity [m/s]
+            return np.where((dist > 0)[:, None], dd / np.where(dist > 0, dist, 1.0)[:, None], up), dist
+
+        def project(p):
+            for _ in range(self.PROJECTIONS):
+                n, dist = normal(p)
+                inside = dist < R
+                if not inside.any():
+                    break
+                p = np.where(inside[:, None], ctr + n * R, p)
+                p[:, 1] = np.maximum(p[:, 1], self.FLOOR)
+            return p
+
+        p0 = x[bs, ns].astype(np.float64)
+        depth = R - normal(p0)[1]
+        p = project(p0)
+        n = normal(p)[0]
+        move = ctr - np.asarray(previous, np.float64)[bs, ps]              # the sphere's move this substep
+        rel = (p - start[bs, ns].astype(np.float64)) - move
+        tang = rel - np.einsum("ki,ki->k", rel, n)[:, None] * n
+        size = np.sqrt(np.einsum("ki,ki->k", tang, tang))
+        keep = np.minimum(1.0, self.MU * depth / np.where(size > 0, size, 1.0))
+        p = project(p - keep[:, None] * tang)
+        n = normal(p)[0]
+        u = move / h                                                        # sphere velocity [m/s]
         vv = v[bs, ns].astype(np.float64)
         vv += np.maximum(np.einsum("ki,ki->k", u - vv, n), 0.0)[:, None] * n
+        vr = vv - u
+        vt = vr - np.einsum("ki,ki->k", vr, n)[:, None] * n
+        vv -= keep[:, None] * vt
         floor = p[:, 1] <= self.FLOOR
         vv[floor, 1] = np.maximum(vv[floor, 1], 0.0)  # and the table's, when the rounds ended on it
         x[bs, ns] = p.astype(x.dtype)
@@ -354,9 +379,10 @@ class _PickerColliderSim:
         start, end = pk.before.astype(np.float64), pk.pos.astype(np.float64)
         previous = start
         for s in range(1, n + 1):
+            x0 = self.state.x.copy()
             diverged |= solver.step(self.model, self.state, h, 1).diverged
             centres = start + (end - start) * (s / n)
-            pk.push(self.state, centres, previous, h)
+            pk.push(self.state, centres, previous, h, x0)
             previous = centres
         pk.before = pk.pos.copy()  # the spheres are at rest until the next move
         return diverged
@@ -398,8 +424,9 @@ def _configured(sim_class, sizes, num_variations, settled_start, picker_collider
     cls, tags = sim_class, []
     if picker_colliders:
         model = sim_class.MODEL()
-        rest = float(model.collider_table[0, 3])  # the table's rest height = FleX's collision distance here
-        pickers = type("CollidingPickers", (CollidingPickers,), dict(DISTANCE=rest, FLOOR=rest))
+        # the table's rest height = FleX's collision distance, its friction = FleX's dynamicFriction (all shapes)
+        rest, mu = float(model.collider_table[0, 3]), float(model.collider_table[0, 2])
+        pickers = type("CollidingPickers", (CollidingPickers,), dict(DISTANCE=rest, FLOOR=rest, MU=mu))
         cls = type(cls.__name__ + "_pickers", (_PickerColliderSim, cls), dict(PICKER_CLASS=pickers))
         tags.append("pickers")
     if self_collision:
