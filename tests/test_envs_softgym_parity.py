@@ -244,3 +244,28 @@ def test_rope_self_collision_keeps_flex_rope_radius_apart():
     for _ in range(3):
         sim.step(np.zeros((1, 8), np.float32))
         assert closest(sim.state.x[0].astype(np.float64)) > 0.98 * sc.thickness
+
+
+_DIGEST = r"""
+import hashlib, os, tempfile
+os.environ["TIANIM_CACHE_DIR"] = tempfile.mkdtemp()
+import gymnasium as gym, numpy as np
+import envs
+env = gym.make_vec("{env_id}", num_envs=2, **{options})
+h = hashlib.sha256()
+obs, _ = env.reset(seed=5)
+h.update(obs.tobytes())
+rng = np.random.default_rng(1)
+for _ in range(2):
+    obs, r, *_ = env.step(rng.uniform(-1, 1, (2, 8)).astype(np.float32))
+    h.update(obs.tobytes()); h.update(r.tobytes())
+print(h.hexdigest())
+"""
+
+#: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
+DETERMINISM = {
+    "envs: ClothFold-v2 varied sizes, picker spheres": _DIGEST.format(
+        env_id="tianim/ClothFold-v2", options=dict(cloth_size=(8, 12), num_variations=4, picker_colliders=True)),
+    "envs: RopeFlatten-v1 self-collision, picker spheres": _DIGEST.format(
+        env_id="tianim/RopeFlatten-v1", options=dict(self_collision=True, picker_colliders=True)),
+}
