@@ -204,7 +204,8 @@ class VariedSim:
     The task sim's protocol (:class:`envs._softgym.PickerSim`: ``spaces``, ``reset_copies``, ``step``,
     ``observe``, ``save``/``restore``, ``frame``, ``metrics``, ``diverged``) over one batch-1 sim per copy,
     each of its variation's size (:func:`sized`, settled), rebuilt when a reset changes the size. One
-    physics launch per copy and frame: copy k equals a single env seeded alike, bit for bit.
+    physics launch per copy and frame: copy k equals a single env seeded alike, bit for bit. Its step's
+    metrics (``info``) add ``cloth_dimx``, ``cloth_dimy``: the copy's size (SoftGym's ``ClothSize``).
     Class attributes (set by :func:`configure`): ``BASE`` the task sim class, ``SIZES``, ``COUNT``, ``KEY``."""
 
     BASE = None
@@ -244,6 +245,8 @@ class VariedSim:
         self.diverged = np.array([bool(sim.diverged[0]) for sim in self.sims])
         keys = self.sims[0].metrics.keys()
         self.metrics = {key: np.array([sim.metrics[key][0] for sim in self.sims]) for key in keys}
+        self.metrics["cloth_dimx"] = np.array([float(sim.model.grid.nx) for sim in self.sims])  # SoftGym's
+        self.metrics["cloth_dimy"] = np.array([float(sim.model.grid.ny) for sim in self.sims])  # ClothSize
         return rewards
 
     def observe(self) -> np.ndarray:

@@ -131,6 +131,7 @@ def test_varied_sizes_keep_spaces_and_a_batch_copy_equals_the_single_env():
             o, r, *_ = single.step(a[k])
             assert np.array_equal(o, vo[k]) and r == vr[k]
     assert len(sizes) > 1  # the copies' sizes differ, and nothing else in the interface does
+    assert set(zip(vout[-1][4]["cloth_dimx"], vout[-1][4]["cloth_dimy"])) == sizes  # info says each size
 
 
 def test_bad_options_are_refused_naming_them():
