@@ -82,13 +82,15 @@ apart: the folded half rests on the other. Single env and batch run the same cod
   under random actions and about 6x during the scripted fold (``ClothFoldCorners``: 21 against
   3.5 env-steps/s for 4 copies on 2 shared cores; the neighbour lists are rebuilt about 14 times
   per env step, 25 % of the step, and the contact sweeps take 40 %).
-* One cloth size, 64 x 64 (SoftGym draws 60..119 per side per variation from 1000 cached
-  variations): the CPU steps 64 x 64 at a few env steps per second per core.
+* One cloth size, 64 x 64, by default (SoftGym draws 60..119 per side per variation from 1000 cached
+  variations: the option ``cloth_size="softgym"`` does, see ClothFold-v2's "Options", which this
+  version takes too): the CPU steps 64 x 64 at a few env steps per second per core.
 * XPBD with 4 x 2 sweeps per frame instead of FleX's 4 substeps x 30 iterations: a corner pulled
   at full speed stretches the springs next to it more than FleX's cloth (tianim's strain_limit
   solver option is not used in version 1).
-* The pickers are not collision spheres (in FleX they also push the cloth); the start is not
-  settled by simulation (the flat cloth is already at rest); observations have finite bounds.
+* The pickers are not collision spheres (in FleX they also push the cloth; option
+  ``picker_colliders``); the start is not settled by simulation (the flat cloth is already at rest;
+  option ``settled_start``); observations have finite bounds.
 
 ## Version History
 
