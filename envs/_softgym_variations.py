@@ -85,15 +85,16 @@ def check_cloth_size(cloth_size):
 
 
 def variation_draws(key: int, j: np.ndarray, sizes: tuple) -> tuple:
-    """Variation ``j`` (V,) of the configuration with 64-bit ``key``: ``(dimx (V,), dimy (V,), u (V,))``,
+    """Variation ``j`` (V,) of the configuration with 64-bit ``key``: ``(dimx (V,), dimy (V,), u (V, 2))``,
     each side uniform on ``sizes[0] .. sizes[1]`` (SoftGym's ``randint(60, 120)`` twice, dimx first) and
-    ``u`` uniform in [0, 1) (the turn, ``(u - 0.5) pi / 2``). Philox4x32-10 keyed by ``key``, counted by ``j``."""
+    ``u`` uniforms in [0, 1) (ClothFold: ``u[:, 0]`` the turn, ``(u - 0.5) pi / 2``; ClothFlatten: the
+    picked particle and the lift). Philox4x32-10 keyed by ``key``, counted by ``j``."""
     j = np.asarray(j, np.uint64).reshape(-1)
-    u = uniforms(np.full(j.size, key, np.uint64), j, 3)
+    u = uniforms(np.full(j.size, key, np.uint64), j, 4)
     lo, hi = sizes
     count = hi - lo + 1
     side = lo + np.minimum((u[:, :2] * count).astype(np.int64), count - 1)
-    return side[:, 0], side[:, 1], u[:, 2]
+    return side[:, 0], side[:, 1], u[:, 2:]
 
 
 # ----------------------------------------------------------------------------------------- sized tasks
@@ -107,6 +108,10 @@ def sized(base, nx: int, ny: int):
     attrs = dict(MODEL=staticmethod(lambda: sg.cloth_model(nx, ny)), NX=nx,
                  KEYPOINTS=np.array([0, nx * (ny - 1), nx - 1, nx * ny - 1]),
                  GROUP_A=grid[:, :half].ravel(), GROUP_B=np.flip(grid, axis=1)[:, :half].ravel())
+    if base.VARIATIONS_KIND == "crumpled":  # ClothFlatten: A_max of this size (SoftGym's _set_to_flatten)
+        from .cloth_flatten import flat_area
+
+        attrs["A_MAX"] = flat_area(nx, ny)
     return type(f"{base.__name__}_{nx}x{ny}", (base,), attrs)
 
 
@@ -129,11 +134,12 @@ def _physics_tag(sim_class) -> str:
     return ";".join(parts)
 
 
-def cache_path(sim_class) -> Path:
-    """The cache file of the settled cloth of ``sim_class`` (a :func:`sized` ClothFold sim class)."""
-    digest = hashlib.sha256(_physics_tag(sim_class).encode()).hexdigest()[:20]
+def cache_path(sim_class, kind: str = "cloth", extra: str = "") -> Path:
+    """The cache file of a layout of ``sim_class``'s cloth (a :func:`sized` sim class): ``kind`` and
+    ``extra`` (what else the layout depends on) name and key it with the physics."""
+    digest = hashlib.sha256((_physics_tag(sim_class) + ";" + extra).encode()).hexdigest()[:20]
     m = sim_class.MODEL()
-    return cache_dir() / f"cloth-{m.grid.nx}x{m.grid.ny}-{digest}.npy"
+    return cache_dir() / f"{kind}-{m.grid.nx}x{m.grid.ny}-{digest}.npy"
 
 
 def settle(sim_class, start=None) -> tuple:
@@ -167,17 +173,75 @@ _MEMO: dict = {}
 def settled_cloth(sim_class) -> np.ndarray:
     """The settled cloth of ``sim_class`` (N, 3) float32, read-only: from this process's memory, else
     from the cache file, else settled now (:func:`settle`) and written there (atomically)."""
-    path = cache_path(sim_class)
+    return _cached(cache_path(sim_class), sim_class.MODEL().n_particles, lambda: settle(sim_class)[0])
+
+
+#: ClothFlatten's generation (``generate_env_variation``): frames at most per phase, the stop speed, the
+#: frames SoftGym waits at least while holding, the lift (raised by ``LIFT_LOW + LIFT_SPAN u`` metres).
+CRUMPLE_WAIT, CRUMPLE_STILL, CRUMPLE_MIN_HOLD, LIFT_LOW, LIFT_SPAN = 300, 0.01, 5, 0.5, 0.5
+#: Frames over which the picked particle is raised (SoftGym raises it at once; module docstring).
+LIFT_FRAMES = 25
+
+
+def crumple(sim_class, pick: int, lift: float) -> tuple:
+    """SoftGym's ClothFlatten variation (``generate_env_variation``) of ``sim_class``'s cloth on its
+    physics, uncached: the flat cloth one frame; particle ``pick`` raised by ``lift`` [m] (over
+    :data:`LIFT_FRAMES` frames, SoftGym at once) and held, frames until every |v| < 0.01 m/s after at
+    least 5 (at most 300); released, frames until every velocity component (signed, as SoftGym's
+    ``curr_vel < 0.01``) is below 0.01 m/s (at most 300); centred in x and z. Returns
+    ``(positions (N, 3) float32 [m], frames run)``."""
+    model = sim_class.MODEL()
+    state = model.state(batch=1, dtype=np.float32)
+    solver = tp.XPBD(iterations=sim_class.ITERATIONS, watchdog=False, **sim_class.SOLVER_OPTIONS)
+    h = sg.FRAME_DT / sim_class.SUBSTEPS
+
+    def frame():
+        solver.step(model, state, h, sim_class.SUBSTEPS)
+
+    frame()
+    frames = 1
+    state.pinned[0, pick] = True
+    state.v[0, pick] = 0.0
+    start = state.x[0, pick].copy()
+    for f in range(LIFT_FRAMES):
+        state.x[0, pick] = start + np.float32((f + 1) / LIFT_FRAMES * lift) * np.array([0, 1, 0], np.float32)
+        frame()
+        frames += 1
+    for j in range(CRUMPLE_WAIT):
+        frame()
+        frames += 1
+        if j > CRUMPLE_MIN_HOLD and np.all(np.abs(state.v) < CRUMPLE_STILL):
+            break
+    state.pinned[0, pick] = False
+    for _ in range(CRUMPLE_WAIT):
+        frame()
+        frames += 1
+        if np.all(state.v < CRUMPLE_STILL):  # SoftGym: np.alltrue(curr_vel < stable_vel_threshold), signed
+            break
+    x = state.x[0].copy()
+    x[:, [0, 2]] -= x[:, [0, 2]].mean(axis=0, keepdims=True)  # center_object
+    return x.astype(np.float32), frames
+
+
+def crumpled_cloth(sim_class, pick: int, lift: float) -> np.ndarray:
+    """:func:`crumple`'s layout (N, 3) float32, read-only, cached as :func:`settled_cloth`'s."""
+    extra = f"crumple={CRUMPLE_WAIT},{CRUMPLE_STILL!r},{CRUMPLE_MIN_HOLD},{LIFT_FRAMES};pick={pick};lift={lift!r}"
+    return _cached(cache_path(sim_class, "crumpled", extra), sim_class.MODEL().n_particles,
+                   lambda: crumple(sim_class, pick, lift)[0])
+
+
+def _cached(path: Path, n: int, make) -> np.ndarray:
+    """The (n, 3) float32 layout at ``path``: from memory, else the file, else ``make()`` written there."""
     x = _MEMO.get(path)
     if x is None:
         try:
             x = np.load(path)
-            if x.shape != (sim_class.MODEL().n_particles, 3) or x.dtype != np.float32:
+            if x.shape != (n, 3) or x.dtype != np.float32:
                 x = None
         except (OSError, ValueError):
             x = None
         if x is None:
-            x = settle(sim_class)[0]
+            x = make()
             try:
                 path.parent.mkdir(parents=True, exist_ok=True)
                 tmp = path.with_suffix(f".{os.getpid()}.tmp.npy")
@@ -226,9 +290,15 @@ class VariedSim:
         return cls.BASE.spaces()
 
     def sim_class_of(self, j: int):
-        """The settled sized sim class of variation ``j`` and its turn uniform."""
+        """Variation ``j``: its sim class (sized, starting from its settled or crumpled layout) and the
+        uniforms its batch-1 sim resets from (ClothFold: the turn; ClothFlatten: variation 0 unturned)."""
         nx, ny, u = variation_draws(self.KEY, np.array([j]), self.SIZES)
-        return settled_sized(self.BASE, int(nx[0]), int(ny[0])), float(u[0])
+        nx, ny, u = int(nx[0]), int(ny[0]), u[0]
+        if self.BASE.VARIATIONS_KIND == "crumpled":
+            pick = min(int(u[0] * nx * ny), nx * ny - 1)        # SoftGym: random.randint(0, N - 1)
+            lift = LIFT_LOW + LIFT_SPAN * float(u[1])           # SoftGym: random() * 0.5 + 0.5
+            return crumpled_sized(self.BASE, nx, ny, pick, lift), np.array([0.0, 0.5])
+        return settled_sized(self.BASE, nx, ny), np.array([float(u[0])])
 
     def reset_copies(self, idx: np.ndarray, u: np.ndarray) -> None:
         """Copies ``idx`` (R,) take variations ``floor(u[:, 0] COUNT)`` (SoftGym's randint(num_variations))."""
@@ -237,7 +307,7 @@ class VariedSim:
             cls, turn = self.sim_class_of(j)
             if type(self.sims[k]) is not cls:
                 self.sims[k] = cls(1)
-            self.sims[k].reset_copies(np.zeros(1, np.int64), np.array([[turn]]))
+            self.sims[k].reset_copies(np.zeros(1, np.int64), turn[None])
             self.variation[k] = j
 
     def step(self, actions: np.ndarray) -> np.ndarray:
@@ -272,6 +342,18 @@ def settled_sized(base, nx: int, ny: int):
     """:func:`sized` ``base`` starting from its settled cloth."""
     cls = sized(base, nx, ny)
     return type(cls.__name__ + "_settled", (_SettledStart, cls), {})
+
+
+@lru_cache(maxsize=64)
+def crumpled_sized(base, nx: int, ny: int, pick: int, lift: float):
+    """:func:`sized` ClothFlatten ``base`` whose one start variation is :func:`crumpled_cloth` (unturned:
+    its reset uniforms are (0, 0.5), variation 0 turned by 0, i.e. left as it is)."""
+    cls = sized(base, nx, ny)
+
+    def _variation_starts(self):
+        return crumpled_cloth(cls, pick, lift)[None]
+
+    return type(cls.__name__ + f"_crumpled{pick}", (cls,), dict(_variation_starts=_variation_starts))
 
 
 # ----------------------------------------------------------------------------------------- pickers

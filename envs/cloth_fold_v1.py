@@ -128,6 +128,7 @@ class ClothFoldV1Sim(sg.PickerSim):
     GROUP_A, GROUP_B, NX = GROUP_A, GROUP_B, N  # the fold's halves and the grid's columns (per size)
     RESET_DRAWS = 1
     OPTIONS = ("cloth_size", "num_variations", "settled_start", "picker_colliders")
+    VARIATIONS_KIND = "settled"  # how envs._softgym_variations makes a sized variation
 
     def __init__(self, batch: int):
         super().__init__(batch)

@@ -110,11 +110,39 @@ def test_settled_start_of_the_fixed_cloth_is_the_settled_layout_turned():
     assert obs.shape == (18,) and abs(angle) <= np.pi / 4 + 1e-6
 
 
+@pytest.mark.parametrize("nx,ny", [(64, 64), (60, 119), (9, 13)])
+def test_flatten_area_of_each_size_is_its_full_rectangle(nx, ny):
+    """SoftGym's ``_set_to_flatten`` spreads nx x ny particles over ``linspace(0, n r, n)``: their +-r squares
+    cover every cell of the 100 x 100 grid over the box, so A_max = (nx r)(ny r) (to float32 rounding)."""
+    from envs.cloth_flatten import flat_area
+
+    r = sg.CLOTH_SPACING
+    assert flat_area(nx, ny) == pytest.approx(nx * ny * r * r, rel=1e-6)
+
+
+def test_crumpled_variation_follows_softgyms_generation(cache):
+    """ClothFlatten's generation on a 9 x 7 cloth: lifted by 0.5 m by one particle, held, dropped; it ends
+    still by SoftGym's signed rule before its frame limits, on the table, centred, covering less than
+    the flat cloth; the cache gives the bits of a fresh generation."""
+    from envs.cloth_flatten_v1 import ClothFlattenV1Sim
+
+    cls = sv.sized(ClothFlattenV1Sim, 9, 7)
+    x, frames = sv.crumple(cls, 30, 0.5)
+    assert 1 + sv.LIFT_FRAMES + sv.CRUMPLE_MIN_HOLD < frames <= 1 + sv.LIFT_FRAMES + 2 * sv.CRUMPLE_WAIT
+    assert x[:, 1].min() > sg.CLOTH_REST_HEIGHT - 1e-4 and x[:, 1].max() < 0.1
+    assert np.allclose(x[:, [0, 2]].mean(axis=0), 0.0, atol=1e-6)
+    assert sg.covered_area(x[None], sg.CLOTH_SPACING)[0] < cls.A_MAX
+    assert np.array_equal(sv.crumpled_cloth(cls, 30, 0.5), x)
+    sv._MEMO.clear()
+    assert np.array_equal(sv.crumpled_cloth(cls, 30, 0.5), x) and len(list(cache.glob("crumpled-9x7-*.npy"))) == 1
+
+
 # ----------------------------------------------------------------------------------------- varied sizes
-def test_varied_sizes_keep_spaces_and_a_batch_copy_equals_the_single_env():
+@pytest.mark.parametrize("env_id", ["tianim/ClothFold-v2", "tianim/ClothFlatten-v1"])
+def test_varied_sizes_keep_spaces_and_a_batch_copy_equals_the_single_env(env_id):
     opts = dict(cloth_size=(8, 13), num_variations=6)
-    single = gym.make("tianim/ClothFold-v2", **opts)
-    vec = gym.make_vec("tianim/ClothFold-v2", num_envs=3, **opts)
+    single = gym.make(env_id, **opts)
+    vec = gym.make_vec(env_id, num_envs=3, **opts)
     assert single.observation_space.shape == (18,) and single.action_space.shape == (8,)
     vobs, _ = vec.reset(seed=20)
     sizes = set()
