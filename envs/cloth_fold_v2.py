@@ -59,9 +59,9 @@ Made and checked in :mod:`envs._softgym_variations` (``tests/test_envs_softgym_p
 | ``settled_start=True``  | the fixed 64 x 64 cloth settled first (SoftGym's rule: 5 frames, then until every |v| < 0.2 m/s, at most 1000), then turned per reset; settled layouts are cached per size in ``$TIANIM_CACHE_DIR/softgym`` (default ``~/.cache/tianim/softgym``) |
 | ``picker_colliders=True`` | each picker is also a kinematic sphere of radius 5 cm that particles keep FleX's 5 mm collision distance from, with the table's friction 0.75 (FleX's ``dynamicFriction``); the frame then runs substep by substep when a sphere is near the cloth |
 
-Measured (single env, random actions, 1 thread, 2 shared cores under load ~8: ranges of two runs):
-64 x 64 6.7-7.3 env-steps/s; 60 x 60 6.0-7.7; 90 x 90 3.4-3.8; 119 x 119 2.3-3.0; picker spheres at 64 x 64
-5.1-6.3 (about 6-30 % slower), at 90 x 90 3.1-3.6.
+Measured (single env, random actions, 1 thread, 2 shared cores under load ~8: ranges of three runs):
+64 x 64 5.6-7.3 env-steps/s; 60 x 60 5.8-7.7; 90 x 90 3.4-3.8; 119 x 119 2.0-3.0; picker spheres at 64 x 64
+5.1-6.3 (about 6-30 % slower), at 90 x 90 3.1-3.6. A new variation is settled when first drawn (< 1 s).
 
 ## Differences from SoftGym (what remains)
 
