@@ -179,17 +179,14 @@ def settled_cloth(sim_class) -> np.ndarray:
 #: ClothFlatten's generation (``generate_env_variation``): frames at most per phase, the stop speed, the
 #: frames SoftGym waits at least while holding, the lift (raised by ``LIFT_LOW + LIFT_SPAN u`` metres).
 CRUMPLE_WAIT, CRUMPLE_STILL, CRUMPLE_MIN_HOLD, LIFT_LOW, LIFT_SPAN = 300, 0.01, 5, 0.5, 0.5
-#: Frames over which the picked particle is raised (SoftGym raises it at once; module docstring).
-LIFT_FRAMES = 25
 
 
 def crumple(sim_class, pick: int, lift: float) -> tuple:
     """SoftGym's ClothFlatten variation (``generate_env_variation``) of ``sim_class``'s cloth on its
-    physics, uncached: the flat cloth one frame; particle ``pick`` raised by ``lift`` [m] (over
-    :data:`LIFT_FRAMES` frames, SoftGym at once) and held, frames until every |v| < 0.01 m/s after at
-    least 5 (at most 300); released, frames until every velocity component (signed, as SoftGym's
-    ``curr_vel < 0.01``) is below 0.01 m/s (at most 300); centred in x and z. Returns
-    ``(positions (N, 3) float32 [m], frames run)``."""
+    physics, uncached: the flat cloth one frame; particle ``pick`` raised by ``lift`` [m] at once and
+    held (a pin), frames until every |v| < 0.01 m/s once more than 5 have run (at most 300); released,
+    frames until every velocity component (signed, as SoftGym's ``curr_vel < 0.01``) is below
+    0.01 m/s (at most 300); centred in x and z. Returns ``(positions (N, 3) float32 [m], frames run)``."""
     model = sim_class.MODEL()
     state = model.state(batch=1, dtype=np.float32)
     solver = tp.XPBD(iterations=sim_class.ITERATIONS, watchdog=False, **sim_class.SOLVER_OPTIONS)
@@ -202,11 +199,7 @@ def crumple(sim_class, pick: int, lift: float) -> tuple:
     frames = 1
     state.pinned[0, pick] = True
     state.v[0, pick] = 0.0
-    start = state.x[0, pick].copy()
-    for f in range(LIFT_FRAMES):
-        state.x[0, pick] = start + np.float32((f + 1) / LIFT_FRAMES * lift) * np.array([0, 1, 0], np.float32)
-        frame()
-        frames += 1
+    state.x[0, pick, 1] += np.float32(lift)  # SoftGym: pickpoint_pos[1] += random() * 0.5 + 0.5
     for j in range(CRUMPLE_WAIT):
         frame()
         frames += 1
@@ -225,7 +218,7 @@ def crumple(sim_class, pick: int, lift: float) -> tuple:
 
 def crumpled_cloth(sim_class, pick: int, lift: float) -> np.ndarray:
     """:func:`crumple`'s layout (N, 3) float32, read-only, cached as :func:`settled_cloth`'s."""
-    extra = f"crumple={CRUMPLE_WAIT},{CRUMPLE_STILL!r},{CRUMPLE_MIN_HOLD},{LIFT_FRAMES};pick={pick};lift={lift!r}"
+    extra = f"crumple={CRUMPLE_WAIT},{CRUMPLE_STILL!r},{CRUMPLE_MIN_HOLD};pick={pick};lift={lift!r}"
     return _cached(cache_path(sim_class, "crumpled", extra), sim_class.MODEL().n_particles,
                    lambda: crumple(sim_class, pick, lift)[0])
 
