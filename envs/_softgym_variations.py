@@ -350,6 +350,12 @@ def crumpled_sized(base, nx: int, ny: int, pick: int, lift: float):
 
 
 # ----------------------------------------------------------------------------------------- pickers
+def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``sum_i a_i b_i`` over the last axis (3), written out: the same rounding for any array size (NumPy's
+    einsum and reductions pick their summation by shape, and a batch copy must equal a single env)."""
+    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+
+
 class CollidingPickers(sg.Pickers):
     """SoftGym's pickers that are also kinematic spheres (option ``picker_colliders``; FleX's pickers are
     sphere shapes of the picker radius, ``pyflex.add_sphere``).
@@ -399,7 +405,7 @@ class CollidingPickers(sg.Pickers):
         R = self.radius + self.DISTANCE
         c = np.asarray(centres, np.float64)                               # (B, P, 3)
         d = x[:, None, :, :].astype(np.float64) - c[:, :, None, :]       # (B, P, N, 3)
-        near = (np.einsum("bpni,bpni->bpn", d, d) < R * R) & ~state.pinned[:, None, :]
+        near = (_dot(d, d) < R * R) & ~state.pinned[:, None, :]
         if not near.any():
             return
         bs, ps, ns = np.nonzero(near)
@@ -408,17 +414,20 @@ class CollidingPickers(sg.Pickers):
 
         def normal(p):
             dd = p - ctr
-            dist = np.sqrt(np.einsum("ki,ki->k", dd, dd))
+            dist = np.sqrt(_dot(dd, dd))
             return np.where((dist > 0)[:, None], dd / np.where(dist > 0, dist, 1.0)[:, None], up), dist
 
         def project(p):
+            # A particle stops at its first round outside the sphere (its rounds do not depend on the
+            # others': a copy of a batch gets the bits of a single env).
+            active = np.ones(len(p), bool)
             for _ in range(self.PROJECTIONS):
                 n, dist = normal(p)
-                inside = dist < R
-                if not inside.any():
+                active &= dist < R
+                if not active.any():
                     break
-                p = np.where(inside[:, None], ctr + n * R, p)
-                p[:, 1] = np.maximum(p[:, 1], self.FLOOR)
+                p = np.where(active[:, None], ctr + n * R, p)
+                p[:, 1] = np.where(active, np.maximum(p[:, 1], self.FLOOR), p[:, 1])
             return p
 
         p0 = x[bs, ns].astype(np.float64)
@@ -427,16 +436,16 @@ class CollidingPickers(sg.Pickers):
         n = normal(p)[0]
         move = ctr - np.asarray(previous, np.float64)[bs, ps]              # the sphere's move this substep
         rel = (p - start[bs, ns].astype(np.float64)) - move
-        tang = rel - np.einsum("ki,ki->k", rel, n)[:, None] * n
-        size = np.sqrt(np.einsum("ki,ki->k", tang, tang))
+        tang = rel - _dot(rel, n)[:, None] * n
+        size = np.sqrt(_dot(tang, tang))
         keep = np.minimum(1.0, self.MU * depth / np.where(size > 0, size, 1.0))
         p = project(p - keep[:, None] * tang)
         n = normal(p)[0]
         u = move / h                                                        # sphere velocity [m/s]
         vv = v[bs, ns].astype(np.float64)
-        vv += np.maximum(np.einsum("ki,ki->k", u - vv, n), 0.0)[:, None] * n
+        vv += np.maximum(_dot(u - vv, n), 0.0)[:, None] * n
         vr = vv - u
-        vt = vr - np.einsum("ki,ki->k", vr, n)[:, None] * n
+        vt = vr - _dot(vr, n)[:, None] * n
         vv -= keep[:, None] * vt
         floor = p[:, 1] <= self.FLOOR
         vv[floor, 1] = np.maximum(vv[floor, 1], 0.0)  # and the table's, when the rounds ended on it
@@ -464,10 +473,10 @@ class _PickerColliderSim:
                  + float(np.sqrt((seg * seg).sum(axis=-1)).max()) + self.CLEARANCE)
         rel = x[:, None] - start[:, :, None]                                   # (B, P, N, 3)
         length2 = np.maximum((seg * seg).sum(axis=-1), 1e-30)[:, :, None]
-        t = np.clip(np.einsum("bpni,bpi->bpn", rel, seg) / length2, 0.0, 1.0)
+        t = np.clip(_dot(rel, seg[:, :, None]) / length2, 0.0, 1.0)
         gap = rel - t[..., None] * seg[:, :, None]
         limit = self.pickers.radius + self.pickers.DISTANCE + reach
-        return bool(np.einsum("bpni,bpni->bpn", gap, gap).min() > limit * limit)
+        return bool(_dot(gap, gap).min() > limit * limit)
 
     def frame_step(self, solver=None):
         solver = self.solver if solver is None else solver

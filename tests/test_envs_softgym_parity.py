@@ -298,3 +298,26 @@ DETERMINISM = {
     "envs: RopeFlatten-v1 self-collision, picker spheres": _DIGEST.format(
         env_id="tianim/RopeFlatten-v1", options=dict(self_collision=True, picker_colliders=True)),
 }
+
+
+def test_picker_spheres_batch_copy_equals_single_env_and_the_far_shortcut_changes_no_bit(monkeypatch):
+    """A frame with every sphere out of reach runs as one solver call (no push can happen); one call of n
+    substeps gives the bits of n calls of one, so the shortcut, decided for the whole batch, changes no
+    result: copy k of a batch equals the single env seeded k, and forcing the substep path changes nothing."""
+    rng = np.random.default_rng(4)
+    actions = rng.uniform(-1, 1, (3, 2, 8)).astype(np.float32)
+    actions[:, :, [1, 5]] = -1.0  # down onto the cloth: spheres reach it in the second step
+
+    def run_vec():
+        vec = gym.make_vec("tianim/ClothFold-v2", num_envs=2, picker_colliders=True)
+        out = [vec.reset(seed=7)[0]]
+        out += [vec.step(a)[0] for a in actions]
+        return np.array(out)
+
+    fast = run_vec()
+    for k in range(2):
+        env = gym.make("tianim/ClothFold-v2", picker_colliders=True)
+        obs = [env.reset(seed=7 + k)[0]] + [env.step(a[k])[0] for a in actions]
+        assert np.array_equal(np.array(obs), fast[:, k])
+    monkeypatch.setattr(sv._PickerColliderSim, "_far", lambda self, start, end: False)
+    assert np.array_equal(run_vec(), fast)
