@@ -6,7 +6,7 @@ Each option is SoftGym env config (``softgym/registered_env.py``, ``softgym/envs
 an env's constructor (``gym.make("tianim/ClothFold-v2", cloth_size="softgym")``) and off by default:
 with no option the registered versions run unchanged, bit for bit (their golden files hold).
 
-* ``cloth_size`` (ClothFold): ``None`` (default) the fixed :data:`envs._softgym.CLOTH_SIDE` square;
+* ``cloth_size`` (ClothFold, ClothFlatten): ``None`` (default) the fixed :data:`envs._softgym.CLOTH_SIDE` square;
   ``"softgym"`` SoftGym's ``ClothEnv._sample_cloth_size``, ``np.random.randint(60, 120)`` for each of
   ``dimx`` (columns, along x) and ``dimy`` (rows, along z), i.e. 60..119 particles a side, independently
   (rectangles), :data:`envs._softgym.CLOTH_SPACING` = 6.25 mm apart and 0.5 kg in all whatever the size
@@ -17,6 +17,8 @@ with no option the registered versions run unchanged, bit for bit (their golden 
   ``generate_env_variation``), and a reset picks a variation uniformly (SoftGym's
   ``np.random.randint(num_variations)``). Each copy then has its own size, so copies step one launch each
   (:class:`VariedSim`); observations and actions keep their shapes (4 corners + 2 pickers).
+  ClothFlatten's variation ``j`` draws ``(dimx, dimy, picked particle, lift)`` and is crumpled by
+  SoftGym's ClothFlatten ``generate_env_variation`` (:func:`crumple`), cached per variation, not turned.
 * ``settled_start`` (ClothFold, fixed size): the cloth is first settled as SoftGym settles its cached
   states, then turned by the reset's angle as before (varied sizes are always settled).
 * Settling (:func:`settled_cloth`): SoftGym's ``generate_env_variation`` of ClothFold, on the task's own
@@ -27,8 +29,9 @@ with no option the registered versions run unchanged, bit for bit (their golden 
   hash of every parameter that changes them (:func:`cache_path`), generated lazily, when first drawn;
   a cached layout has the bits of a fresh settle (float32 saved as is).
 * ``picker_colliders`` (ClothFold, ClothFlatten, RopeFlatten): each picker is also a kinematic sphere of
-  SoftGym's picker radius that particles keep FleX's collision distance away from (FleX's pickers are
-  shapes, ``pyflex.add_sphere``): :class:`CollidingPickers`.
+  SoftGym's picker radius that particles keep FleX's collision distance away from, with FleX's shape
+  friction (its ``dynamicFriction``, the table's here) (FleX's pickers are shapes, ``pyflex.add_sphere``):
+  :class:`CollidingPickers`. Bits of any copy do not depend on the batch.
 * ``self_collision`` (RopeFlatten): the rope's particles keep FleX's rope radius, 2.5 cm, apart
   (``softgym_rope.h``: ``g_params.radius``, ``eNvFlexPhaseSelfCollide | eNvFlexPhaseSelfCollideFilter``):
   :class:`tianim.physics.SelfCollision` with that thickness, particles within one spring hop (the
@@ -59,7 +62,6 @@ NUM_VARIATIONS = 1000
 FIRST_FRAMES, MAX_WAIT, STILL = 5, 1000, 0.2   # frames, frames, m/s (every |velocity component| below)
 #: Bump when the settling or the file layout changes: old cache files are then never read.
 CACHE_FORMAT = 1
-OPTION_NAMES = ("cloth_size", "num_variations", "settled_start", "picker_colliders", "self_collision")
 
 
 # ----------------------------------------------------------------------------------------- sizes
@@ -499,16 +501,20 @@ class _PickerColliderSim:
 
 
 # ----------------------------------------------------------------------------------------- options
-def configure(sim_class, cloth_size=None, num_variations=None, settled_start=False, picker_colliders=False,
-              self_collision=False):
-    """The sim class of ``sim_class``'s task with SoftGym's options (module docstring); ``sim_class``
-    itself when every option is at its default. TypeError/ValueError naming an option the task does not
-    take or a bad value (nothing is built)."""
-    given = dict(cloth_size=cloth_size, num_variations=num_variations, settled_start=settled_start,
-                 picker_colliders=picker_colliders, self_collision=self_collision)
+def configure(sim_class, **options):
+    """The sim class of ``sim_class``'s task with SoftGym's ``options`` (module docstring: ``cloth_size``,
+    ``num_variations``, ``settled_start``, ``picker_colliders``, ``self_collision``); ``sim_class`` itself
+    when every option is at its default. TypeError/ValueError naming an option the task does not take,
+    an unknown one or a bad value (nothing is built)."""
     defaults = dict(cloth_size=None, num_variations=None, settled_start=False, picker_colliders=False,
                     self_collision=False)
     accepted = getattr(sim_class, "OPTIONS", ())
+    for name, value in options.items():
+        if name not in defaults:
+            raise TypeError(f"{name}={fmt(value)} is not an env option; {sim_class.__name__} takes "
+                            f"{', '.join(accepted) or 'none'} (and render_mode)")
+    given = dict(defaults, **options)
+    cloth_size, num_variations = given["cloth_size"], given["num_variations"]
     for name, value in given.items():
         if value != defaults[name] and name not in accepted:
             raise TypeError(f"{name}={fmt(value)}: {sim_class.__name__} does not take this option; it takes "
@@ -526,7 +532,7 @@ def configure(sim_class, cloth_size=None, num_variations=None, settled_start=Fal
             raise ValueError(f"num_variations={fmt(num_variations)} needs cloth_size='softgym' or a (lo, hi) "
                              "pair: the fixed-size cloth has one layout, turned per reset")
     return _configured(sim_class, sizes, None if num_variations is None else int(num_variations),
-                       bool(settled_start), bool(picker_colliders), bool(self_collision))
+                       bool(given["settled_start"]), bool(given["picker_colliders"]), bool(given["self_collision"]))
 
 
 @lru_cache(maxsize=None)

@@ -169,7 +169,8 @@ def test_bad_options_are_refused_naming_them():
                               (dict(cloth_size="softgym", num_variations=0), ValueError, "num_variations"),
                               (dict(num_variations=10), ValueError, "num_variations"),
                               (dict(picker_colliders="yes"), TypeError, "picker_colliders"),
-                              (dict(self_collision=True), TypeError, "self_collision")]:
+                              (dict(self_collision=True), TypeError, "self_collision"),
+                              (dict(cloth_sizes="softgym"), TypeError, "cloth_sizes.*not an env option")]:
         with pytest.raises(exc, match=word):
             gym.make("tianim/ClothFold-v2", **kwargs)
     with pytest.raises(TypeError, match="cloth_size"):
