@@ -280,7 +280,7 @@ _DIGEST = r"""
 import hashlib, os, tempfile
 os.environ["TIANIM_CACHE_DIR"] = tempfile.mkdtemp()
 import gymnasium as gym, numpy as np
-import envs
+import envs  # noqa: F401
 env = gym.make_vec("{env_id}", num_envs=2, **{options})
 h = hashlib.sha256()
 obs, _ = env.reset(seed=5)
