@@ -464,6 +464,12 @@ class _PickerColliderSim:
     #: solver call (:meth:`frame_step`).
     CLEARANCE = 0.01
 
+    def __init__(self, batch: int):
+        super().__init__(batch)
+        # The action repeat in one launch (PickerSim.one_launch, where the solver offers it) moves the pickers
+        # inside the kernel, without spheres: the spheres need the frame loop (Pickers.act, frame_step).
+        self.one_launch = False
+
     def _far(self, start: np.ndarray, end: np.ndarray) -> bool:
         """True when no particle can reach a sphere within this frame: every particle at least
         ``R + reach`` from every sphere's path (the segment start -> end), ``reach`` = the largest speed
