@@ -36,10 +36,10 @@ def rope_frame(x: np.ndarray, pin_box, target) -> np.ndarray:
 
 
 def cloth_frame(x: np.ndarray, nx: int, pickers, holding) -> np.ndarray:
-    """The cloth grid (nx*nx, 3) on the table and the two pickers (red when holding)."""
+    """The cloth grid (ny*nx, 3), rows of ``nx``, on the table and the two pickers (red when holding)."""
     scene = Scene3D(*SIZE, camera=CLOTH_CAMERA, ssaa=1, shadow_size=512)
     scene.ground(height=-0.002, size=1.0)
-    scene.surface(x.reshape(nx, nx, 3), color="blue", back_color="orange")
+    scene.surface(x.reshape(-1, nx, 3), color="blue", back_color="orange")
     for p, h in zip(pickers, holding):
         scene.sphere(p, 0.012, color="red" if h else "orange")
     return scene.render()

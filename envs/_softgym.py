@@ -67,22 +67,24 @@ CLOTH_PICKER = dict(count=2, radius=0.05, threshold=0.005, particle_radius=CLOTH
 
 
 @lru_cache(maxsize=None)
-def cloth_model() -> tp.Model:
-    """SoftGym's cloth, CLOTH_SIDE x CLOTH_SIDE, flat at rest on the table and centred at the origin (shared)."""
-    n, r = CLOTH_SIDE, CLOTH_SPACING
-    w = (n - 1) * r
-    return tp.cloth(nx=n, ny=n, size=(w, w), total_mass=CLOTH_MASS, stiffness=CLOTH_STIFFNESS,
-                    medium_damping=CLOTH_DAMPING * CLOTH_MASS / (n * n), gravity=GRAVITY, plane="xz",
-                    origin=(-w / 2, CLOTH_REST_HEIGHT, -w / 2), pins="none",
+def cloth_model(nx: int = CLOTH_SIDE, ny: int = CLOTH_SIDE) -> tp.Model:
+    """SoftGym's cloth, ``nx`` columns (along x) x ``ny`` rows (along z) of particles (default
+    CLOTH_SIDE x CLOTH_SIDE), CLOTH_MASS in all whatever the size (softgym_cloth.h: mass / (dimx dimz)
+    per particle), flat at rest on the table and centred at the origin (shared per size)."""
+    r = CLOTH_SPACING
+    w, h = (nx - 1) * r, (ny - 1) * r
+    return tp.cloth(nx=nx, ny=ny, size=(w, h), total_mass=CLOTH_MASS, stiffness=CLOTH_STIFFNESS,
+                    medium_damping=CLOTH_DAMPING * CLOTH_MASS / (nx * ny), gravity=GRAVITY, plane="xz",
+                    origin=(-w / 2, CLOTH_REST_HEIGHT, -h / 2), pins="none",
                     colliders=[tp.Ground(height=CLOTH_REST_HEIGHT, restitution=0.0, friction=CLOTH_FRICTION)],
                     **CLOTH_EXTRA)
 
 
-def cloth_frame(x: np.ndarray, pickers: np.ndarray, held: np.ndarray) -> np.ndarray:
-    """rgb_array frame of the SoftGym cloth (N, 3) and its pickers."""
+def cloth_frame(x: np.ndarray, pickers: np.ndarray, held: np.ndarray, nx: int = CLOTH_SIDE) -> np.ndarray:
+    """rgb_array frame of the SoftGym cloth (N, 3) of ``nx`` columns and its pickers."""
     from ._render import cloth_frame as frame
 
-    return frame(x, CLOTH_SIDE, pickers, held >= 0)
+    return frame(x, nx, pickers, held >= 0)
 
 
 # ----------------------------------------------------------------------------------------- metrics
@@ -274,6 +276,8 @@ class PickerSim:
     """
 
     MODEL = None
+    PICKER_CLASS = None  # None: :class:`Pickers`; envs._softgym_variations.CollidingPickers for picker_colliders
+    OPTIONS: tuple = ()  # env options this task accepts (envs._softgym_variations.configure)
     SUBSTEPS = 4
     ITERATIONS = 1
     SOLVER_OPTIONS: dict = {}
@@ -285,7 +289,7 @@ class PickerSim:
     def __init__(self, batch: int):
         self.model = type(self).MODEL()
         self.state = self.model.state(batch=batch, dtype=np.float32)
-        self.pickers = Pickers(batch, **self.PICKER)
+        self.pickers = (self.PICKER_CLASS or Pickers)(batch, **self.PICKER)
         # The full watchdog (non-finite values and the energy the solver creates, XPBD's kinetic +
         # gravity criterion; ~0.1 ms a frame for a 64x64 cloth); a copy that fails is rolled back to the
         # start of the env step and its episode ends.
@@ -366,9 +370,20 @@ class PickerSim:
 
 class PickerEnv(SimEnv):
     """A single SoftGym picker task: :class:`SimEnv` plus the task's metrics in ``info``
-    (``performance``, ``normalized_performance`` and the task's own keys, floats)."""
+    (``performance``, ``normalized_performance`` and the task's own keys, floats).
+
+    ``**options``: the task's SoftGym options (its sim class's ``OPTIONS``: ``cloth_size``,
+    ``num_variations``, ``settled_start``, ``picker_colliders``, ``self_collision``; see
+    :func:`envs._softgym_variations.configure`); none given runs the registered version unchanged."""
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / (FRAME_DT * ACTION_REPEAT))}
+
+    def __init__(self, render_mode: str | None = None, **options):
+        if options:
+            from ._softgym_variations import configure
+
+            self.sim_class = configure(type(self).sim_class, **options)
+        super().__init__(render_mode=render_mode)
 
     def step(self, action):
         obs, reward, terminated, truncated, info = super().step(action)
@@ -382,6 +397,14 @@ class PickerVectorEnv(SimVectorEnv):
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": round(1.0 / (FRAME_DT * ACTION_REPEAT)),
                 "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, max_episode_steps: int | None = None, render_mode: str | None = None,
+                 autoreset_mode=AutoresetMode.NEXT_STEP, **options):
+        if options:  # the single env's options (PickerEnv)
+            from ._softgym_variations import configure
+
+            self.sim_class = configure(type(self).sim_class, **options)
+        super().__init__(num_envs, max_episode_steps, render_mode, autoreset_mode)
 
     def _advance(self, actions, reset_mask):
         obs, reward, terminated = super()._advance(actions, reset_mask)

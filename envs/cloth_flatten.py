@@ -91,12 +91,13 @@ VARIATIONS = 8
 LIFT_FRAMES, HOLD_FRAMES, DROP_FRAMES = 25, 35, 60
 
 
-def flat_area() -> float:
-    """A_max: SoftGym's ``_set_to_flatten`` layout (``linspace(0, n r, n)`` per axis, centred), covered."""
+def flat_area(nx: int = N, ny: int = N) -> float:
+    """A_max: SoftGym's ``_set_to_flatten`` layout (``linspace(0, n r, n)`` per axis, centred), covered,
+    for ``nx`` columns x ``ny`` rows (default the N x N cloth)."""
     r = sg.CLOTH_SPACING
-    p = np.linspace(0.0, N * r, N)
-    xx, zz = np.meshgrid(p, p)
-    flat = np.stack([xx.ravel(), np.full(N * N, r), zz.ravel()], axis=1)
+    px, pz = np.linspace(0.0, nx * r, nx), np.linspace(0.0, ny * r, ny)
+    xx, zz = np.meshgrid(px, pz)
+    flat = np.stack([xx.ravel(), np.full(nx * ny, r), zz.ravel()], axis=1)
     flat -= flat.mean(axis=0)
     return float(sg.covered_area(flat[None], r)[0])
 
@@ -142,6 +143,9 @@ class ClothFlattenSim(sg.PickerSim):
     SUBSTEPS, ITERATIONS = sg.CLOTH_SUBSTEPS, sg.CLOTH_ITERATIONS
     PICKER = sg.CLOTH_PICKER
     KEYPOINTS = KEYPOINTS
+    NX = N
+    OPTIONS = ("cloth_size", "num_variations", "picker_colliders")  # envs._softgym_variations.configure
+    VARIATIONS_KIND = "crumpled"  # how envs._softgym_variations makes a sized variation
     A_MAX = None
     RESET_DRAWS = 2
 
@@ -151,9 +155,13 @@ class ClothFlattenSim(sg.PickerSim):
         if ClothFlattenSim.A_MAX is None:
             ClothFlattenSim.A_MAX = flat_area()
 
+    def _variation_starts(self) -> np.ndarray:
+        """The start variations (V, N, 3) a reset draws from (option ``cloth_size``: the copy's own one)."""
+        return start_variations()
+
     def _start(self, idx, u):
         x = self.state.x
-        x[idx] = sg.turned_variation(u, start_variations())
+        x[idx] = sg.turned_variation(u, self._variation_starts())
         self.pickers.reset(idx, sg.box_centres(x[idx], 0.2))  # SoftGym's _get_center_point
         self.a0[idx] = sg.covered_area(x[idx], sg.CLOTH_SPACING)
 
@@ -162,7 +170,7 @@ class ClothFlattenSim(sg.PickerSim):
         return {"performance": area, "normalized_performance": sg.normalized(area, self.a0, self.A_MAX)}
 
     def frame(self, k):
-        return sg.cloth_frame(self.state.x[k], self.pickers.pos[k], self.pickers.held[k])
+        return sg.cloth_frame(self.state.x[k], self.pickers.pos[k], self.pickers.held[k], self.NX)
 
 
 class ClothFlattenEnv(sg.PickerEnv):

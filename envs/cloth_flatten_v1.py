@@ -35,14 +35,32 @@ easier), so v1 keeps 4 substeps; the scores above 1 (coverage beyond the flat la
 the stretch, at 4 x 1 as at 2 x 1. The script's score is bimodal per seed, so 20 seeds resolve
 only differences of ~0.2.
 
+## Options (SoftGym's env config; ``gym.make("tianim/ClothFlatten-v1", **options)``, also v0)
+
+Off by default (the task above, bit for bit); :mod:`envs._softgym_variations`:
+
+* ``cloth_size="softgym"`` or ``(lo, hi)``, ``num_variations`` (default 1000): per variation ``dimx`` x
+  ``dimy`` particles (each side uniform on 60..119, SoftGym's ``randint(60, 120)`` twice), crumpled by
+  SoftGym's ``generate_env_variation`` on this version's physics (a particle drawn uniformly raised at
+  once by 0.5-1.0 m, held until every |v| < 0.01 m/s (at least 5, at most 300 frames), dropped until every
+  velocity component is below 0.01 m/s (at most 300), centred), not turned; A_max of its own size; made
+  when first drawn and cached per variation in ``$TIANIM_CACHE_DIR/softgym`` (default
+  ``~/.cache/tianim/softgym``): 5.5, 9.0, 15.8 s per variation at 60, 90, 119 a side (once). ``info``
+  adds ``cloth_dimx``, ``cloth_dimy``. Copies step one launch each.
+* ``picker_colliders=True``: each picker is also a kinematic sphere (5 cm radius, FleX's 5 mm collision
+  distance, the table's friction 0.75) that pushes the cloth (:class:`envs._softgym_variations.CollidingPickers`).
+
+Measured single env, random actions, 1 thread, 2 shared cores under load ~8 (ranges of runs):
+64 x 64 10.0-13.4 env-steps/s; 60 x 60 12.2; 90 x 90 7.6; 119 x 119 4.6; picker spheres 5.2-11.8 at 64 x 64.
+
 ## Differences from SoftGym (what remains)
 
 | SoftGym (FleX)                                   | here                                                   |
 |--------------------------------------------------|--------------------------------------------------------|
 | 4 substeps x 30 iterations per frame             | XPBD, 4 substeps x 1 symmetric sweep (stretchier)       |
 | the cloth self-collides                          | no self-collision: crumpled layers interpenetrate       |
-| 60..119 particles per side, 1000 cached variations settled by velocity thresholds | 64 x 64, 8 variations from fixed frame counts, turned at random |
-| pickers are collision spheres                    | pickers only carry the particle they hold              |
+| 60..119 particles per side, 1000 cached variations settled by velocity thresholds | 64 x 64, 8 variations from fixed frame counts, turned at random; ``cloth_size`` gives SoftGym's sizes and generation (on XPBD's few sweeps, so the piles differ) |
+| pickers are collision spheres                    | only with ``picker_colliders`` (a projection after each substep) |
 | an extra frame before A0 is read; unbounded observations | none; ``Box(-3, 3)``                           |
 
 ## Version History

@@ -82,13 +82,15 @@ apart: the folded half rests on the other. Single env and batch run the same cod
   under random actions and about 6x during the scripted fold (``ClothFoldCorners``: 21 against
   3.5 env-steps/s for 4 copies on 2 shared cores; the neighbour lists are rebuilt about 14 times
   per env step, 25 % of the step, and the contact sweeps take 40 %).
-* One cloth size, 64 x 64 (SoftGym draws 60..119 per side per variation from 1000 cached
-  variations): the CPU steps 64 x 64 at a few env steps per second per core.
+* One cloth size, 64 x 64, by default (SoftGym draws 60..119 per side per variation from 1000 cached
+  variations: the option ``cloth_size="softgym"`` does, see ClothFold-v2's "Options", which this
+  version takes too): the CPU steps 64 x 64 at a few env steps per second per core.
 * XPBD with 4 x 2 sweeps per frame instead of FleX's 4 substeps x 30 iterations: a corner pulled
   at full speed stretches the springs next to it more than FleX's cloth (tianim's strain_limit
   solver option is not used in version 1).
-* The pickers are not collision spheres (in FleX they also push the cloth); the start is not
-  settled by simulation (the flat cloth is already at rest); observations have finite bounds.
+* The pickers are not collision spheres (in FleX they also push the cloth; option
+  ``picker_colliders``); the start is not settled by simulation (the flat cloth is already at rest;
+  option ``settled_start``); observations have finite bounds.
 
 ## Version History
 
@@ -123,34 +125,42 @@ class ClothFoldV1Sim(sg.PickerSim):
     SOLVER_OPTIONS = sg.CLOTH_SOLVER
     PICKER = sg.CLOTH_PICKER
     KEYPOINTS = KEYPOINTS
+    GROUP_A, GROUP_B, NX = GROUP_A, GROUP_B, N  # the fold's halves and the grid's columns (per size)
     RESET_DRAWS = 1
+    OPTIONS = ("cloth_size", "num_variations", "settled_start", "picker_colliders")
+    VARIATIONS_KIND = "settled"  # how envs._softgym_variations makes a sized variation
 
     def __init__(self, batch: int):
         super().__init__(batch)
-        self.b0 = np.zeros((batch, len(GROUP_B), 3), np.float32)
+        self.b0 = np.zeros((batch, len(self.GROUP_B), 3), np.float32)
         self.p0 = np.zeros(batch)
+
+    def _flat_start(self) -> np.ndarray:
+        """The cloth before it is turned (N, 3) [m]: the model's flat layout (option ``settled_start``:
+        the settled one, envs._softgym_variations)."""
+        return self.model.positions
 
     def _start(self, idx, u):
         angle = (u[:, 0] - 0.5) * np.pi / 2  # SoftGym: (np.random.random() - 0.5) * pi / 2
         x = self.state.x
-        x[idx] = sg.turned(self.model.positions, angle)  # SoftGym's rotate_particles, about the centre (0, 0)
+        x[idx] = sg.turned(self._flat_start(), angle)  # SoftGym's rotate_particles, about the centre (0, 0)
         start = x[idx]
-        self.b0[idx] = start[:, GROUP_B]
-        corners = start[:, KEYPOINTS[:2]].astype(np.float64)
+        self.b0[idx] = start[:, self.GROUP_B]
+        corners = start[:, self.KEYPOINTS[:2]].astype(np.float64)
         middle = 0.5 * (corners[:, 0] + corners[:, 1])
         middle[:, 1] = 0.1
         self.pickers.reset(idx, middle)
-        group, fixation = sg.fold_metrics(start, GROUP_A, GROUP_B, self.b0[idx])
+        group, fixation = sg.fold_metrics(start, self.GROUP_A, self.GROUP_B, self.b0[idx])
         self.p0[idx] = -group - FIXATION_WEIGHT * fixation
 
     def _metrics(self):
-        group, fixation = sg.fold_metrics(self.state.x, GROUP_A, GROUP_B, self.b0)
+        group, fixation = sg.fold_metrics(self.state.x, self.GROUP_A, self.GROUP_B, self.b0)
         p = -group - FIXATION_WEIGHT * fixation
         return {"performance": p, "normalized_performance": sg.normalized(p, self.p0, 0.0),
                 "neg_group_dist": -group, "neg_fixation_dist": -fixation}
 
     def frame(self, k):
-        return sg.cloth_frame(self.state.x[k], self.pickers.pos[k], self.pickers.held[k])
+        return sg.cloth_frame(self.state.x[k], self.pickers.pos[k], self.pickers.held[k], self.NX)
 
 
 class ClothFoldV1Env(sg.PickerEnv):

@@ -47,14 +47,37 @@ one particle stretches about 4x more: neither plan is converged (FleX runs 30 it
 the fewer sweeps propagate a pull less far per frame. Tasks that lift the cloth by one point
 and read its shape should stay on v1.
 
+## Options (SoftGym's env config; ``gym.make("tianim/ClothFold-v2", **options)``, also ClothFold-v1)
+
+Off by default: without them the task is the one above, bit for bit (``tests/golden/ClothFold-v2.npz``).
+Made and checked in :mod:`envs._softgym_variations` (``tests/test_envs_softgym_parity.py``).
+
+| option                  | what it does                                                              |
+|-------------------------|---------------------------------------------------------------------------|
+| ``cloth_size="softgym"`` or ``(lo, hi)`` | per variation ``dimx`` x ``dimy`` particles, each side uniform on 60..119 (SoftGym's ``randint(60, 120)`` twice; rectangles) or ``lo..hi``, 6.25 mm apart, 0.5 kg in all; settled, turned by the variation's angle; key points the 4 corners and fold halves ``dimx // 2`` columns each, as SoftGym's; ``info`` adds ``cloth_dimx``, ``cloth_dimy``. Copies step one launch each |
+| ``num_variations=1000`` | how many cached variations a reset picks from (with ``cloth_size``)       |
+| ``settled_start=True``  | the fixed 64 x 64 cloth settled first (SoftGym's rule: 5 frames, then until every |v| < 0.2 m/s, at most 1000), then turned per reset; settled layouts are cached per size in ``$TIANIM_CACHE_DIR/softgym`` (default ``~/.cache/tianim/softgym``) |
+| ``picker_colliders=True`` | each picker is also a kinematic sphere of radius 5 cm that particles keep FleX's 5 mm collision distance from, with the table's friction 0.75 (FleX's ``dynamicFriction``); the frame then runs substep by substep when a sphere is near the cloth |
+
+Measured (single env, random actions, 1 thread, 2 shared cores under load ~8: ranges of three runs):
+64 x 64 5.6-7.3 env-steps/s; 60 x 60 5.8-7.7; 90 x 90 3.4-3.8; 119 x 119 2.0-3.0; picker spheres at 64 x 64
+5.1-6.3 (about 6-30 % slower), at 90 x 90 3.1-3.6. A new variation is settled when first drawn (< 1 s).
+The scripted ``ClothFoldCorners`` (envs/baselines.py, written for pickers that do not collide: it flies
+at the lowest picker height), final normalized performance over seeds 0-2 (mean +- sd): 0.41 +- 0.05 by
+default, 0.64 +- 0.05 with ``cloth_size="softgym"``, -2.8 +- 0.8 with ``picker_colliders`` (its spheres
+plough through the cloth on the way to the corners, as FleX's would).
+
 ## Differences from SoftGym (what remains)
 
 | SoftGym (FleX)                                   | here                                                   |
 |--------------------------------------------------|--------------------------------------------------------|
 | 4 substeps x 30 iterations per frame             | XPBD, 2 substeps x 1 symmetric sweep: a cloth hung from one point stretches (table above) |
 | self-collision inside the constraint iterations, particle friction 1 | a projection after each substep, no particle friction |
-| 60..119 particles per side per variation, 1000 cached settled variations | 64 x 64 only, flat start (already at rest) |
-| pickers are collision spheres (they push the cloth) | pickers only carry the particle they hold          |
+| 60..119 particles per side per variation, 1000 cached settled variations | 64 x 64 by default; ``cloth_size`` gives SoftGym's draw from lazily made cached variations |
+| the cached states were settled (SoftGym sets the cloth flat at 5 mm, then steps it until still) | flat start, already at rest: settling it moves no particle by more than 1e-6 m (``settled_start``) |
+| the cached state is loaded and one more ``pyflex.step()`` runs before the reset's metrics | no extra frame |
+| pickers are collision spheres (they push the cloth) | only with ``picker_colliders``; then the push is a projection after each substep (FleX: inside its iterations), and a particle squeezed between a sphere and the table ends on the table |
+| one FleX scene per env                           | varied sizes step one launch per copy (a batch of equal-size copies would share one) |
 | unbounded observations                           | ``Box(-3, 3)``                                         |
 
 ## Version History

@@ -74,12 +74,13 @@ damping 1/s, gravity 9.8 m/s^2, table contact with friction 1.0 (FleX's ``dynami
 
 * No self-collision (FleX's rope particles of radius 2.5 cm collide): crossing strands pass
   through each other. :data:`ROPE_SOLVER` switches tianim's on in one line; off in version 0
-  because it made a step 20x slower here (measured, see its comment).
+  because it made a step 20x slower here (measured, see its comment); the env option
+  ``self_collision=True`` turns it on (:mod:`envs._softgym_variations`).
 * FleX's rope springs have 7.5% "give" (rest length 1.075 x spacing); here the rest length is the
   spacing, so the straight rope's end distance is exactly L.
 * 100 generated variations turned at random instead of 1000 cached ones, settled together.
-* One rope (SoftGym's variations also all have 40 segments); pickers are not collision spheres;
-  observations have finite bounds.
+* One rope (SoftGym's variations also all have 40 segments); pickers are not collision spheres
+  (option ``picker_colliders=True``: they are); observations have finite bounds.
 """
 
 from __future__ import annotations
@@ -182,6 +183,7 @@ class RopeFlattenSim(sg.PickerSim):
     PICKER = PICKER
     KEYPOINTS = KEYPOINTS
     RESET_DRAWS = 2
+    OPTIONS = ("picker_colliders", "self_collision")  # envs._softgym_variations.configure
 
     def _start(self, idx, u):
         x = self.state.x

@@ -32,15 +32,27 @@ apart), gravity 9.8 m/s^2, table friction 1.0 at 1 mm. XPBD with :data:`SUBSTEPS
 frame, against 12.5 mm segments, and ``k h^2 / m`` = 10^6 x (5 ms)^2 / 0.5 kg = 50 makes the stretch
 constraints near rigid at this step already.
 
+## Options (SoftGym's env config; ``gym.make("tianim/RopeFlatten-v1", **options)``, also v0)
+
+Off by default (the task above, bit for bit); :mod:`envs._softgym_variations`:
+
+* ``self_collision=True``: the rope's particles keep FleX's rope radius, 2.5 cm, apart
+  (:class:`tianim.physics.SelfCollision`, particles within one spring hop, i.e. 1 and 2 apart, excluded
+  as FleX's self-collide filter leaves them out). The starts stay those made without it (strands that
+  cross in a start are pushed apart in the first frame). Measured single env, random actions, 1 thread,
+  2 shared cores under load: 21 against 62-108 env-steps/s without.
+* ``picker_colliders=True``: each picker is also a kinematic sphere (2 cm radius, FleX's 1 mm collision
+  distance, the table's friction 1.0) that pushes the rope: 53 against 62 env-steps/s (same run).
+
 ## Differences from SoftGym (what remains)
 
 | SoftGym (FleX)                                   | here                                                   |
 |--------------------------------------------------|--------------------------------------------------------|
-| rope particles self-collide at 2.5 cm            | no self-collision: crossing strands pass through        |
+| rope particles self-collide at 2.5 cm            | only with ``self_collision`` (a projection after each substep, Jacobi sweeps; the starts are made without it) |
 | springs with 7.5 % give (rest 1.075 x spacing)   | rest length = spacing (the straight rope's ends are L apart) |
 | 4 substeps x 30 iterations                       | XPBD, 2 substeps x 1 symmetric sweep                    |
 | 1000 cached variations                           | 100 generated per process, turned at random             |
-| pickers are collision spheres; unbounded observations | pickers only carry; ``Box(-3, 3)``                 |
+| pickers are collision spheres; unbounded observations | only with ``picker_colliders``; ``Box(-3, 3)``     |
 
 ## Version History
 

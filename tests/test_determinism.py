@@ -18,7 +18,7 @@ import pytest
 #: Test modules with a ``DETERMINISM`` dict (a new subsystem adds its module here).
 MODULES = ("test_physics_batch", "test_physics_lanes", "test_physics_selfcollision", "test_spatial_grid",
            "test_particles", "test_crowds", "test_crowds_pedestrians", "test_mocap_solve",
-           "test_render_reference", "test_envs_softgym", "test_arm")
+           "test_render_reference", "test_envs_softgym", "test_envs_softgym_parity", "test_arm")
 THREADS = ("1", "3")
 
 RUNNER = r"""
