@@ -18,7 +18,7 @@ from tianim.kernels.grid import BOX_PAD, grid_funcs
 
 @cached_variants
 def grid_kernels(real_name: str, dim: int):
-    """Kernels ``cell_ids``, ``counting_sort`` and ``query`` for ``real_name`` positions in ``dim`` D."""
+    """Kernels ``cell_ids``, ``counting_sort``, ``query`` and ``blocked_sort`` for ``real_name`` positions in ``dim`` D."""
     t = kernel_types(real_name, dim)
     ti, real = t.ti, t.real
     g = grid_funcs(real_name, dim)
@@ -51,6 +51,72 @@ def grid_kernels(real_name: str, dim: int):
         """
         for b in range(x.shape[0]):
             g.sort_copy(b, x, cell, start, order, xs)
+
+    @ti.func
+    def part(q, n, parts):
+        """(first, end) of part q of range(n) cut into ``parts`` nearly equal parts (64-bit products)."""
+        return ti.cast(ti.cast(q, ti.i64) * n // parts, ti.i32), ti.cast(ti.cast(q + 1, ti.i64) * n // parts, ti.i32)
+
+    @ti.kernel
+    def blocked_sort(x: t.vec_arr, cell: i32_2, start: i32_2, order: i32_2, xs: t.vec_arr, hist: i32_3, rsum: i32_2):
+        """The counting sort of ``counting_sort`` (the same start, order and xs, bit for bit) with each copy's
+        work split over S = hist.shape[1] blocks of points and G = rsum.shape[1] ranges of cells, for copies
+        fewer than the threads. Blocked distribution counting (the parallel radix sort's counting pass,
+        e.g. Zagha and Blelloch 1991, "Radix sort for vector multiprocessors"):
+
+        1. per point block q (in parallel): hist[b, q, c] = points of block q in cell c;
+        2. per cell range g (in parallel): its total; then, serial over the G ranges, their offsets; then per
+           range: start[b, c] = first slot of cell c and hist[b, q, c] = first slot of block q's points of
+           cell c (cell-major, block-minor: the order of the serial stable sort, by point index);
+        3. per point block (in parallel): scatter in point-index order, hist as the cursors.
+
+        Every entry is written by one thread: deterministic for any thread count. hist (B, S, M + 1),
+        rsum (B, G) int32 scratch. O(N + S M) work per copy, about (N + S M) / S per thread.
+        """
+        B, N = x.shape[0], x.shape[1]
+        S, C, G = hist.shape[1], hist.shape[2], rsum.shape[1]  # C = M + 1 cells (the inactive cell last)
+        ti.loop_config(block_dim=1)
+        for b, q in ti.ndrange(B, S):
+            for c in range(C):
+                hist[b, q, c] = 0
+            k0, k1 = part(q, N, S)
+            for i in range(k0, k1):
+                hist[b, q, cell[b, i]] += 1
+        ti.loop_config(block_dim=1)
+        for b, g in ti.ndrange(B, G):
+            tot = 0
+            k0, k1 = part(g, C, G)
+            for c in range(k0, k1):
+                for q in range(S):
+                    tot += hist[b, q, c]
+            rsum[b, g] = tot
+        ti.loop_config(serialize=True)
+        for b in range(B):
+            run = 0
+            for g in range(G):
+                cnt = rsum[b, g]
+                rsum[b, g] = run
+                run += cnt
+            start[b, C] = run  # the end of the last cell (N)
+        ti.loop_config(block_dim=1)
+        for b, g in ti.ndrange(B, G):
+            run = rsum[b, g]
+            k0, k1 = part(g, C, G)
+            for c in range(k0, k1):
+                start[b, c] = run
+                for q in range(S):
+                    cnt = hist[b, q, c]
+                    hist[b, q, c] = run
+                    run += cnt
+        ti.loop_config(block_dim=1)
+        for b, q in ti.ndrange(B, S):
+            k0, k1 = part(q, N, S)
+            for i in range(k0, k1):
+                c = cell[b, i]
+                k = hist[b, q, c]
+                hist[b, q, c] = k + 1
+                order[b, k] = i
+                xs[b, k] = x[b, i]
 
     @ti.kernel
     def query(q: t.vec_arr, xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1,
@@ -112,7 +178,7 @@ def grid_kernels(real_name: str, dim: int):
                             n += hit
             count[b, i] = n
 
-    return cell_ids, counting_sort, query
+    return cell_ids, counting_sort, query, blocked_sort
 
 
 @cached_variants

@@ -52,6 +52,11 @@ from tianim._checks import INT32_MAX, as_float_array, check_choice, check_finite
 #: Default cap on the number of cells of one copy's grid (4 bytes each).
 MAX_CELLS = 1 << 26
 
+#: Most point blocks of the blocked (parallel) sort of one copy, and the fewest points per copy it is used for
+#: (below, the serial sort's thread-pool start-up is not worth saving).
+SORT_BLOCKS = 8
+BLOCKED_SORT_MIN_POINTS = 1 << 15
+
 
 class NeighbourOverflowError(ValueError):
     """A query found more neighbours for some point than ``max_neighbours`` can hold."""
@@ -176,6 +181,7 @@ class NeighbourGrid:
         self._views = None  # (q, indices, counts): views of _out for the last query size
         self._all_active = np.ones((B, N), np.uint8)
         self._built = None
+        self._scratch = None  # the blocked sort's (hist, rsum), made at the first build (see _sort_scratch)
 
     def __repr__(self) -> str:
         return (f"NeighbourGrid(dim={self.dim}, cells={tuple(int(d) for d in self.dims)}, cell_size={self.cell_size:g}, "
@@ -184,7 +190,7 @@ class NeighbourGrid:
     @property
     def nbytes(self) -> int:
         """Bytes held by the grid's buffers (cells, sort, sorted positions, query outputs)."""
-        arrays = [self.cell, self.start, self.order, self.sorted_x] + list(self._out or ())
+        arrays = [self.cell, self.start, self.order, self.sorted_x] + list(self._out or ()) + list(self._scratch or ())
         return int(sum(a.nbytes for a in arrays))
 
     @property
@@ -238,11 +244,36 @@ class NeighbourGrid:
         active = active.view(np.uint8) if active.dtype == np.bool_ else active
         if check:
             x = self._points("x", x, self.n_points, None if active is self._all_active else active)
-        cell_ids, counting_sort, _ = self._kernels()
+        cell_ids, counting_sort, _, blocked_sort = self._kernels()
         cell_ids(x, np.ascontiguousarray(active), self._geom, self.dims, self.cell)
-        counting_sort(x, self.cell, self.start, self.order, self.sorted_x)
+        scratch = self._sort_scratch()
+        if scratch is None:
+            counting_sort(x, self.cell, self.start, self.order, self.sorted_x)
+        else:
+            blocked_sort(x, self.cell, self.start, self.order, self.sorted_x, *scratch)
         self._built = x
         return self
+
+    @staticmethod
+    def _threads() -> int:
+        """Taichi's CPU thread count (the blocked sort's block count follows it; its result does not)."""
+        from tianim import _ti
+
+        return int(_ti.get().lang.impl.current_cfg().cpu_max_num_threads)
+
+    def _sort_scratch(self):
+        """``(hist, rsum)`` for the blocked sort (``grid_kernels().blocked_sort``, the same result as the serial
+        counting sort) when the copies are fewer than the threads, or None (the serial sort per copy, copies in
+        parallel). S = threads // B blocks of points (at most :data:`SORT_BLOCKS`), only for copies of at least
+        :data:`BLOCKED_SORT_MIN_POINTS` points and scratch of at most 4 B S (M + 1) <= 16 B N per copy."""
+        if self._scratch is None:
+            s = min(self._threads() // self.batch, SORT_BLOCKS)
+            c = self.n_cells + 1
+            if s < 2 or self.n_points < BLOCKED_SORT_MIN_POINTS or s * c > 4 * self.n_points:
+                self._scratch = ()
+            else:
+                self._scratch = (np.zeros((self.batch, s, c), np.int32), np.zeros((self.batch, 2 * s), np.int32))
+        return self._scratch or None
 
     def query(self, radius, points: np.ndarray | None = None, on_overflow: str = "raise") -> NeighbourList:
         """Neighbours within ``radius`` [m] of each built point (default) or of ``points`` (B, Q, D).
@@ -260,7 +291,7 @@ class NeighbourGrid:
         else:
             q, exclude = self._points("points", points, None), 0
         nbr, count = self._buffers(q.shape[1])
-        _, _, query = self._kernels()
+        query = self._kernels()[2]
         query(q, self.sorted_x, self.order, self.start, self._geom, self.dims, r, exclude, 0, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
 
@@ -275,7 +306,7 @@ class NeighbourGrid:
         if self._built is None:
             raise RuntimeError("query_half before build: call grid.build(x) first")
         nbr, count = self._buffers(self.n_points)
-        _, _, query = self._kernels()
+        query = self._kernels()[2]
         query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
 
