@@ -18,7 +18,7 @@ from tianim.kernels.grid import BOX_PAD, grid_funcs
 
 @cached_variants
 def grid_kernels(real_name: str, dim: int):
-    """Kernels ``cell_ids``, ``counting_sort``, ``query`` and ``blocked_sort`` for ``real_name`` positions in ``dim`` D."""
+    """Kernels ``cell_ids``, ``counting_sort`` and ``query`` for ``real_name`` positions in ``dim`` D."""
     t = kernel_types(real_name, dim)
     ti, real = t.ti, t.real
     g = grid_funcs(real_name, dim)
@@ -52,6 +52,80 @@ def grid_kernels(real_name: str, dim: int):
         for b in range(x.shape[0]):
             g.sort_copy(b, x, cell, start, order, xs)
 
+    @ti.kernel
+    def query(q: t.vec_arr, xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1,
+              r: ti.f64, exclude_self: ti.template(), half: ti.template(), nbr: i32_3, count: i32_2):
+        """For each query point q[b, i]: the indices j with |x_j - q_i|^2 <= r^2 (in ``real``).
+
+        Cells are visited in fixed order (z, then y ascending; a row of cells along x is one
+        contiguous span of the sorted arrays; rows farther than r across y and z are skipped, ``grid_funcs.span``,
+        which drops only rows without neighbours), within a cell by
+        particle index. The first K =
+        nbr.shape[2] neighbours are stored in nbr[b, i]; count[b, i] is the total (> K: overflow).
+        ``exclude_self`` and ``half`` are compile-time flags (0 or 1: one variant each).
+        With ``exclude_self`` the queries are the built points themselves (``q`` is ignored but must
+        have their shape), visited in cell order, and i is not its own neighbour. With ``half``
+        (only with ``exclude_self``) a half shell: the point at sorted position s visits only the
+        sorted positions after s among the cells of its box (its own cell from s + 1 on, the rest of its
+        own row of cells, and the rows after it in (z, y) order), so each pair is found once, by the
+        point that comes first in the grid's (cell, index) order: about half the work of a full query.
+        """
+        r2 = ti.cast(r, real) * ti.cast(r, real)
+        last = start.shape[1] - 2  # the extra cell of inactive points
+        cap = nbr.shape[2]
+        for b, s in ti.ndrange(q.shape[0], q.shape[1]):
+            i = s
+            p = q[b, s]
+            skip = 0
+            if ti.static(exclude_self != 0):  # the built points, visited in sorted order (cache-friendly)
+                skip = ti.cast(s >= start[b, last], ti.i32)  # an inactive point: no neighbours
+                i = order[b, s]
+                p = xs[b, s]
+            n = 0
+            if skip == 0:
+                t, padh = g.cell_units(p, r, geom, dims)
+                lo, hi = g.box_t(t, padh, dims)
+                z0, z1 = g.z_range(lo, hi)
+                own_y = g.coord(p[1], 1, geom, dims)
+                own_z = 0
+                if ti.static(dim == 3):
+                    own_z = g.coord(p[2], 2, geom, dims)
+                if ti.static(half != 0):
+                    z0 = own_z  # rows before the point's own: their pairs were found from there
+                for z in range(z0, z1 + 1):
+                    y0 = lo[1]
+                    if ti.static(half != 0):
+                        if z == own_z:
+                            y0 = own_y
+                    for y in range(y0, hi[1] + 1):
+                        k0, k1 = g.span(b, t, padh, y, z, lo, hi, dims, start)
+                        if ti.static(half != 0):
+                            if z == own_z and y == own_y:
+                                k0 = s + 1
+                        for k in range(k0, k1):
+                            # branch-free compaction: every candidate is stored at slot n while the row has
+                            # room, n advances only on a hit (a miss is overwritten by the next hit or left
+                            # past the count); an unpredictable branch per candidate cost more than the store
+                            d = xs[b, k] - p
+                            hit = ti.cast(d.dot(d) <= r2, ti.i32)
+                            if ti.static(exclude_self != 0 and half == 0):  # (a half row starts after s)
+                                hit &= ti.cast(k != s, ti.i32)  # k == s: the point itself
+                            if n < cap:
+                                nbr[b, i, n] = order[b, k]
+                            n += hit
+            count[b, i] = n
+
+    return cell_ids, counting_sort, query
+
+
+@cached_variants
+def blocked_sort_kernel(real_name: str, dim: int, blocks: int):
+    """``blocked_sort`` with ``blocks`` point blocks per copy (compiled per count: see ``NeighbourGrid._sort_scratch``)."""
+    t = kernel_types(real_name, dim)
+    ti = t.ti
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+
     @ti.func
     def part(q, n, parts):
         """(first, end) of part q of range(n) cut into ``parts`` nearly equal parts (64-bit products)."""
@@ -60,7 +134,7 @@ def grid_kernels(real_name: str, dim: int):
     @ti.kernel
     def blocked_sort(x: t.vec_arr, cell: i32_2, start: i32_2, order: i32_2, xs: t.vec_arr, hist: i32_3, rsum: i32_2):
         """The counting sort of ``counting_sort`` (the same start, order and xs, bit for bit) with each copy's
-        work split over S = hist.shape[1] blocks of points and G = rsum.shape[1] ranges of cells, for copies
+        work split over S = ``blocks`` (= hist.shape[1]) blocks of points and G = rsum.shape[1] ranges of cells, for copies
         fewer than the threads. Blocked distribution counting (the parallel radix sort's counting pass,
         e.g. Zagha and Blelloch 1991, "Radix sort for vector multiprocessors"):
 
@@ -74,7 +148,7 @@ def grid_kernels(real_name: str, dim: int):
         rsum (B, G) int32 scratch. O(N + S M) work per copy, about (N + S M) / S per thread.
         """
         B, N = x.shape[0], x.shape[1]
-        S, C, G = hist.shape[1], hist.shape[2], rsum.shape[1]  # C = M + 1 cells (the inactive cell last)
+        S, C, G = blocks, hist.shape[2], rsum.shape[1]  # C = M + 1 cells (the inactive cell last)
         ti.loop_config(block_dim=1)
         for b, q in ti.ndrange(B, S):
             for c in range(C):
@@ -87,7 +161,7 @@ def grid_kernels(real_name: str, dim: int):
             tot = 0
             k0, k1 = part(g, C, G)
             for c in range(k0, k1):
-                for q in range(S):
+                for q in ti.static(range(blocks)):  # unrolled: a loop per cell cost more than the cell
                     tot += hist[b, q, c]
             rsum[b, g] = tot
         ti.loop_config(serialize=True)
@@ -104,7 +178,7 @@ def grid_kernels(real_name: str, dim: int):
             k0, k1 = part(g, C, G)
             for c in range(k0, k1):
                 start[b, c] = run
-                for q in range(S):
+                for q in ti.static(range(blocks)):  # unrolled: a loop per cell cost more than the cell
                     cnt = hist[b, q, c]
                     hist[b, q, c] = run
                     run += cnt
@@ -118,67 +192,7 @@ def grid_kernels(real_name: str, dim: int):
                 order[b, k] = i
                 xs[b, k] = x[b, i]
 
-    @ti.kernel
-    def query(q: t.vec_arr, xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1,
-              r: ti.f64, exclude_self: ti.i32, half: ti.i32, nbr: i32_3, count: i32_2):
-        """For each query point q[b, i]: the indices j with |x_j - q_i|^2 <= r^2 (in ``real``).
-
-        Cells are visited in fixed order (z, then y ascending; a row of cells along x is one
-        contiguous span of the sorted arrays; rows farther than r across y and z are skipped, ``grid_funcs.span``,
-        which drops only rows without neighbours), within a cell by
-        particle index. The first K =
-        nbr.shape[2] neighbours are stored in nbr[b, i]; count[b, i] is the total (> K: overflow).
-        With ``exclude_self`` the queries are the built points themselves (``q`` is ignored but must
-        have their shape), visited in cell order, and i is not its own neighbour. With ``half``
-        (only with ``exclude_self``) a half shell: the point at sorted position s visits only the
-        sorted positions after s among the cells of its box (its own cell from s + 1 on, the rest of its
-        own row of cells, and the rows after it in (z, y) order), so each pair is found once, by the
-        point that comes first in the grid's (cell, index) order: about half the work of a full query.
-        """
-        r2 = ti.cast(r, real) * ti.cast(r, real)
-        last = start.shape[1] - 2  # the extra cell of inactive points
-        cap = nbr.shape[2]
-        for b, s in ti.ndrange(q.shape[0], q.shape[1]):
-            i = s
-            p = q[b, s]
-            skip = 0
-            if exclude_self != 0:  # the built points, visited in sorted order (cache-friendly)
-                skip = ti.cast(s >= start[b, last], ti.i32)  # an inactive point: no neighbours
-                i = order[b, s]
-                p = xs[b, s]
-            n = 0
-            if skip == 0:
-                t, padh = g.cell_units(p, r, geom, dims)
-                lo, hi = g.box_t(t, padh, dims)
-                z0, z1 = g.z_range(lo, hi)
-                own_y = g.coord(p[1], 1, geom, dims)
-                own_z = 0
-                if ti.static(dim == 3):
-                    own_z = g.coord(p[2], 2, geom, dims)
-                if half != 0:
-                    z0 = own_z  # rows before the point's own: their pairs were found from there
-                for z in range(z0, z1 + 1):
-                    y0 = lo[1]
-                    if half != 0 and z == own_z:
-                        y0 = own_y
-                    for y in range(y0, hi[1] + 1):
-                        k0, k1 = g.span(b, t, padh, y, z, lo, hi, dims, start)
-                        if half != 0 and z == own_z and y == own_y:
-                            k0 = s + 1
-                        for k in range(k0, k1):
-                            # branch-free compaction: every candidate is stored at slot n while the row has
-                            # room, n advances only on a hit (a miss is overwritten by the next hit or left
-                            # past the count); an unpredictable branch per candidate cost more than the store
-                            d = xs[b, k] - p
-                            hit = ti.cast(d.dot(d) <= r2, ti.i32)
-                            if ti.static(True):
-                                hit &= ti.cast(exclude_self == 0 or k != s, ti.i32)  # k == s: the point itself
-                            if n < cap:
-                                nbr[b, i, n] = order[b, k]
-                            n += hit
-            count[b, i] = n
-
-    return cell_ids, counting_sort, query, blocked_sort
+    return blocked_sort
 
 
 @cached_variants

@@ -244,13 +244,16 @@ class NeighbourGrid:
         active = active.view(np.uint8) if active.dtype == np.bool_ else active
         if check:
             x = self._points("x", x, self.n_points, None if active is self._all_active else active)
-        cell_ids, counting_sort, _, blocked_sort = self._kernels()
+        cell_ids, counting_sort, _ = self._kernels()
         cell_ids(x, np.ascontiguousarray(active), self._geom, self.dims, self.cell)
         scratch = self._sort_scratch()
         if scratch is None:
             counting_sort(x, self.cell, self.start, self.order, self.sorted_x)
         else:
-            blocked_sort(x, self.cell, self.start, self.order, self.sorted_x, *scratch)
+            from tianim.spatial._kernels import blocked_sort_kernel
+
+            blocked_sort_kernel(np.dtype(self.dtype).name, self.dim, scratch[0].shape[1])(
+                x, self.cell, self.start, self.order, self.sorted_x, *scratch)
         self._built = x
         return self
 
@@ -291,7 +294,7 @@ class NeighbourGrid:
         else:
             q, exclude = self._points("points", points, None), 0
         nbr, count = self._buffers(q.shape[1])
-        query = self._kernels()[2]
+        _, _, query = self._kernels()
         query(q, self.sorted_x, self.order, self.start, self._geom, self.dims, r, exclude, 0, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
 
@@ -306,7 +309,7 @@ class NeighbourGrid:
         if self._built is None:
             raise RuntimeError("query_half before build: call grid.build(x) first")
         nbr, count = self._buffers(self.n_points)
-        query = self._kernels()[2]
+        _, _, query = self._kernels()
         query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
 
