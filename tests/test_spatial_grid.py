@@ -426,7 +426,19 @@ _NEAREST_SCRIPT = textwrap.dedent("""
 
 
 #: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
-DETERMINISM = {"spatial: grid query": _THREAD_SCRIPT, "spatial: nearest-k query": _NEAREST_SCRIPT}
+#: One copy of 40,000 points: the serial sort under one thread, the blocked sort (3 blocks) under three.
+_BLOCKED_SCRIPT = textwrap.dedent("""
+    import hashlib, numpy as np
+    from tianim.spatial import NeighbourGrid
+    x = np.random.default_rng(8).random((1, 40000, 3)).astype(np.float32)
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.03, 40000, max_neighbours=24, dtype=np.float32).build(x)
+    pairs = grid.query_half(0.03).pairs()
+    print(hashlib.sha256(grid.start.tobytes() + grid.order.tobytes() + grid.sorted_x.tobytes()
+                         + pairs.tobytes()).hexdigest())
+""")
+
+DETERMINISM = {"spatial: grid query": _THREAD_SCRIPT, "spatial: nearest-k query": _NEAREST_SCRIPT,
+               "spatial: one large copy (blocked sort)": _BLOCKED_SCRIPT}
 
 
 @pytest.mark.parametrize("dim, dtype", [(2, np.float32), (3, np.float32), (3, np.float64)])

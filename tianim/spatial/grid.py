@@ -32,8 +32,10 @@ Cost
 ----
 Memory: ``4 B (3 N + M + 2) + 4 B Q (K + 1)`` bytes plus ``B N D`` reals for sorted positions,
 with M = prod(cells per axis), K = ``max_neighbours``, Q query points.
-Build: O(N + M) per copy, serial inside a copy, copies in parallel (a counting sort by cell id,
-stable in point index; Knuth, TAOCP vol. 3, 5.2 "distribution counting").
+Build: O(N + M) per copy, copies in parallel (a counting sort by cell id, stable in point index;
+Knuth, TAOCP vol. 3, 5.2 "distribution counting"); with fewer copies than threads each copy's sort is
+split over S = threads / B blocks of points (``blocked_sort``: O(N + S M), the same result bit for bit),
+else serial inside a copy.
 Query: O(Q (C + S)) in parallel over (copy, point), C = rows of cells visited (<= 3^(D-1) for r <= h),
 S = points in them: rows that lie farther than r across y and z are culled (``grid_funcs.span``),
 so S is about 0.88 x 3^D rho h^D for density rho and r = h (28.4 candidates per point for
@@ -260,9 +262,9 @@ class NeighbourGrid:
     @staticmethod
     def _threads() -> int:
         """Taichi's CPU thread count (the blocked sort's block count follows it; its result does not)."""
-        from tianim import _ti
+        from tianim.runtime import ensure_taichi
 
-        return int(_ti.get().lang.impl.current_cfg().cpu_max_num_threads)
+        return int(ensure_taichi().lang.impl.current_cfg().cpu_max_num_threads)
 
     def _sort_scratch(self):
         """``(hist, rsum)`` for the blocked sort (``grid_kernels().blocked_sort``, the same result as the serial
