@@ -288,6 +288,34 @@ def test_half_query_gives_each_pair_once_as_brute_force(dim, dtype):
         assert [sorted(nbrs) for nbrs in both] == full[b]
 
 
+@pytest.mark.parametrize("dim, dtype", [(2, np.float64), (3, np.float32)])
+def test_grid_pairs_are_the_half_query_rows_in_the_grids_order(dim, dtype):
+    """``NeighbourGrid.pairs`` (rows written by sorted position) gives exactly the rows of
+    ``query_half(r).pairs(b)`` (rows by point index), taken in the grid's order: row order[b, s] for
+    s = 0, 1, ...; so the same pairs as brute force (the test above), with inactive and outside points."""
+    rng = np.random.default_rng(30 + dim)
+    B, N, r = 2, 1500, 0.05 if dim == 2 else 0.1
+    x = rng.uniform(-0.1, 1.1, (B, N, dim)).astype(dtype)
+    active = (rng.random((B, N)) > 0.1).astype(np.uint8)
+    grid = NeighbourGrid(np.zeros(dim), np.ones(dim), r, N, batch=B, max_neighbours=40, dtype=dtype)
+    grid.build(x, active)
+    for b in range(B):
+        half = grid.query_half(r)
+        want = [(min(i, j), max(i, j)) for i in grid.order[b].tolist()
+                for j in half.indices[b, i, : half.counts[b, i]].tolist()]
+        got = grid.pairs(r, b)
+        assert got.dtype == np.int64 and got.shape == (len(want), 2) and len(want) > 1000
+        assert got.tolist() == [list(p) for p in want]
+    with pytest.raises(ValueError, match="radius"):
+        grid.pairs(-1.0)
+    with pytest.raises(ValueError, match="b"):
+        grid.pairs(r, b=2)
+    with pytest.raises(NeighbourOverflowError, match="max_neighbours=40"):
+        grid.pairs(0.5)
+    with pytest.raises(RuntimeError, match="build"):
+        NeighbourGrid(np.zeros(dim), np.ones(dim), r, N, dtype=dtype).pairs(r)
+
+
 def test_half_query_leaves_full_query_results_unchanged():
     rng = np.random.default_rng(5)
     x = rng.random((1, 2000, 3))

@@ -104,6 +104,10 @@ class NeighbourList:
         if self.overflow:
             raise NeighbourOverflowError(_overflow_message(self))
         check_int("b", b, lo=0, hi=self.counts.shape[0] - 1)
+        return self._pair_rows(b, None)
+
+    def _pair_rows(self, b, rows):
+        """The pairs of copy b's rows in row order; row r is point r (``rows`` None) or point rows[r]."""
         from tianim.spatial._kernels import pair_kernels
 
         counts = self.counts[b]
@@ -111,7 +115,7 @@ class NeighbourList:
         np.cumsum(counts[:-1], out=offsets[1:])
         out = np.empty((int(offsets[-1] + counts[-1]) if counts.size else 0, 2), np.int64)
         if len(out):
-            pair_kernels()(self.indices[b], counts, offsets, out)
+            pair_kernels()(self.indices[b], counts, offsets, counts if rows is None else rows, rows is None, out)
         return out
 
 
@@ -297,7 +301,7 @@ class NeighbourGrid:
             q, exclude = self._points("points", points, None), 0
         nbr, count = self._buffers(q.shape[1])
         _, _, query = self._kernels()
-        query(q, self.sorted_x, self.order, self.start, self._geom, self.dims, r, exclude, 0, nbr, count)
+        query(q, self.sorted_x, self.order, self.start, self._geom, self.dims, r, exclude, 0, 0, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
 
     def query_half(self, radius, on_overflow: str = "raise") -> NeighbourList:
@@ -312,8 +316,33 @@ class NeighbourGrid:
             raise RuntimeError("query_half before build: call grid.build(x) first")
         nbr, count = self._buffers(self.n_points)
         _, _, query = self._kernels()
-        query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, nbr, count)
+        query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, 0, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
+
+    def pairs(self, radius, b: int = 0) -> np.ndarray:
+        """Each pair of built points of copy ``b`` within ``radius`` [m] once, as a (P, 2) int64 array of rows
+        ``(min(i, j), max(i, j))``: the pairs of ``query_half(radius).pairs(b)``, with the same rows in the
+        grid's order (by the sorted position of the point that finds them: cell, then index) instead of by
+        point index, so the half query writes its rows in memory order (the output of
+        ``cKDTree.query_pairs(r, output_type="ndarray")``, whose order is its own). Uses the query buffers
+        (a NeighbourList from an earlier query is overwritten); raises :class:`NeighbourOverflowError` when
+        a point has more than ``max_neighbours`` pairs to the points after it (as ``query_half``).
+        """
+        r = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
+        check_int("b", b, lo=0, hi=self.batch - 1)
+        if self._built is None:
+            raise RuntimeError("pairs before build: call grid.build(x) first")
+        nbr, count = self._buffers(self.n_points)
+        _, _, query = self._kernels()
+        query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, 1, nbr, count)
+        rows = NeighbourList(nbr, count, self.max_neighbours)
+        if rows.overflow:
+            b0, s0 = np.argwhere(count > self.max_neighbours)[0]
+            raise NeighbourOverflowError(
+                f"{rows.overflow} point(s) have more than max_neighbours={self.max_neighbours} pairs to the points "
+                f"after them (copy {b0}, point {int(self.order[b0, s0])} has {int(count[b0, s0])}); give a larger "
+                "max_neighbours or a smaller radius")
+        return rows._pair_rows(b, self.order[b])
 
     def query_nearest(self, k, radius, points: np.ndarray | None = None):
         """The ``k`` nearest built points within ``radius`` [m] of each built point (default, itself
