@@ -111,6 +111,60 @@ def test_a_batch_equals_separate_grids_bit_for_bit():
             assert np.array_equal(nb1.indices[0, i, :k], both[0][b, i, :k])
 
 
+@pytest.mark.parametrize("dim,dtype", [(3, np.float32), (2, np.float64)])
+def test_serial_and_blocked_sorts_equal_a_stable_argsort_by_cell(dim, dtype):
+    """The serial ``counting_sort`` and ``blocked_sort`` (a copy's sort split over S point blocks and G
+    cell ranges, S and G from 1 to 7: more blocks than some cells have points, ranges of one cell) both
+    give NumPy's stable argsort of the cell ids (order), the cells' first slots (start) and the positions
+    in that order, with inactive points, clamped outside points, empty cells, ties, 3 copies and N not a
+    multiple of S."""
+    rng = np.random.default_rng(12)
+    B, n = 3, 997
+    x = (rng.random((B, n, dim)) * 1.4 - 0.2).astype(dtype)  # some outside [0, 1]: clamped
+    x[:, :100] = x[:, 100:200]  # coincident points: ties by index
+    active = (rng.random((B, n)) > 0.1).astype(np.uint8)
+    grid = NeighbourGrid((0,) * dim, (1,) * dim, 0.13 if dim == 3 else 0.04, n, batch=B, dtype=dtype)
+    grid.build(x, active)
+    from tianim.spatial._kernels import blocked_sort_kernel
+
+    _, counting_sort, _ = grid._kernels()
+    order = np.argsort(grid.cell, axis=1, kind="stable").astype(np.int32)
+    start = np.stack([np.searchsorted(np.sort(c), np.arange(grid.n_cells + 2)) for c in grid.cell]).astype(np.int32)
+    ref = start, order, np.take_along_axis(x, order[..., None].astype(np.int64), axis=1)
+    assert np.all(grid.cell[active == 0] == grid.n_cells) and len(np.unique(grid.cell)) > 300
+    for a in (grid.start, grid.order, grid.sorted_x):
+        a.fill(-1)
+    counting_sort(x, grid.cell, grid.start, grid.order, grid.sorted_x)
+    for got, want in zip((grid.start, grid.order, grid.sorted_x), ref):
+        assert np.array_equal(got, want)
+    for s, g in [(1, 1), (2, 2), (3, 5), (2, 7), (4, 1)]:
+        for a in (grid.start, grid.order, grid.sorted_x):
+            a.fill(-1)
+        hist, rsum = np.full((B, s, grid.n_cells + 1), 99, np.int32), np.full((B, g), 99, np.int32)
+        blocked_sort_kernel(np.dtype(dtype).name, dim, s)(x, grid.cell, grid.start, grid.order, grid.sorted_x, hist, rsum)
+        for got, want in zip((grid.start, grid.order, grid.sorted_x), ref):
+            assert np.array_equal(got, want), (s, g)
+
+
+def test_build_takes_the_blocked_sort_for_one_large_copy_and_keeps_the_bits(monkeypatch):
+    """With fewer copies than threads and enough points, ``build`` sorts with the blocked kernel;
+    the grid (start, order, sorted positions) and the queries equal those of the serial sort."""
+    import tianim.spatial.grid as sg
+
+    x = np.random.default_rng(3).random((1, 5000, 3)).astype(np.float32)
+    grids = []
+    for blocked in (True, False):
+        monkeypatch.setattr(sg, "BLOCKED_SORT_MIN_POINTS", 1000 if blocked else 10 ** 9)
+        grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.06, 5000, max_neighbours=48, dtype=np.float32)
+        monkeypatch.setattr(grid, "_threads", lambda: 3)
+        grids.append(grid.build(x))
+        assert (grid._sort_scratch() is not None) == blocked
+    for name in ("start", "order", "sorted_x"):
+        assert np.array_equal(getattr(grids[0], name), getattr(grids[1], name)), name
+    a, b = (g.query_half(0.06).pairs() for g in grids)
+    assert np.array_equal(a, b) and len(a) > 10000
+
+
 _THREAD_SCRIPT = textwrap.dedent("""
     import hashlib, numpy as np
     from tianim.spatial import NeighbourGrid
@@ -232,6 +286,34 @@ def test_half_query_gives_each_pair_once_as_brute_force(dim, dtype):
             for m in row:
                 both[m].add(k)
         assert [sorted(nbrs) for nbrs in both] == full[b]
+
+
+@pytest.mark.parametrize("dim, dtype", [(2, np.float64), (3, np.float32)])
+def test_grid_pairs_are_the_half_query_rows_in_the_grids_order(dim, dtype):
+    """``NeighbourGrid.pairs`` (rows written by sorted position) gives exactly the rows of
+    ``query_half(r).pairs(b)`` (rows by point index), taken in the grid's order: row order[b, s] for
+    s = 0, 1, ...; so the same pairs as brute force (the test above), with inactive and outside points."""
+    rng = np.random.default_rng(30 + dim)
+    B, N, r = 2, 1500, 0.05 if dim == 2 else 0.1
+    x = rng.uniform(-0.1, 1.1, (B, N, dim)).astype(dtype)
+    active = (rng.random((B, N)) > 0.1).astype(np.uint8)
+    grid = NeighbourGrid(np.zeros(dim), np.ones(dim), r, N, batch=B, max_neighbours=40, dtype=dtype)
+    grid.build(x, active)
+    for b in range(B):
+        half = grid.query_half(r)
+        want = [(min(i, j), max(i, j)) for i in grid.order[b].tolist()
+                for j in half.indices[b, i, : half.counts[b, i]].tolist()]
+        got = grid.pairs(r, b)
+        assert got.dtype == np.int64 and got.shape == (len(want), 2) and len(want) > 1000
+        assert got.tolist() == [list(p) for p in want]
+    with pytest.raises(ValueError, match="radius"):
+        grid.pairs(-1.0)
+    with pytest.raises(ValueError, match="b"):
+        grid.pairs(r, b=2)
+    with pytest.raises(NeighbourOverflowError, match="max_neighbours=40"):
+        grid.pairs(0.5)
+    with pytest.raises(RuntimeError, match="build"):
+        NeighbourGrid(np.zeros(dim), np.ones(dim), r, N, dtype=dtype).pairs(r)
 
 
 def test_half_query_leaves_full_query_results_unchanged():
@@ -372,7 +454,19 @@ _NEAREST_SCRIPT = textwrap.dedent("""
 
 
 #: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).
-DETERMINISM = {"spatial: grid query": _THREAD_SCRIPT, "spatial: nearest-k query": _NEAREST_SCRIPT}
+#: One copy of 40,000 points: the serial sort under one thread, the blocked sort (3 blocks) under three.
+_BLOCKED_SCRIPT = textwrap.dedent("""
+    import hashlib, numpy as np
+    from tianim.spatial import NeighbourGrid
+    x = np.random.default_rng(8).random((1, 40000, 3)).astype(np.float32)
+    grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.03, 40000, max_neighbours=24, dtype=np.float32).build(x)
+    pairs = grid.query_half(0.03).pairs()
+    print(hashlib.sha256(grid.start.tobytes() + grid.order.tobytes() + grid.sorted_x.tobytes()
+                         + pairs.tobytes()).hexdigest())
+""")
+
+DETERMINISM = {"spatial: grid query": _THREAD_SCRIPT, "spatial: nearest-k query": _NEAREST_SCRIPT,
+               "spatial: one large copy (blocked sort)": _BLOCKED_SCRIPT}
 
 
 @pytest.mark.parametrize("dim, dtype", [(2, np.float32), (3, np.float32), (3, np.float64)])

@@ -7,14 +7,16 @@ are checked equal (as sorted (i, j) pair keys) before anything is timed; times a
 
 * ``tianim`` - :class:`tianim.spatial.NeighbourGrid`, float64 and float32 positions, Taichi CPU
   (build + query into its (N, K) neighbour buffer; ``csr_s``: the extra time of NumPy CSR lists);
-* ``tianim_pairs`` - build + ``query_half`` + ``pairs()`` (float32): each pair once as a (P, 2) int64
-  array, the output of ``cKDTree.query_pairs(output_type="ndarray")``, timed against it
-  (``speedup_pairs_vs_ckdtree``, the headline ratio: the same output from the same points);
+* ``tianim_pairs`` - build + ``NeighbourGrid.pairs`` (float32): each pair once as a (P, 2) int64 array,
+  the output of ``cKDTree.query_pairs(output_type="ndarray")``, timed against it
+  (``speedup_pairs_vs_ckdtree``, the headline ratio: the same output from the same points); beside it
+  ``tianim_half_pairs`` - build + ``query_half`` + ``NeighbourList.pairs()`` (the same pairs, rows by point
+  index: the half query's rows are scattered writes);
 * ``ckdtree_ball`` - ``scipy.spatial.cKDTree(x).query_ball_point(x, r, workers=-1)`` (all cores);
 * ``ckdtree_pairs`` - ``cKDTree(x).query_pairs(r, output_type="ndarray")`` (one core, each pair once);
 * ``numpy_cells`` - a vectorised NumPy cell list (sort by cell id, 27 offset passes).
 
-Summary keys (the largest N): ``grid_pairs_s`` (tianim build + query_half + pairs), ``ckdtree_pairs_s``,
+Summary keys (the largest N): ``grid_pairs_s`` (tianim build + pairs), ``grid_half_pairs_s``, ``ckdtree_pairs_s``,
 ``grid_speedup_pairs_vs_ckdtree``; ``grid_query_s`` (tianim float32 build + query), ``grid_query_f64_s``,
 ``ckdtree_query_s`` (the faster cKDTree method), ``numpy_cells_s``, ``grid_speedup_vs_ckdtree``,
 ``grid_speedup_vs_numpy``, ``n_points``, ``mean_neighbours``.
@@ -116,6 +118,8 @@ def run_size(n, repeats, seed=0):
     got = hg.build(x32).query_half(r).pairs()
     if not np.array_equal(_pair_keys(got, n), ref32):
         raise AssertionError(f"N={n}: tianim query_half pairs and cKDTree.query_pairs disagree")
+    if not np.array_equal(_pair_keys(hg.build(x32).pairs(r), n), ref32):
+        raise AssertionError(f"N={n}: tianim NeighbourGrid.pairs and cKDTree.query_pairs disagree")
     # --- timed
     slow = min(repeats, 3) if n >= 500_000 else repeats
     row = {"n_points": n, "radius": r, "mean_neighbours": float(counts.mean())}
@@ -125,7 +129,8 @@ def run_size(n, repeats, seed=0):
     row["csr_s"] = median_time(lambda: g.query(r).csr(), repeats=repeats) - median_time(lambda: g.query(r), repeats=repeats)
     row["build_f32_s"] = median_time(lambda: g.build(x32), repeats=repeats)
     row["query_f32_s"] = median_time(lambda: g.query(r), repeats=repeats)
-    row["tianim_pairs_s"] = median_time(lambda: hg.build(x32).query_half(r).pairs(), repeats=repeats)
+    row["tianim_pairs_s"] = median_time(lambda: hg.build(x32).pairs(r), repeats=repeats)
+    row["tianim_half_pairs_s"] = median_time(lambda: hg.build(x32).query_half(r).pairs(), repeats=repeats)
     row["ckdtree_ball_s"] = median_time(lambda: _ckd_ball(x64[0], r), repeats=slow, warmup=0)
     row["ckdtree_pairs_s"] = median_time(lambda: _ckd_pairs(x64[0], r), repeats=slow, warmup=0)
     row["numpy_cells_s"] = median_time(lambda: numpy_cells(x64[0], r), repeats=slow, warmup=0)
@@ -144,13 +149,14 @@ def main(argv=None) -> int:
     rows = [run_size(n, repeats) for n in sizes]
     print("tianim bench grid: build + query, neighbour sets checked equal first (seconds, medians)")
     print_table(rows, ["n_points", "mean_neighbours", "tianim_f32_s", "tianim_f64_s", "build_f32_s", "query_f32_s", "csr_s",
-                       "tianim_pairs_s",
+                       "tianim_pairs_s", "tianim_half_pairs_s",
                        "ckdtree_ball_s", "ckdtree_pairs_s", "numpy_cells_s", "speedup_pairs_vs_ckdtree", "speedup_vs_ckdtree",
                        "speedup_vs_numpy"])
     last = rows[-1]
     summary = {
         "n_points": last["n_points"], "mean_neighbours": last["mean_neighbours"],
-        "grid_pairs_s": last["tianim_pairs_s"], "ckdtree_pairs_s": last["ckdtree_pairs_s"],
+        "grid_pairs_s": last["tianim_pairs_s"], "grid_half_pairs_s": last["tianim_half_pairs_s"],
+        "ckdtree_pairs_s": last["ckdtree_pairs_s"],
         "grid_speedup_pairs_vs_ckdtree": last["speedup_pairs_vs_ckdtree"],
         "grid_query_s": last["tianim_f32_s"], "grid_query_f64_s": last["tianim_f64_s"],
         "ckdtree_query_s": min(last["ckdtree_ball_s"], last["ckdtree_pairs_s"]), "numpy_cells_s": last["numpy_cells_s"],

@@ -28,8 +28,14 @@ LATERAL_MIN = 1e-3
 
 
 @cached_variants
-def boids_kernels(real_name: str, dim: int, steps: int = 1):
-    """``boids_steps`` (``steps`` steps per launch, unrolled) for ``real_name`` positions in ``dim`` D."""
+def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True):
+    """``boids_steps`` (``steps`` steps per launch, unrolled) for ``real_name`` positions in ``dim`` D.
+
+    ``masked`` (default): the neighbour scan is branch-free (every candidate of the scanned cells goes
+    through the masks, the radius test included, and adds zero when it fails); ``masked=False`` is the
+    branchy scan it replaced (a branch on the radius test, unpredictable for about half the candidates),
+    kept as the reference that tests/test_crowds.py checks it against bit for bit. Both add the same terms
+    in the same order (a failing candidate adds +0.0, which changes no sum)."""
     t = kernel_types(real_name, dim)
     ti, real = t.ti, t.real
     surface, _ = contact_parts(real_name, dim)
@@ -58,6 +64,13 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1):
         narrow = ahead & ti.cast(lhs >= rhs, ti.i32)  # fov <= pi
         wide = ahead | ti.cast(lhs <= rhs, ti.i32)  # fov > pi
         return ti.select(cos <= -1, 1, ti.select(cos >= 0, narrow, wide))
+
+    @ti.func
+    def in_view(hd, d2, rs2, cs, ra2, ca, rc2, cc):
+        """(ms, ma, mc): 1 where the offset (h . d = hd, |d|^2 = d2) is within the separation, alignment and
+        cohesion radius^2 and field of view."""
+        return (ti.cast(d2 <= rs2, ti.i32) & visible(hd, d2, cs), ti.cast(d2 <= ra2, ti.i32) & visible(hd, d2, ca),
+                ti.cast(d2 <= rc2, ti.i32) & visible(hd, d2, cc))
 
     @ti.func
     def steer_to(direction, vi, max_speed, max_force):
@@ -108,25 +121,44 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1):
         ns, na, nc = 0, 0, 0
         seen = 0
         rows = 0
-        lo, hi_c = grid.box(xi, r * (1 + BOX_PAD), geom, dims)
+        lo = ti.Vector.zero(ti.i32, dim)
+        hi_c = ti.Vector.zero(ti.i32, dim)
+        if ti.static(masked):
+            tt, padh = grid.cell_units(xi, r, geom, dims)  # one multiplication per axis, no division
+            lo, hi_c = grid.box_t(tt, padh, dims)  # a superset of grid.box's cells: the extra hold no point within r
+        else:
+            lo, hi_c = grid.box(xi, r * (1 + BOX_PAD), geom, dims)
         if r >= 0:
             rows = grid.n_rows(lo, hi_c)
         zero = ti.Vector.zero(real, dim)
         for row in range(rows):
             base = grid.row_base(row, lo, hi_c, dims)  # (narrowing rows to the disc cost more than it saved)
             for k in range(start[b, base + lo[0]], start[b, base + hi_c[0] + 1]):
-                if k != s:
+                if ti.static(masked):  # masks and selects, not branches: which candidates count is unpredictable
+                    d = xs[b, k] - xi
+                    d2 = d.dot(d)
+                    hit = ti.cast(d2 <= r2, ti.i32) & ti.cast(k != s, ti.i32)
+                    seen += hit
+                    use = hit & ti.cast(seen <= cap, ti.i32) & ti.cast(d2 > 0, ti.i32)
+                    ms, ma, mc = in_view(hi.dot(d), d2, rs2, cs, ra2, ca, rc2, cc)
+                    ms &= use
+                    ma &= use
+                    mc &= use
+                    if ms != 0:  # (rare: the separation radius is the small one)
+                        sep -= d / d2
+                    ali += ti.select(ma != 0, vs[b, k], zero)  # + 0.0 where ma == 0: the sum is unchanged
+                    coh += ti.select(mc != 0, d, zero)
+                    ns += ms
+                    na += ma
+                    nc += mc
+                elif k != s:  # the replaced scan (masked=False): branches on the radius test
                     d = xs[b, k] - xi
                     d2 = d.dot(d)
                     if d2 <= r2:
                         seen += 1
                         if seen <= cap and d2 > 0:
-                            # masks and selects, not branches: whether a neighbour is in view is unpredictable
-                            hd_ = hi.dot(d)
-                            ms = ti.cast(d2 <= rs2, ti.i32) & visible(hd_, d2, cs)
-                            ma = ti.cast(d2 <= ra2, ti.i32) & visible(hd_, d2, ca)
-                            mc = ti.cast(d2 <= rc2, ti.i32) & visible(hd_, d2, cc)
-                            if ms != 0:  # (rare: the separation radius is the small one)
+                            ms, ma, mc = in_view(hi.dot(d), d2, rs2, cs, ra2, ca, rc2, cc)
+                            if ms != 0:
                                 sep -= d / d2
                             ali += ti.select(ma != 0, vs[b, k], zero)
                             coh += ti.select(mc != 0, d, zero)

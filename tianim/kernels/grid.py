@@ -56,27 +56,27 @@ def grid_funcs(real_name: str, dim: int):
     @ti.func
     def sort_copy(b, x: ti.template(), cell: ti.template(), start: ti.template(), order: ti.template(),
                   xs: ti.template()):
-        """Counting sort of copy b by cell, stable in point index (see ``counting_sort``)."""
+        """Counting sort of copy b by cell, stable in point index (see ``counting_sort``): counts, an
+        inclusive scan (start[c] = end of cell c), then the scatter backwards from the last point, each
+        cell's cursor counting down, so start[c] ends at the first slot of c and each cell holds its points
+        in index order (Knuth, TAOCP vol. 3, 5.2, Algorithm D: no pass to shift the ends into starts)."""
         n_cells = start.shape[1] - 1
         for c in range(n_cells + 1):
             start[b, c] = 0
         for i in range(x.shape[1]):  # counts
             start[b, cell[b, i]] += 1
         run = 0
-        for c in range(n_cells):  # exclusive scan: start[c] = first slot of cell c
-            cnt = start[b, c]
+        for c in range(n_cells):  # inclusive scan: start[c] = one past the last slot of cell c
+            run += start[b, c]
             start[b, c] = run
-            run += cnt
-        for i in range(x.shape[1]):  # scatter in point-index order (stable)
+        start[b, n_cells] = run
+        for m in range(x.shape[1]):  # scatter from the last point down (stable: the cursors count down)
+            i = x.shape[1] - 1 - m
             c = cell[b, i]
-            k = start[b, c]
+            k = start[b, c] - 1
             order[b, k] = i
             xs[b, k] = x[b, i]
-            start[b, c] = k + 1
-        for k in range(n_cells):  # start[c] now holds the end of cell c: shift right by one
-            c = n_cells - k
-            start[b, c] = start[b, c - 1]
-        start[b, 0] = 0
+            start[b, c] = k
 
     @ti.func
     def box(p, pad, geom: ti.template(), dims: ti.template()):

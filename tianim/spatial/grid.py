@@ -32,8 +32,10 @@ Cost
 ----
 Memory: ``4 B (3 N + M + 2) + 4 B Q (K + 1)`` bytes plus ``B N D`` reals for sorted positions,
 with M = prod(cells per axis), K = ``max_neighbours``, Q query points.
-Build: O(N + M) per copy, serial inside a copy, copies in parallel (a counting sort by cell id,
-stable in point index; Knuth, TAOCP vol. 3, 5.2 "distribution counting").
+Build: O(N + M) per copy, copies in parallel (a counting sort by cell id, stable in point index;
+Knuth, TAOCP vol. 3, 5.2 "distribution counting"); with fewer copies than threads each copy's sort is
+split over S = threads / B blocks of points (``blocked_sort``: O(N + S M), the same result bit for bit),
+else serial inside a copy.
 Query: O(Q (C + S)) in parallel over (copy, point), C = rows of cells visited (<= 3^(D-1) for r <= h),
 S = points in them: rows that lie farther than r across y and z are culled (``grid_funcs.span``),
 so S is about 0.88 x 3^D rho h^D for density rho and r = h (28.4 candidates per point for
@@ -51,6 +53,11 @@ from tianim._checks import INT32_MAX, as_float_array, check_choice, check_finite
 
 #: Default cap on the number of cells of one copy's grid (4 bytes each).
 MAX_CELLS = 1 << 26
+
+#: Most point blocks of the blocked (parallel) sort of one copy, and the fewest points per copy it is used for
+#: (below, the serial sort's thread-pool start-up is not worth saving).
+SORT_BLOCKS = 8
+BLOCKED_SORT_MIN_POINTS = 1 << 15
 
 
 class NeighbourOverflowError(ValueError):
@@ -97,6 +104,10 @@ class NeighbourList:
         if self.overflow:
             raise NeighbourOverflowError(_overflow_message(self))
         check_int("b", b, lo=0, hi=self.counts.shape[0] - 1)
+        return self._pair_rows(b, None)
+
+    def _pair_rows(self, b, rows):
+        """The pairs of copy b's rows in row order; row r is point r (``rows`` None) or point rows[r]."""
         from tianim.spatial._kernels import pair_kernels
 
         counts = self.counts[b]
@@ -104,7 +115,7 @@ class NeighbourList:
         np.cumsum(counts[:-1], out=offsets[1:])
         out = np.empty((int(offsets[-1] + counts[-1]) if counts.size else 0, 2), np.int64)
         if len(out):
-            pair_kernels()(self.indices[b], counts, offsets, out)
+            pair_kernels()(self.indices[b], counts, offsets, counts if rows is None else rows, rows is None, out)
         return out
 
 
@@ -176,6 +187,7 @@ class NeighbourGrid:
         self._views = None  # (q, indices, counts): views of _out for the last query size
         self._all_active = np.ones((B, N), np.uint8)
         self._built = None
+        self._scratch = None  # the blocked sort's (hist, rsum), made at the first build (see _sort_scratch)
 
     def __repr__(self) -> str:
         return (f"NeighbourGrid(dim={self.dim}, cells={tuple(int(d) for d in self.dims)}, cell_size={self.cell_size:g}, "
@@ -184,7 +196,7 @@ class NeighbourGrid:
     @property
     def nbytes(self) -> int:
         """Bytes held by the grid's buffers (cells, sort, sorted positions, query outputs)."""
-        arrays = [self.cell, self.start, self.order, self.sorted_x] + list(self._out or ())
+        arrays = [self.cell, self.start, self.order, self.sorted_x] + list(self._out or ()) + list(self._scratch or ())
         return int(sum(a.nbytes for a in arrays))
 
     @property
@@ -240,9 +252,37 @@ class NeighbourGrid:
             x = self._points("x", x, self.n_points, None if active is self._all_active else active)
         cell_ids, counting_sort, _ = self._kernels()
         cell_ids(x, np.ascontiguousarray(active), self._geom, self.dims, self.cell)
-        counting_sort(x, self.cell, self.start, self.order, self.sorted_x)
+        scratch = self._sort_scratch()
+        if scratch is None:
+            counting_sort(x, self.cell, self.start, self.order, self.sorted_x)
+        else:
+            from tianim.spatial._kernels import blocked_sort_kernel
+
+            blocked_sort_kernel(np.dtype(self.dtype).name, self.dim, scratch[0].shape[1])(
+                x, self.cell, self.start, self.order, self.sorted_x, *scratch)
         self._built = x
         return self
+
+    @staticmethod
+    def _threads() -> int:
+        """Taichi's CPU thread count (the blocked sort's block count follows it; its result does not)."""
+        from tianim.runtime import ensure_taichi
+
+        return int(ensure_taichi().lang.impl.current_cfg().cpu_max_num_threads)
+
+    def _sort_scratch(self):
+        """``(hist, rsum)`` for the blocked sort (``grid_kernels().blocked_sort``, the same result as the serial
+        counting sort) when the copies are fewer than the threads, or None (the serial sort per copy, copies in
+        parallel). S = threads // B blocks of points (at most :data:`SORT_BLOCKS`), only for copies of at least
+        :data:`BLOCKED_SORT_MIN_POINTS` points and scratch of at most 4 B S (M + 1) <= 16 B N per copy."""
+        if self._scratch is None:
+            s = min(self._threads() // self.batch, SORT_BLOCKS)
+            c = self.n_cells + 1
+            if s < 2 or self.n_points < BLOCKED_SORT_MIN_POINTS or s * c > 4 * self.n_points:
+                self._scratch = ()
+            else:
+                self._scratch = (np.zeros((self.batch, s, c), np.int32), np.zeros((self.batch, 2 * s), np.int32))
+        return self._scratch or None
 
     def query(self, radius, points: np.ndarray | None = None, on_overflow: str = "raise") -> NeighbourList:
         """Neighbours within ``radius`` [m] of each built point (default) or of ``points`` (B, Q, D).
@@ -261,7 +301,7 @@ class NeighbourGrid:
             q, exclude = self._points("points", points, None), 0
         nbr, count = self._buffers(q.shape[1])
         _, _, query = self._kernels()
-        query(q, self.sorted_x, self.order, self.start, self._geom, self.dims, r, exclude, 0, nbr, count)
+        query(q, self.sorted_x, self.order, self.start, self._geom, self.dims, r, exclude, 0, 0, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
 
     def query_half(self, radius, on_overflow: str = "raise") -> NeighbourList:
@@ -276,8 +316,33 @@ class NeighbourGrid:
             raise RuntimeError("query_half before build: call grid.build(x) first")
         nbr, count = self._buffers(self.n_points)
         _, _, query = self._kernels()
-        query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, nbr, count)
+        query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, 0, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
+
+    def pairs(self, radius, b: int = 0) -> np.ndarray:
+        """Each pair of built points of copy ``b`` within ``radius`` [m] once, as a (P, 2) int64 array of rows
+        ``(min(i, j), max(i, j))``: the pairs of ``query_half(radius).pairs(b)``, with the same rows in the
+        grid's order (by the sorted position of the point that finds them: cell, then index) instead of by
+        point index, so the half query writes its rows in memory order (the output of
+        ``cKDTree.query_pairs(r, output_type="ndarray")``, whose order is its own). Uses the query buffers
+        (a NeighbourList from an earlier query is overwritten); raises :class:`NeighbourOverflowError` when
+        a point has more than ``max_neighbours`` pairs to the points after it (as ``query_half``).
+        """
+        r = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
+        check_int("b", b, lo=0, hi=self.batch - 1)
+        if self._built is None:
+            raise RuntimeError("pairs before build: call grid.build(x) first")
+        nbr, count = self._buffers(self.n_points)
+        _, _, query = self._kernels()
+        query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, 1, nbr, count)
+        rows = NeighbourList(nbr, count, self.max_neighbours)
+        if rows.overflow:
+            b0, s0 = np.argwhere(count > self.max_neighbours)[0]
+            raise NeighbourOverflowError(
+                f"{rows.overflow} point(s) have more than max_neighbours={self.max_neighbours} pairs to the points "
+                f"after them (copy {b0}, point {int(self.order[b0, s0])} has {int(count[b0, s0])}); give a larger "
+                "max_neighbours or a smaller radius")
+        return rows._pair_rows(b, self.order[b])
 
     def query_nearest(self, k, radius, points: np.ndarray | None = None):
         """The ``k`` nearest built points within ``radius`` [m] of each built point (default, itself
