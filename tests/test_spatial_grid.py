@@ -147,22 +147,29 @@ def test_serial_and_blocked_sorts_equal_a_stable_argsort_by_cell(dim, dtype):
 
 
 def test_build_takes_the_blocked_sort_for_one_large_copy_and_keeps_the_bits(monkeypatch):
-    """With fewer copies than threads and enough points, ``build`` sorts with the blocked kernel;
-    the grid (start, order, sorted positions) and the queries equal those of the serial sort."""
-    import tianim.spatial.grid as sg
-
+    """``sort="blocked"`` (what ``"auto"`` takes with fewer copies than threads and enough points) sorts
+    with the blocked kernel; the grid (start, order, sorted positions) and the queries equal those of
+    ``sort="serial"``."""
     x = np.random.default_rng(3).random((1, 5000, 3)).astype(np.float32)
     grids = []
-    for blocked in (True, False):
-        monkeypatch.setattr(sg, "BLOCKED_SORT_MIN_POINTS", 1000 if blocked else 10 ** 9)
-        grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.06, 5000, max_neighbours=48, dtype=np.float32)
-        monkeypatch.setattr(grid, "_threads", lambda: 3)
+    for sort in ("blocked", "serial"):
+        grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.06, 5000, max_neighbours=48, dtype=np.float32, sort=sort)
         grids.append(grid.build(x))
-        assert (grid._sort_scratch() is not None) == blocked
+        assert (grid._sort_scratch() is not None) == (sort == "blocked")
     for name in ("start", "order", "sorted_x"):
         assert np.array_equal(getattr(grids[0], name), getattr(grids[1], name)), name
     a, b = (g.query_half(0.06).pairs() for g in grids)
     assert np.array_equal(a, b) and len(a) > 10000
+
+
+def test_auto_sort_takes_the_blocked_sort_only_for_large_copies_fewer_than_threads(monkeypatch):
+    for n, batch, threads, blocked in ((1 << 15, 1, 3, True), ((1 << 15) - 1, 1, 3, False), (1 << 15, 2, 3, False),
+                                       (1 << 15, 1, 1, False)):
+        grid = NeighbourGrid((0, 0, 0), (1, 1, 1), 0.06, n, batch=batch, dtype=np.float32)
+        monkeypatch.setattr(grid, "_threads", lambda: threads)
+        assert (grid._sort_scratch() is not None) == blocked, (n, batch, threads)
+    with pytest.raises(ValueError, match="sort"):
+        NeighbourGrid((0, 0, 0), (1, 1, 1), 0.06, 10, sort="parallel")
 
 
 _THREAD_SCRIPT = textwrap.dedent("""

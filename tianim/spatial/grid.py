@@ -146,10 +146,14 @@ class NeighbourGrid:
         Dtype of the positions (the distance test runs in it).
     max_cells : int
         Refuse grids with more cells per copy than this (memory guard).
+    sort : "auto", "serial" or "blocked"
+        The build's counting sort: one serial sort per copy (copies in parallel), or one copy's sort
+        split over blocks of points and cell ranges; both give the same bits. ``"auto"`` takes the
+        blocked sort for copies fewer than the threads with at least :data:`BLOCKED_SORT_MIN_POINTS` points.
     """
 
     def __init__(self, lower, upper, cell_size, n_points, batch=1, max_neighbours=32, dtype=np.float32,
-                 max_cells=MAX_CELLS):
+                 max_cells=MAX_CELLS, sort="auto"):
         lo = as_float_array("lower", lower, ndim=1)
         hi = as_float_array("upper", upper, ndim=1)
         if lo.size not in (2, 3):
@@ -163,6 +167,7 @@ class NeighbourGrid:
         self.batch = check_int("batch", batch, lo=1)
         self.max_neighbours = check_int("max_neighbours", max_neighbours, lo=1)
         max_cells = check_int("max_cells", max_cells, lo=1)
+        self.sort = check_choice("sort", sort, ("auto", "serial", "blocked"))
         self.dtype = real_dtype(dtype)
         dims = np.maximum(np.ceil((hi - lo) / h), 1).astype(np.int64)
         n_cells = int(np.prod(dims))
@@ -272,13 +277,18 @@ class NeighbourGrid:
 
     def _sort_scratch(self):
         """``(hist, rsum)`` for the blocked sort (``grid_kernels().blocked_sort``, the same result as the serial
-        counting sort) when the copies are fewer than the threads, or None (the serial sort per copy, copies in
-        parallel). S = threads // B blocks of points (at most :data:`SORT_BLOCKS`), only for copies of at least
-        :data:`BLOCKED_SORT_MIN_POINTS` points and scratch of at most 4 B S (M + 1) <= 16 B N per copy."""
+        counting sort), or None (the serial sort per copy, copies in parallel). ``sort="auto"`` takes the
+        blocked sort when the copies are fewer than the threads: S = threads // B blocks of points (at most
+        :data:`SORT_BLOCKS`), only for copies of at least :data:`BLOCKED_SORT_MIN_POINTS` points and scratch of
+        at most 4 B S (M + 1) <= 16 B N per copy; ``"blocked"`` takes it always (at least 2 blocks),
+        ``"serial"`` never."""
         if self._scratch is None:
             s = min(self._threads() // self.batch, SORT_BLOCKS)
             c = self.n_cells + 1
-            if s < 2 or self.n_points < BLOCKED_SORT_MIN_POINTS or s * c > 4 * self.n_points:
+            if self.sort == "blocked":
+                s = max(s, 2)
+            if self.sort == "serial" or (self.sort == "auto" and (
+                    s < 2 or self.n_points < BLOCKED_SORT_MIN_POINTS or s * c > 4 * self.n_points)):
                 self._scratch = ()
             else:
                 self._scratch = (np.zeros((self.batch, s, c), np.int32), np.zeros((self.batch, 2 * s), np.int32))
