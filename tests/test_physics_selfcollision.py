@@ -153,6 +153,57 @@ def test_batch_equals_separate_runs_with_every_feature_on():
 
 
 
+@pytest.mark.parametrize("kind", ["grid", "rope"])
+def test_candidate_rows_hold_exactly_the_non_neighbours_within_the_radius(kind):
+    """After a build (full, then partial) each row holds exactly the particles within the query radius that the
+    exclusion rule does not leave out (brute force over all pairs, independent of the grid): the excluded ones
+    are dropped once per build, not tested in every sweep."""
+    from tianim.physics.selfcollision import Contacts, exclusion_lists
+
+    if kind == "grid":
+        model, one = drop_scene()  # plane xy: a grid in x, y, its normal z
+        state = model.state(batch=2)
+        state.x[:] = one.x[0]
+        folded = state.x[1].reshape(N, N, 3)
+        folded[:, N // 2:] = folded[:, N // 2 - 1::-1]  # the right half laid over the left, 1 cm up: contacts
+        folded[:, N // 2:, 2] += np.float32(0.01)
+    else:
+        model = tp.rope(n=40, length=0.4)
+        state = model.state(batch=2)
+        ang = np.linspace(0, 4 * np.pi, 40)
+        state.x[:, :, 0] = (0.03 * np.cos(ang)).astype(np.float32)  # a tight coil: its turns touch
+        state.x[:, :, 1] = (0.03 * np.sin(ang)).astype(np.float32)
+        state.x[:, :, 2] = np.linspace(0, 0.02, 40, dtype=np.float32)
+    sc = tp.SelfCollision(THICKNESS)
+    c = Contacts(sc, model, state)
+    n = model.n_particles
+    if kind == "grid":
+        r, col = np.divmod(np.arange(n), model.grid.nx)
+        k = c.k_excl
+        excl = (np.abs(r[:, None] - r[None]) <= k) & (np.abs(col[:, None] - col[None]) <= k)
+    else:
+        off, idx = exclusion_lists(model, c.k_excl)
+        excl = np.eye(n, dtype=bool)
+        for i in range(n):
+            excl[i, idx[off[i]:off[i + 1]]] = True
+    for copies in (None, [1]):
+        if copies is not None:
+            state.x[1] = state.x[1, ::-1]  # move copy 1 only; copy 0's rows must stay
+        c.rebuild(state.x, copies)
+        kept = 0
+        for b in range(2):
+            x = state.x[b].astype(np.float32)
+            d2 = ((x[:, None] - x[None]) ** 2).sum(axis=2)
+            want = (d2 <= np.float32(c.radius) ** 2 * (1 + 1e-5)) & ~excl
+            sure = (d2 <= np.float32(c.radius) ** 2 * (1 - 1e-5)) & ~excl  # float32 rounding at the radius
+            for i in range(n):
+                row = set(c.nbr[b, i, :c.count[b, i]].tolist())
+                assert len(row) == c.count[b, i] and not (row & set(np.flatnonzero(excl[i]).tolist())), (b, i)
+                assert set(np.flatnonzero(sure[i]).tolist()) <= row <= set(np.flatnonzero(want[i]).tolist()), (b, i)
+                kept += len(row)
+        assert kept > 0  # the scene has candidates left after the exclusion
+
+
 def test_exclusion_rule():
     from tianim.physics.selfcollision import exclusion_lists, exclusion_steps
 
