@@ -336,6 +336,52 @@ def test_fused_symplectic_contact_launch_equals_the_two_launches(iterations, cap
     assert np.array_equal(out[True][0], out[False][0]) and np.array_equal(out[True][1], out[False][1])
 
 
+
+def _coil_rope():
+    """A rope of 40 particles wound in a tight coil 0.3 m up (its turns touch and fall onto the ground)."""
+    model = tp.rope(n=40, length=0.6, mass=0.001, stiffness=500.0, pins=(), colliders=[tp.Ground(friction=0.5)])
+    state = model.state(batch=2)
+    ang = np.linspace(0, 5 * np.pi, 40)
+    for b, r in enumerate((0.03, 0.035)):
+        state.x[b, :, 0] = (r * np.cos(ang)).astype(np.float32)
+        state.x[b, :, 1] = (0.3 - 0.25 * b + 0.004 * ang).astype(np.float32)
+        state.x[b, :, 2] = (r * np.sin(ang)).astype(np.float32)
+    return model, state
+
+
+@pytest.mark.parametrize("scene, iterations, sweeps, cap, compensated", [
+    ("cloth", 2, 1, None, False), pytest.param("cloth", 3, 2, 0.5, True, marks=pytest.mark.slow),
+    ("rope", 1, 2, None, False)])
+def test_xpbd_contact_launch_equals_the_two_launches(scene, iterations, sweeps, cap, compensated):
+    """XPBD with self-collision alone runs every substep of a call in one launch (per copy, stopping when the
+    copy's lists go stale: rebuilt, its contacts run, and it goes on): bit for bit the XPBD launch plus the
+    passes' launch per substep (``SelfCollision(path="split")``), over several calls, both copies (each
+    rebuilding on its own schedule), odd and even contact sweeps, the separation-speed cap, compensated
+    positions, grids and edge models."""
+    from tianim.physics.selfcollision import contacts_for
+
+    if scene == "cloth":
+        model, _ = drop_scene()
+        start = model.state(batch=2)
+        start.x[:, :, 2] += np.random.default_rng(3).normal(0, 0.003, start.x.shape[:2]).astype(np.float32)
+        start.x[1, :, 1] -= 0.3  # copy 1 starts near the ground: it folds onto itself sooner
+    else:
+        model, start = _coil_rope()
+    out = {}
+    for path in ("fused", "split"):
+        sc = tp.SelfCollision(THICKNESS, iterations=iterations, margin=0.004, max_separation_speed=cap, path=path)
+        solver = tp.XPBD(iterations=sweeps, self_collision=sc, compensated=compensated)
+        s = start.copy()
+        for _ in range(3):
+            solver.step(model, s, 1e-3, 151)
+        out[path] = (s.x.copy(), s.v.copy(), contacts_for(sc, model, s).rebuilt.tolist())
+    plain = start.copy()
+    tp.XPBD(iterations=sweeps, compensated=compensated).step(model, plain, 1e-3, 453)
+    assert not np.array_equal(plain.x, out["fused"][0])  # contacts acted
+    assert min(out["fused"][2]) > 2 and out["fused"][2] == out["split"][2]
+    assert np.array_equal(out["fused"][0], out["split"][0]) and np.array_equal(out["fused"][1], out["split"][1])
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("method, everything", [("symplectic_euler", False), ("verlet", True)])
 def test_serial_and_parallel_passes_are_bit_identical(method, everything):

@@ -83,9 +83,11 @@ class SelfCollision:
         ``maxDepenetrationVelocity``: overlaps that did not arise within the substep (particles placed
         or teleported into each other) are then pushed apart without a blow-up. None (default): no cap.
     path : {"auto", "fused", "split"}
-        How symplectic Euler runs with self-collision alone (:mod:`tianim.physics.passes`): ``"fused"``
-        (its substep inside the contact launch), ``"split"`` (the solver's substep launch, then the passes'
-        launch); ``"auto"``: fused. Bit-identical; other solvers and pass mixes always split.
+        How symplectic Euler and XPBD run with self-collision alone: ``"fused"`` (symplectic Euler: its
+        substep inside the contact launch, :mod:`tianim.physics.passes`; XPBD on the per-copy layout: every
+        substep of the call and its contacts in one launch, :func:`tianim.physics.xpbd.run_xpbd_contact`),
+        ``"split"`` (the solver's substep launch, then the passes' launch, per substep); ``"auto"``: fused.
+        Bit-identical; other solvers, layouts and pass mixes always split.
     substeps_per_launch : int, optional
         Substeps per fused launch when its loops run in parallel (1 to 8; they are unrolled, so the
         compile time grows with it). Default: :data:`tianim.physics.passes.SC_SUBSTEPS_PER_LAUNCH`;

@@ -488,6 +488,17 @@ class XPBD(Solver):
             opts["compensated"] = True
         return _with_passes(opts, self)
 
+    def _contact_fused(self, model, state) -> bool:
+        """Self-collision is the only pass, on the per-copy layout, and ``SelfCollision.path`` is not "split":
+        the call runs in one launch (:func:`tianim.physics.xpbd.run_xpbd_contact`, bit-identical)."""
+        from tianim.physics.xpbd import choose_xpbd_layout
+
+        sc = self.self_collision
+        if sc is None or sc.path == "split" or self.strain_limit is not None or model.bending is not None:
+            return False
+        layout = choose_xpbd_layout(model, state.batch) if self.layout == "auto" else self.layout
+        return layout == "per_copy"
+
     def _advance(self, model, state, dt, substeps):
         from tianim.physics.xpbd import run_xpbd
 
@@ -499,6 +510,12 @@ class XPBD(Solver):
             return
         if self.self_collision is not None:
             check_sc_model(self.self_collision, model)
+        if self._contact_fused(model, state):
+            from tianim.physics.xpbd import run_xpbd_contact
+
+            run_xpbd_contact(model, state, dt, substeps, self.iterations, self.self_collision, self._buffer,
+                             compensated=self.compensated)
+            return
         if self.compensated:
             self._buffer("rem", state.x.shape, state.dtype).fill(0)  # one remainder per call (xpbd.run_xpbd)
         run_with_passes(model, state, dt, substeps,
