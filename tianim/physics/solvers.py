@@ -488,6 +488,73 @@ class XPBD(Solver):
             opts["compensated"] = True
         return _with_passes(opts, self)
 
+    def can_step_picker_frames(self, model, state) -> bool:
+        """Whether :meth:`step_picker_frames` runs for this model and state: no per-substep pass (bending,
+        strain limit, self-collision), the per-copy layout, the papers' positions (not ``compensated``) and
+        a watchdog that rolls back (``on_divergence="rollback"``)."""
+        from tianim.physics.xpbd import choose_xpbd_layout
+
+        if has_passes(model, self.self_collision, self.strain_limit) or self.compensated:
+            return False
+        if self.watchdog is None or self.watchdog.on_divergence != "rollback":
+            return False
+        layout = choose_xpbd_layout(model, state.batch) if self.layout == "auto" else self.layout
+        return layout == "per_copy"
+
+    def step_picker_frames(self, model, state, dt: float, substeps: int, frames: int, actions, pos, held, low, high,
+                           reach: float, move: float) -> np.ndarray:
+        """``frames`` frames of SoftGym pickers then ``substeps`` XPBD substeps of ``dt`` [s] each, in one launch.
+
+        The same results, bit for bit, as ``frames`` times the NumPy picker move (``envs._softgym.Pickers.act``:
+        release, move by ``move`` [m] x (dx, dy, dz) clipped to ``low .. high``, pick the nearest free particle
+        within ``reach`` [m], carry the held particles as pins at rest) followed by :meth:`step`, and the same
+        watchdog: its checks run per frame afterwards, on the states the launch kept
+        (:func:`tianim.physics.xpbd.run_xpbd_picker_frames`). One difference: a copy that diverges in a frame
+        stays rolled back to that frame's start for the remaining frames (the per-frame loop would go on from
+        there); a caller that rolls the whole call back, as the SoftGym envs do, sees no difference.
+        Only where :meth:`can_step_picker_frames`.
+
+        Parameters
+        ----------
+        actions : (B, C, 4) float32; pos (B, C, 3) float32 and held (B, C) int64 (updated in place);
+        low, high : (B, 3) float32; reach, move : float [m]
+
+        Returns
+        -------
+        diverged : (B,) bool
+            Copies the watchdog flagged in any frame.
+        """
+        from tianim.physics.xpbd import run_xpbd_picker_frames
+
+        if not self.can_step_picker_frames(model, state):
+            raise ValueError("step_picker_frames needs XPBD without per-substep passes or compensated positions, on "
+                             "the per-copy layout, with Watchdog(on_divergence='rollback'); use step() per frame")
+        dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
+        substeps = check_positive_int("substeps", substeps)
+        frames = check_positive_int("frames", frames)
+        check_state(model, state)
+        xa, va, pa, xp, vp = run_xpbd_picker_frames(model, state, dt, substeps, self.iterations, frames, actions,
+                                                    pos, held, low, high, reach, move, self._buffer)
+        wd, terms = self.watchdog, self.watched_energy
+        diverged = np.zeros(state.batch, dtype=bool)
+        for f in range(frames):
+            # the watchdog's call for frame f, as step() makes it: before on the state after the picker move,
+            # after on the state after the physics (a copy flagged earlier stays as its rollback left it)
+            if diverged.any():
+                live = ~diverged
+                state.x[live], state.v[live], state.pinned[live] = xa[f][live], va[f][live], pa[f][live]
+            else:
+                state.x[...], state.v[...], state.pinned[...] = xa[f], va[f], pa[f]
+            token = wd.before(model, state, terms)
+            if diverged.any():
+                state.x[live], state.v[live] = xp[f][live], vp[f][live]
+            else:
+                state.x[...], state.v[...] = xp[f], vp[f]
+            state.t += dt * substeps
+            bad, _reason = wd.after(model, state, token, terms)
+            diverged |= bad
+        return diverged
+
     def _contact_fused(self, model, state) -> bool:
         """Self-collision is the only pass, on the per-copy layout, and ``SelfCollision.path`` is not "split":
         the call runs in one launch (:func:`tianim.physics.xpbd.run_xpbd_contact`, bit-identical)."""

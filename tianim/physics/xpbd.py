@@ -97,7 +97,8 @@ PARALLEL_MIN_PARTICLES = 1024
 
 
 @cached_variants
-def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, compensated=False, sc_iters=0):
+def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, compensated=False, sc_iters=0,
+             pickers=False):
     t = kernel_types(real_name, dim)
     ti, real, vec, vec_arr = t.ti, t.real, t.vec, t.vec_arr
     real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
@@ -283,6 +284,8 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
                              n_springs, iters, g_norm)
 
     kernels = {"per_copy": per_copy}
+    if pickers:
+        kernels["picker_frames"] = _picker_kernel(real_name, dim, copy_substep)
     if sc_iters:
         kernels["per_copy_contact"] = _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders)
     if grid:
@@ -541,3 +544,124 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
                 contacts.nbr, contacts.count, contacts.excl_off, contacts.excl_idx, data["coll"], h, float(real(0.0)),
                 thick, g_norm, nx, ny, contacts.k_excl, contacts.x_build, spread, run, margin, vcap)
         left -= lim
+
+
+def _picker_kernel(real_name, dim, copy_substep):
+    """``frames`` frames of picker moves and XPBD substeps per copy in one launch (:func:`run_xpbd_picker_frames`)."""
+    t = kernel_types(real_name, dim)
+    ti, real, vec, vec_arr, work_arr = t.ti, t.real, t.vec, t.vec_arr, t.work_arr
+    real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    u8_3 = ti.types.ndarray(dtype=ti.u8, ndim=3)
+    vec_1 = ti.types.ndarray(dtype=vec, ndim=1)
+
+    @ti.kernel
+    def picker_frames(x: vec_arr, v: vec_arr, dx: vec_arr, rem: vec_arr, lam: real2_arr, pinned: mask_arr,
+                      inv_mass: real_arr, ends: int_arr, k: real_arr, rest: real_arr, damp: real_arr,
+                      coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32, n_springs: ti.i32, nsub: ti.i32,
+                      iters: ti.i32, act: real2_arr, pos: vec_arr, new: vec_arr, held: i32_2, low: vec_1, high: vec_1,
+                      reach: ti.f64, move: real, frames: ti.i32, xa: work_arr, va: work_arr, pa: u8_3, xp: work_arr,
+                      vp: work_arr):
+        g_norm = g.norm()
+        n = x.shape[1]
+        count = pos.shape[1]
+        for b in range(x.shape[0]):
+            for f in range(frames):
+                # the picker move (the NumPy form: envs._softgym.Pickers.act): every release first
+                for p in range(count):
+                    if act[b, 4 * p + 3] <= 0 and held[b, p] >= 0:  # actions are finite
+                        pinned[b, held[b, p]] = ti.u8(0)
+                        held[b, p] = -1
+                for p in range(count):
+                    a = ti.Vector([act[b, 4 * p + c] for c in ti.static(range(dim))], dt=real)
+                    new[b, p] = ti.min(ti.max(pos[b, p] + a * move, low[b]), high[b])
+                # picks picker by picker (a taker: pick and free before this frame's picks), on the positions
+                # before the carries; the nearest free particle within reach, distances in float64, first of ties
+                for p in range(count):
+                    if act[b, 4 * p + 3] > 0 and held[b, p] < 0:
+                        best = ti.cast(ti.math.inf, ti.f64)
+                        near = -1
+                        for i in range(n):
+                            d0 = ti.cast(x[b, i][0], ti.f64) - ti.cast(pos[b, p][0], ti.f64)
+                            d1 = ti.cast(x[b, i][1], ti.f64) - ti.cast(pos[b, p][1], ti.f64)
+                            d2 = ti.cast(x[b, i][2], ti.f64) - ti.cast(pos[b, p][2], ti.f64)
+                            dist = ti.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                            taken = False
+                            for q in range(count):
+                                if held[b, q] == i:
+                                    taken = True
+                            if dist <= reach and not taken and dist < best:
+                                best = dist
+                                near = i
+                        if near >= 0:
+                            held[b, p] = near
+                for p in range(count):  # every held particle follows its picker: a pin, at rest
+                    i = held[b, p]
+                    if i >= 0:
+                        x[b, i] = x[b, i] + (new[b, p] - pos[b, p])
+                        v[b, i] = ti.Vector.zero(real, dim)
+                        pinned[b, i] = ti.u8(1)
+                    pos[b, p] = new[b, p]
+                for i in range(n):
+                    xa[f, b, i] = x[b, i]
+                    va[f, b, i] = v[b, i]
+                    pa[f, b, i] = pinned[b, i]
+                for _sub in range(nsub):
+                    copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h, nx,
+                                 n_springs, iters, g_norm)
+                for i in range(n):
+                    xp[f, b, i] = x[b, i]
+                    vp[f, b, i] = v[b, i]
+
+    return picker_frames
+
+
+def run_xpbd_picker_frames(model, state, dt: float, substeps: int, iterations: int, frames: int, actions, pos, held,
+                           low, high, reach: float, move: float, buffer):
+    """``frames`` frames of SoftGym-style pickers and XPBD on every copy in one launch (per-copy layout, no
+    per-substep passes): per frame the picker move of ``envs._softgym.Pickers.act`` (release, move clipped to
+    the box, pick the nearest free particle within ``reach`` of the picker's position before the move, in
+    float64 and the first of ties, carry every held particle by its picker's displacement as an infinite-mass
+    pin at rest), then ``substeps`` XPBD substeps of ``dt`` [s] (:func:`run_xpbd`). The same arithmetic, in the
+    same order, as that NumPy move followed by one :func:`run_xpbd` call per frame (bit-identical).
+
+    Parameters
+    ----------
+    actions : (B, C, 4) float32
+        Per picker ``(dx, dy, dz, pick)``, the same in every frame; the move is ``move`` [m] times (dx, dy, dz).
+    pos : (B, C, 3) float32
+        Picker positions [m], updated in place. ``held`` (B, C) int64: held particle or -1, updated in place.
+    low, high : (B, 3) float32
+        The pickers' box [m].
+
+    Returns ``(xa, va, pa, xp, vp)``: per frame the positions, velocities and pins after the picker move
+    (F, B, N, D) / (F, B, N) and the positions and velocities after its physics, for the caller's watchdog.
+    ``state.t`` is not advanced.
+    """
+    dtype = state.dtype
+    real = dtype.type
+    data = model.kernel_data(dtype)
+    grid = model.grid is not None
+    kernels = _kernels(dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
+                       len(model.colliders) > 0, False, 0, True)
+    edges = not grid and model.n_springs > 0
+    n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
+    lam = buffer("lambda", (state.batch, n_lam), dtype)
+    rem = buffer("rem", state.x.shape, dtype)
+    dx = buffer("dx", state.x.shape, dtype)
+    f_shape = (int(frames),) + state.x.shape
+    xa, va, xp, vp = (buffer(name, f_shape, dtype) for name in ("frames_xa", "frames_va", "frames_xp", "frames_vp"))
+    pa = buffer("frames_pa", f_shape[:3], np.uint8)
+    new = buffer("frames_new", pos.shape, dtype)
+    held32 = np.ascontiguousarray(held, dtype=np.int32)
+    act = np.ascontiguousarray(actions, dtype=dtype).reshape(state.batch, -1)
+    g, rho, h = model.gravity.astype(dtype), float(real(model.medium_damping)), float(real(dt))
+    nx = model.grid.nx if grid else 1
+    ends = np.ascontiguousarray(model.springs.ravel() if edges else np.zeros(2), dtype=np.int32)
+    kernels["picker_frames"](state.x, state.v, dx, rem, lam, state.pinned.view(np.uint8), data["inv_mass"], ends,
+                             data["k"], data["rest"], data["damp"], data["coll"], g, rho, h, nx,
+                             model.n_springs if edges else 0, int(substeps), int(iterations), act, pos, new, held32,
+                             np.ascontiguousarray(low, dtype=dtype), np.ascontiguousarray(high, dtype=dtype),
+                             float(reach), float(real(move)), int(frames), xa, va, pa, xp, vp)
+    held[...] = held32
+    return xa, va, pa.view(bool), xp, vp
