@@ -324,7 +324,16 @@ class PickerSim:
 
     def physics(self, solver):
         """The physics of one env step on every copy without picker actions: ``ACTION_REPEAT`` frames
-        of ``solver`` (one without watchdog gives the benchmark's kernel-only rate)."""
+        of ``solver`` (one without watchdog gives the benchmark's kernel-only rate), launched as the env
+        launches them (in one launch where ``one_launch`` applies: pickers that keep what they hold and
+        do not move)."""
+        s, pk = self.state, self.pickers
+        if self.one_launch and solver.can_step_picker_frames(self.model, s):
+            keep = np.zeros((s.batch, pk.count, 4), np.float32)
+            keep[:, :, 3] = np.where(pk.held >= 0, 1.0, -1.0)
+            solver.step_picker_frames(self.model, s, FRAME_DT / self.SUBSTEPS, self.SUBSTEPS, ACTION_REPEAT, keep,
+                                      pk.pos.copy(), pk.held.copy(), pk.low, pk.high, pk.reach, PICKER_STEP)
+            return
         for _ in range(ACTION_REPEAT):
             self.frame_step(solver)
 

@@ -491,12 +491,12 @@ class XPBD(Solver):
     def can_step_picker_frames(self, model, state) -> bool:
         """Whether :meth:`step_picker_frames` runs for this model and state: no per-substep pass (bending,
         strain limit, self-collision), the per-copy layout, the papers' positions (not ``compensated``) and
-        a watchdog that rolls back (``on_divergence="rollback"``)."""
+        no watchdog or one that rolls back (``on_divergence="rollback"``)."""
         from tianim.physics.xpbd import choose_xpbd_layout
 
         if has_passes(model, self.self_collision, self.strain_limit) or self.compensated:
             return False
-        if self.watchdog is None or self.watchdog.on_divergence != "rollback":
+        if self.watchdog is not None and self.watchdog.on_divergence != "rollback":
             return False
         layout = choose_xpbd_layout(model, state.batch) if self.layout == "auto" else self.layout
         return layout == "per_copy"
@@ -528,7 +528,8 @@ class XPBD(Solver):
 
         if not self.can_step_picker_frames(model, state):
             raise ValueError("step_picker_frames needs XPBD without per-substep passes or compensated positions, on "
-                             "the per-copy layout, with Watchdog(on_divergence='rollback'); use step() per frame")
+                             "the per-copy layout, with no watchdog or Watchdog(on_divergence='rollback'); use step() "
+                             "per frame")
         dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
         substeps = check_positive_int("substeps", substeps)
         frames = check_positive_int("frames", frames)
@@ -537,6 +538,16 @@ class XPBD(Solver):
                                                     pos, held, low, high, reach, move, self._buffer)
         wd, terms = self.watchdog, self.watched_energy
         diverged = np.zeros(state.batch, dtype=bool)
+        if wd is None:  # as step() without a watchdog: non-finite results raise (and are not rolled back)
+            state.t += frames * (dt * substeps)
+            if not _finite(state):
+                bad = np.flatnonzero(~(np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2))))
+                diverged[bad] = True
+                stats = StepStats(self.name, dt, substeps * frames, diverged, "non-finite positions or velocities", {})
+                raise DivergenceError(f"{self.name} diverged: non-finite positions or velocities in copies "
+                                      f"{bad.tolist()} within {frames} picker frames; the watchdog was off, so the "
+                                      "state was not rolled back", bad.tolist(), stats)
+            return diverged
         for f in range(frames):
             # the watchdog's call for frame f, as step() makes it: before on the state after the picker move,
             # after on the state after the physics (a copy flagged earlier stays as its rollback left it)

@@ -98,7 +98,7 @@ PARALLEL_MIN_PARTICLES = 1024
 
 @cached_variants
 def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, compensated=False, sc_iters=0,
-             pickers=False):
+             pickers=False, serial=False):
     t = kernel_types(real_name, dim)
     ti, real, vec, vec_arr = t.ti, t.real, t.vec, t.vec_arr
     real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
@@ -278,6 +278,7 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
                  coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32, n_springs: ti.i32, nsub: ti.i32,
                  iters: ti.i32):
         g_norm = g.norm()
+        ti.loop_config(serialize=serial)  # one copy: no thread wake-up
         for b in range(x.shape[0]):
             for _sub in range(nsub):
                 copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h, nx,
@@ -285,9 +286,9 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
 
     kernels = {"per_copy": per_copy}
     if pickers:
-        kernels["picker_frames"] = _picker_kernel(real_name, dim, copy_substep)
+        kernels["picker_frames"] = _picker_kernel(real_name, dim, copy_substep, serial)
     if sc_iters:
-        kernels["per_copy_contact"] = _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders)
+        kernels["per_copy_contact"] = _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, serial)
     if grid:
         order = sweep_order(1)
 
@@ -369,7 +370,7 @@ def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: st
     data = model.kernel_data(state.dtype)
     grid = model.grid is not None
     kernels = _kernels(state.dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
-                       len(model.colliders) > 0, bool(compensated))
+                       len(model.colliders) > 0, bool(compensated), 0, False, state.batch == 1)
     edges = not grid and model.n_springs > 0
     n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
     lam = buffer("lambda", (state.batch, n_lam), state.dtype)
@@ -399,7 +400,7 @@ def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: st
             last(*args)
 
 
-def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders):
+def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, serial):
     """The per-copy XPBD substeps with self-collision in one launch (:func:`run_xpbd_contact`).
 
     Per copy (copies in parallel) and per substep, serially: the XPBD substep (``copy_substep``), the
@@ -443,6 +444,7 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders):
         g_norm = g.norm()
         inv_h = 1 / h
         n = x.shape[1]
+        ti.loop_config(serialize=serial)  # one copy: no thread wake-up
         for b in range(x.shape[0]):
             sub = 0
             while sub < lim[b]:
@@ -497,7 +499,7 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
     data = model.kernel_data(dtype)
     grid = model.grid is not None
     kernels = _kernels(dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
-                       len(model.colliders) > 0, bool(compensated), sc_iters)
+                       len(model.colliders) > 0, bool(compensated), sc_iters, False, state.batch == 1)
     edges = not grid and model.n_springs > 0
     n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
     lam = buffer("lambda", (state.batch, n_lam), dtype)
@@ -546,7 +548,7 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
         left -= lim
 
 
-def _picker_kernel(real_name, dim, copy_substep):
+def _picker_kernel(real_name, dim, copy_substep, serial):
     """``frames`` frames of picker moves and XPBD substeps per copy in one launch (:func:`run_xpbd_picker_frames`)."""
     t = kernel_types(real_name, dim)
     ti, real, vec, vec_arr, work_arr = t.ti, t.real, t.vec, t.vec_arr, t.work_arr
@@ -565,6 +567,7 @@ def _picker_kernel(real_name, dim, copy_substep):
         g_norm = g.norm()
         n = x.shape[1]
         count = pos.shape[1]
+        ti.loop_config(serialize=serial)  # one copy: no thread wake-up
         for b in range(x.shape[0]):
             for f in range(frames):
                 # the picker move (the NumPy form: envs._softgym.Pickers.act): every release first
@@ -643,7 +646,7 @@ def run_xpbd_picker_frames(model, state, dt: float, substeps: int, iterations: i
     data = model.kernel_data(dtype)
     grid = model.grid is not None
     kernels = _kernels(dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
-                       len(model.colliders) > 0, False, 0, True)
+                       len(model.colliders) > 0, False, 0, True, state.batch == 1)
     edges = not grid and model.n_springs > 0
     n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
     lam = buffer("lambda", (state.batch, n_lam), dtype)
