@@ -228,7 +228,9 @@ class Pickers:
     def act(self, state, action: np.ndarray) -> None:
         """One repeat of SoftGym's ``Picker.step`` on every copy: release, move (clipped to the box),
         pick, and carry the held particle by the picker's displacement (it becomes a pin: infinite
-        mass, at rest, as FleX's inverse mass 0). ``action`` (B, count, 4) float32 in [-1, 1]."""
+        mass, at rest, as FleX's inverse mass 0). ``action`` (B, count, 4) float32 in [-1, 1].
+        The one-launch step runs this move inside the kernel (:meth:`tianim.physics.XPBD.step_picker_frames`);
+        ``tests/test_envs_softgym.py`` checks the two equal bit for bit."""
         x, held = state.x, self.held
         pick = action[:, :, 3] > 0
         drop = ~pick & (held >= 0)  # SoftGym releases for every picker first
