@@ -230,7 +230,9 @@ class Pickers:
     def act(self, state, action: np.ndarray) -> None:
         """One repeat of SoftGym's ``Picker.step`` on every copy: release, move (clipped to the box),
         pick, and carry the held particle by the picker's displacement (it becomes a pin: infinite
-        mass, at rest, as FleX's inverse mass 0). ``action`` (B, count, 4) float32 in [-1, 1]."""
+        mass, at rest, as FleX's inverse mass 0). ``action`` (B, count, 4) float32 in [-1, 1].
+        The one-launch step runs this move inside the kernel (:meth:`tianim.physics.XPBD.step_picker_frames`);
+        ``tests/test_envs_softgym.py`` checks the two equal bit for bit."""
         x, held = state.x, self.held
         pick = action[:, :, 3] > 0
         drop = ~pick & (held >= 0)  # SoftGym releases for every picker first
@@ -298,6 +300,10 @@ class PickerSim:
         self.diverged = np.zeros(batch, bool)
         self.metrics: dict = {}
         self._obs = np.empty((batch, 3 * (len(self.KEYPOINTS) + self.pickers.count)), np.float32)
+        #: Run the action repeat (picker moves and physics of all ACTION_REPEAT frames) in one launch where the
+        #: solver can (:meth:`tianim.physics.XPBD.step_picker_frames`: no self-collision); bit-identical to the
+        #: frame loop (False: one Pickers.act and one solver step per frame).
+        self.one_launch = True
 
     # hooks ---------------------------------------------------------------------------------------
     def _start(self, idx: np.ndarray, u: np.ndarray) -> None:  # pragma: no cover - overridden
@@ -324,20 +330,35 @@ class PickerSim:
 
     def physics(self, solver):
         """The physics of one env step on every copy without picker actions: ``ACTION_REPEAT`` frames
-        of ``solver`` (one without watchdog gives the benchmark's kernel-only rate)."""
+        of ``solver`` (one without watchdog gives the benchmark's kernel-only rate), launched as the env
+        launches them (in one launch where ``one_launch`` applies: pickers that keep what they hold and
+        do not move)."""
+        s, pk = self.state, self.pickers
+        if self.one_launch and solver.can_step_picker_frames(self.model, s):
+            keep = np.zeros((s.batch, pk.count, 4), np.float32)
+            keep[:, :, 3] = np.where(pk.held >= 0, 1.0, -1.0)
+            solver.step_picker_frames(self.model, s, FRAME_DT / self.SUBSTEPS, self.SUBSTEPS, ACTION_REPEAT, keep,
+                                      pk.pos.copy(), pk.held.copy(), pk.low, pk.high, pk.reach, PICKER_STEP)
+            return
         for _ in range(ACTION_REPEAT):
             self.frame_step(solver)
 
     def step(self, actions: np.ndarray) -> np.ndarray:
         """Apply the picker actions (B, 4 count) ``ACTION_REPEAT`` times, one frame after each; return
-        the reward (B,) float64 and keep the metrics in ``self.metrics``."""
+        the reward (B,) float64 and keep the metrics in ``self.metrics``. Without self-collision all
+        the frames run in one launch (``one_launch``), with the same results."""
         s, pk = self.state, self.pickers
         saved = (s.x.copy(), s.v.copy(), s.pinned.copy(), pk.pos.copy(), pk.held.copy())
         a = actions.reshape(s.batch, pk.count, 4)
-        diverged = np.zeros(s.batch, bool)
-        for _ in range(ACTION_REPEAT):
-            pk.act(s, a)
-            diverged |= self.frame_step()
+        if self.one_launch and self.solver.can_step_picker_frames(self.model, s):  # the whole repeat, same bits
+            diverged = self.solver.step_picker_frames(self.model, s, FRAME_DT / self.SUBSTEPS, self.SUBSTEPS,
+                                                      ACTION_REPEAT, a, pk.pos, pk.held, pk.low, pk.high, pk.reach,
+                                                      PICKER_STEP)
+        else:
+            diverged = np.zeros(s.batch, bool)
+            for _ in range(ACTION_REPEAT):
+                pk.act(s, a)
+                diverged |= self.frame_step()
         if diverged.any():  # back to the start of this env step, pickers included
             bad = np.flatnonzero(diverged)
             s.x[bad], s.v[bad], s.pinned[bad], pk.pos[bad], pk.held[bad] = (v[bad] for v in saved)

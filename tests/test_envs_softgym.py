@@ -390,6 +390,7 @@ def test_energy_the_solver_creates_in_one_copy_ends_that_copy_alone(env_id):
     disturbed = gym.make_vec(env_id, num_envs=n)
     calm = gym.make_vec(env_id, num_envs=n)
     sim = disturbed.unwrapped._sim
+    sim.one_launch = False  # the fault is injected per solver call (one-launch faults: the test after the next)
     assert sim.solver.watchdog.growth is not None  # the energy check is on in the env
     advance, reasons = sim.solver._advance, []
     step = sim.solver._step
@@ -417,6 +418,150 @@ def test_energy_the_solver_creates_in_one_copy_ends_that_copy_alone(env_id):
     assert np.array_equal(obs_d[[0, 2]], obs_c[[0, 2]]) and np.array_equal(r_d[[0, 2]], r_c[[0, 2]])
     s_d, s_c = sim.state, calm.unwrapped._sim.state
     assert np.array_equal(s_d.x[[0, 2]], s_c.x[[0, 2]]) and np.array_equal(s_d.v[[0, 2]], s_c.v[[0, 2]])
+
+
+
+def _copies_agree(a, b):
+    """Every bit of two PickerSims' states, pickers, metrics and watchdog memory."""
+    sa, sb = a.state, b.state
+    for key in ("x", "v", "pinned", "t"):
+        assert np.array_equal(getattr(sa, key), getattr(sb, key)), key
+    assert np.array_equal(a.pickers.pos, b.pickers.pos) and np.array_equal(a.pickers.held, b.pickers.held)
+    assert np.array_equal(a.diverged, b.diverged)
+    for key, value in a.metrics.items():
+        assert np.array_equal(value, b.metrics[key]), key
+    ma, mb = a.solver.watchdog._memory[sa], b.solver.watchdog._memory[sb]
+    for key in ("energy", "reference", "cusum", "x", "v", "pinned"):
+        assert np.array_equal(getattr(ma, key), getattr(mb, key), equal_nan=True), key
+
+
+@pytest.mark.parametrize("env_id", ["tianim/RopeFlatten-v0", "tianim/RopeFlatten-v1", "tianim/ClothFlatten-v1"])
+def test_one_launch_action_repeat_equals_the_frame_loop(env_id):
+    """Without self-collision the 8 frames of an env step (picker moves and physics) run in one launch: bit
+    for bit the frame loop (Pickers.act and one solver step per frame), for 3 copies under the scripted policy
+    (picks, carries, releases) then random actions, with resets: states, pickers, metrics and the watchdog's
+    memory after every step."""
+    from envs.baselines import make_baseline
+
+    n = 3
+    fused = gym.make_vec(env_id, num_envs=n)
+    loop = gym.make_vec(env_id, num_envs=n)
+    loop.unwrapped._sim.one_launch = False
+    a_sim, b_sim = fused.unwrapped._sim, loop.unwrapped._sim
+    assert a_sim.solver.can_step_picker_frames(a_sim.model, a_sim.state)
+    obs, _ = fused.reset(seed=4)
+    loop.reset(seed=4)
+    policy = make_baseline(env_id, fused)
+    rng = np.random.default_rng(0)
+    held = 0
+    for t in range(14):
+        act = policy(obs) if t < 9 else rng.uniform(-1, 1, (n, 8)).astype(np.float32)
+        if t == 11:
+            fused.reset(seed=9)
+            loop.reset(seed=9)
+        obs, r, term, trunc, info = fused.step(act)
+        obs_l, r_l, *_ = loop.step(act)
+        assert np.array_equal(obs, obs_l) and np.array_equal(r, r_l)
+        _copies_agree(a_sim, b_sim)
+        held += int((a_sim.pickers.held >= 0).sum())
+    assert held > 0  # the pickers picked and carried
+
+
+def _faulty_frames(fault):
+    """``run_xpbd_picker_frames`` with ``fault(xa, va, pa, xp, vp)`` applied to the frames it kept."""
+    import tianim.physics.xpbd as xpbd
+
+    frames = xpbd.run_xpbd_picker_frames
+
+    def faulty(*args, **kwargs):
+        out = frames(*args, **kwargs)
+        fault(*out)
+        return out
+
+    return xpbd, frames, faulty
+
+
+def test_one_launch_nan_in_a_frame_ends_that_copy_as_the_frame_loop():
+    """NaN in copy 1 in the 5th frame of the first step, in the one-launch step (in the frames the launch kept)
+    and in the frame loop (inside its 5th solver call): both end copy 1 alone, put it back to the start of the
+    step, and agree bit for bit in everything but that copy's leftover watchdog energy, which its reset
+    replaces: three more steps (copy 1 reset) agree in every bit."""
+    env_id, n = "tianim/RopeFlatten-v1", 3
+    fused = gym.make_vec(env_id, num_envs=n)
+    loop = gym.make_vec(env_id, num_envs=n)
+    fsim, lsim = fused.unwrapped._sim, loop.unwrapped._sim
+    lsim.one_launch = False
+    advance, calls = lsim.solver._advance, {"n": 0}
+
+    def nan_advance(model, state, dt, substeps):
+        out = advance(model, state, dt, substeps)
+        calls["n"] += 1
+        if calls["n"] == 5:
+            state.x[1, 7] = np.nan
+        return out
+
+    def nan_frame(xa, va, pa, xp, vp):
+        if not calls.get("fused"):
+            calls["fused"] = True
+            xp[4, 1, 7] = np.nan
+
+    lsim.solver._advance = nan_advance
+    xpbd, frames, faulty = _faulty_frames(nan_frame)
+    xpbd.run_xpbd_picker_frames = faulty
+    try:
+        start, _ = fused.reset(seed=3)
+        loop.reset(seed=3)
+        acts = np.random.default_rng(2).uniform(-1, 1, (4, n, 8)).astype(np.float32)
+        obs, r, term, _, info = fused.step(acts[0])
+        obs_l, r_l, term_l, _, _ = loop.step(acts[0])
+    finally:
+        xpbd.run_xpbd_picker_frames = frames
+    assert term.tolist() == [False, True, False] and np.array_equal(term, term_l)
+    assert np.array_equal(obs, obs_l) and np.array_equal(r, r_l) and np.array_equal(obs[1], start[1])
+    mf, ml = fsim.solver.watchdog._memory[fsim.state], lsim.solver.watchdog._memory[lsim.state]
+    assert np.array_equal(mf.energy[[0, 2]], ml.energy[[0, 2]]) and np.isfinite(mf.energy).all()
+    assert np.array_equal(mf.cusum, ml.cusum) and np.array_equal(mf.reference, ml.reference, equal_nan=True)
+    for a in acts[1:]:
+        obs, r, term, _, _ = fused.step(a)
+        obs_l, r_l, term_l, _, _ = loop.step(a)
+        assert np.array_equal(obs, obs_l) and np.array_equal(r, r_l) and not term.any() and not term_l.any()
+    _copies_agree(fsim, lsim)
+
+
+def test_one_launch_energy_the_solver_creates_ends_that_copy_alone():
+    """Energy created within every frame in copy 1 of the one-launch step (its free particles 3 m/s faster
+    upward at the end of each frame than at its start, finite throughout: only the energy criterion can see
+    it): the watchdog, run per frame on the kept states, ends copy 1 alone, back at the start of its step;
+    the other copies are bit for bit those of a run without the fault."""
+    env_id, n = "tianim/RopeFlatten-v1", 3
+    faulty_env = gym.make_vec(env_id, num_envs=n)
+    calm = gym.make_vec(env_id, num_envs=n)
+
+    def speed_up(xa, va, pa, xp, vp):
+        for f in range(xp.shape[0]):
+            vp[f, 1, :, 1] += np.float32(3.0 * (f + 1)) * ~pa[f, 1]
+            if f + 1 < xp.shape[0]:
+                va[f + 1, 1, :, 1] += np.float32(3.0 * (f + 1)) * ~pa[f + 1, 1]
+
+    xpbd, frames, faulty = _faulty_frames(speed_up)
+    xpbd.run_xpbd_picker_frames = faulty
+    try:
+        start, _ = faulty_env.reset(seed=3)
+        calm_obs, _ = calm.reset(seed=3)
+        acts = np.random.default_rng(2).uniform(-1, 1, (6, n, 8)).astype(np.float32)
+        for t in range(6):
+            before = faulty_env.unwrapped._sim.observe().copy()
+            obs, r, term, _, info = faulty_env.step(acts[t])
+            xpbd.run_xpbd_picker_frames = frames
+            obs_c, r_c, term_c, _, _ = calm.step(acts[t])
+            xpbd.run_xpbd_picker_frames = faulty
+            assert not term[[0, 2]].any() and not term_c.any()
+            assert np.array_equal(obs[[0, 2]], obs_c[[0, 2]]) and np.array_equal(r[[0, 2]], r_c[[0, 2]])
+            if term[1]:
+                break
+    finally:
+        xpbd.run_xpbd_picker_frames = frames
+    assert term[1] and info["diverged"][1] and np.array_equal(obs[1], before[1])  # back to where its step began
 
 
 #: Digest scripts that tests/test_determinism.py runs under several thread counts (one subprocess each).

@@ -153,6 +153,57 @@ def test_batch_equals_separate_runs_with_every_feature_on():
 
 
 
+@pytest.mark.parametrize("kind", ["grid", "rope"])
+def test_candidate_rows_hold_exactly_the_non_neighbours_within_the_radius(kind):
+    """After a build (full, then partial) each row holds exactly the particles within the query radius that the
+    exclusion rule does not leave out (brute force over all pairs, independent of the grid): the excluded ones
+    are dropped once per build, not tested in every sweep."""
+    from tianim.physics.selfcollision import Contacts, exclusion_lists
+
+    if kind == "grid":
+        model, one = drop_scene()  # plane xy: a grid in x, y, its normal z
+        state = model.state(batch=2)
+        state.x[:] = one.x[0]
+        folded = state.x[1].reshape(N, N, 3)
+        folded[:, N // 2:] = folded[:, N // 2 - 1::-1]  # the right half laid over the left, 1 cm up: contacts
+        folded[:, N // 2:, 2] += np.float32(0.01)
+    else:
+        model = tp.rope(n=40, length=0.4)
+        state = model.state(batch=2)
+        ang = np.linspace(0, 4 * np.pi, 40)
+        state.x[:, :, 0] = (0.03 * np.cos(ang)).astype(np.float32)  # a tight coil: its turns touch
+        state.x[:, :, 1] = (0.03 * np.sin(ang)).astype(np.float32)
+        state.x[:, :, 2] = np.linspace(0, 0.02, 40, dtype=np.float32)
+    sc = tp.SelfCollision(THICKNESS)
+    c = Contacts(sc, model, state)
+    n = model.n_particles
+    if kind == "grid":
+        r, col = np.divmod(np.arange(n), model.grid.nx)
+        k = c.k_excl
+        excl = (np.abs(r[:, None] - r[None]) <= k) & (np.abs(col[:, None] - col[None]) <= k)
+    else:
+        off, idx = exclusion_lists(model, c.k_excl)
+        excl = np.eye(n, dtype=bool)
+        for i in range(n):
+            excl[i, idx[off[i]:off[i + 1]]] = True
+    for copies in (None, [1]):
+        if copies is not None:
+            state.x[1] = state.x[1, ::-1]  # move copy 1 only; copy 0's rows must stay
+        c.rebuild(state.x, copies)
+        kept = 0
+        for b in range(2):
+            x = state.x[b].astype(np.float32)
+            d2 = ((x[:, None] - x[None]) ** 2).sum(axis=2)
+            want = (d2 <= np.float32(c.radius) ** 2 * (1 + 1e-5)) & ~excl
+            sure = (d2 <= np.float32(c.radius) ** 2 * (1 - 1e-5)) & ~excl  # float32 rounding at the radius
+            for i in range(n):
+                row = set(c.nbr[b, i, :c.count[b, i]].tolist())
+                assert len(row) == c.count[b, i] and not (row & set(np.flatnonzero(excl[i]).tolist())), (b, i)
+                assert set(np.flatnonzero(sure[i]).tolist()) <= row <= set(np.flatnonzero(want[i]).tolist()), (b, i)
+                kept += len(row)
+        assert kept > 0  # the scene has candidates left after the exclusion
+
+
 def test_exclusion_rule():
     from tianim.physics.selfcollision import exclusion_lists, exclusion_steps
 
@@ -283,6 +334,52 @@ def test_fused_symplectic_contact_launch_equals_the_two_launches(iterations, cap
     assert not np.array_equal(plain.x, out[True][0])  # contacts acted
     assert min(out[True][2]) > 1 and out[True][2] == out[False][2]
     assert np.array_equal(out[True][0], out[False][0]) and np.array_equal(out[True][1], out[False][1])
+
+
+
+def _coil_rope():
+    """A rope of 40 particles wound in a tight coil 0.3 m up (its turns touch and fall onto the ground)."""
+    model = tp.rope(n=40, length=0.6, mass=0.001, stiffness=500.0, pins=(), colliders=[tp.Ground(friction=0.5)])
+    state = model.state(batch=2)
+    ang = np.linspace(0, 5 * np.pi, 40)
+    for b, r in enumerate((0.03, 0.035)):
+        state.x[b, :, 0] = (r * np.cos(ang)).astype(np.float32)
+        state.x[b, :, 1] = (0.3 - 0.25 * b + 0.004 * ang).astype(np.float32)
+        state.x[b, :, 2] = (r * np.sin(ang)).astype(np.float32)
+    return model, state
+
+
+@pytest.mark.parametrize("scene, iterations, sweeps, cap, compensated", [
+    ("cloth", 2, 1, None, False), pytest.param("cloth", 3, 2, 0.5, True, marks=pytest.mark.slow),
+    ("rope", 1, 2, None, False)])
+def test_xpbd_contact_launch_equals_the_two_launches(scene, iterations, sweeps, cap, compensated):
+    """XPBD with self-collision alone runs every substep of a call in one launch (per copy, stopping when the
+    copy's lists go stale: rebuilt, its contacts run, and it goes on): bit for bit the XPBD launch plus the
+    passes' launch per substep (``SelfCollision(path="split")``), over several calls, both copies (each
+    rebuilding on its own schedule), odd and even contact sweeps, the separation-speed cap, compensated
+    positions, grids and edge models."""
+    from tianim.physics.selfcollision import contacts_for
+
+    if scene == "cloth":
+        model, _ = drop_scene()
+        start = model.state(batch=2)
+        start.x[:, :, 2] += np.random.default_rng(3).normal(0, 0.003, start.x.shape[:2]).astype(np.float32)
+        start.x[1, :, 1] -= 0.3  # copy 1 starts near the ground: it folds onto itself sooner
+    else:
+        model, start = _coil_rope()
+    out = {}
+    for path in ("fused", "split"):
+        sc = tp.SelfCollision(THICKNESS, iterations=iterations, margin=0.004, max_separation_speed=cap, path=path)
+        solver = tp.XPBD(iterations=sweeps, self_collision=sc, compensated=compensated)
+        s = start.copy()
+        for _ in range(3):
+            solver.step(model, s, 1e-3, 151)
+        out[path] = (s.x.copy(), s.v.copy(), contacts_for(sc, model, s).rebuilt.tolist())
+    plain = start.copy()
+    tp.XPBD(iterations=sweeps, compensated=compensated).step(model, plain, 1e-3, 453)
+    assert not np.array_equal(plain.x, out["fused"][0])  # contacts acted
+    assert min(out["fused"][2]) > 2 and out["fused"][2] == out["split"][2]
+    assert np.array_equal(out["fused"][0], out["split"][0]) and np.array_equal(out["fused"][1], out["split"][1])
 
 
 @pytest.mark.slow

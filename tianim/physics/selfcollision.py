@@ -25,7 +25,9 @@ build, ``sqrt(sum_a (max_k d_ka - min_k d_ka)^2)`` with ``d = x - x_build``, sta
 within t without being listed and the candidate set always contains every contact. A cloth that
 moves as a whole (falls, is carried) keeps its list; the check costs three passes over the positions.
 In a batch only the stale copies are rebuilt (:meth:`Contacts.rebuild`), so each copy's rebuilds happen
-when they would if it ran alone.
+when they would if it ran alone. Each build drops the excluded candidates from the rows (one pass): on a
+flat cloth every particle within the query radius is a topological neighbour, and the sweeps then test
+none of them; the sweeps keep their own exclusion test, which the dropped pairs would fail anyway.
 
 Determinism. The corrections of a particle are summed in 64-bit fixed point
 (:data:`FIXED_POINT` steps per thickness): integer addition is associative, so the result does not
@@ -50,6 +52,9 @@ FIXED_POINT = float(2 ** 40)
 #: The query radius grows the grid cells; beyond this many cells per copy the cell size is increased.
 MAX_GRID_CELLS = 1 << 22
 
+
+#: Up to this many particles x copies the candidate filter of a rebuild runs serially (no thread wake-up).
+DROP_SERIAL_MAX = 4096
 
 #: Launch structures of symplectic Euler with self-collision (``SelfCollision(path=)``).
 SC_PATHS = ("auto", "fused", "split")
@@ -78,9 +83,11 @@ class SelfCollision:
         ``maxDepenetrationVelocity``: overlaps that did not arise within the substep (particles placed
         or teleported into each other) are then pushed apart without a blow-up. None (default): no cap.
     path : {"auto", "fused", "split"}
-        How symplectic Euler runs with self-collision alone (:mod:`tianim.physics.passes`): ``"fused"``
-        (its substep inside the contact launch), ``"split"`` (the solver's substep launch, then the passes'
-        launch); ``"auto"``: fused. Bit-identical; other solvers and pass mixes always split.
+        How symplectic Euler and XPBD run with self-collision alone: ``"fused"`` (symplectic Euler: its
+        substep inside the contact launch, :mod:`tianim.physics.passes`; XPBD on the per-copy layout: every
+        substep of the call and its contacts in one launch, :func:`tianim.physics.xpbd.run_xpbd_contact`),
+        ``"split"`` (the solver's substep launch, then the passes' launch, per substep); ``"auto"``: fused.
+        Bit-identical; other solvers, layouts and pass mixes always split.
     substeps_per_launch : int, optional
         Substeps per fused launch when its loops run in parallel (1 to 8; they are unrolled, so the
         compile time grows with it). Default: :data:`tianim.physics.passes.SC_SUBSTEPS_PER_LAUNCH`;
@@ -178,6 +185,8 @@ class Contacts:
         self.sc = sc
         self.radius = sc.thickness + sc.query_margin
         self.k_excl = exclusion_steps(sc, model)
+        self.grid_model = model.grid is not None
+        self.nx = model.grid.nx if model.grid is not None else 1
         if model.grid is None and model.n_springs:
             self.excl_off, self.excl_idx = exclusion_lists(model, self.k_excl)
         else:
@@ -276,6 +285,11 @@ class Contacts:
             lo, hi, h = self.grid.lower, self.grid.upper, self.grid.cell_size
             self.grid = NeighbourGrid(lo, hi, h, x.shape[1], batch=x.shape[0], max_neighbours=self.capacity,
                                       dtype=x.dtype)
+        # Topological neighbours never touch (the gather tests every candidate for it): leave them out of the
+        # rows here, once per build, instead of in every sweep. On a flat cloth every candidate within the
+        # radius is a neighbour. The sums are fixed point (module docstring): the same bits either way.
+        _drop_excluded_kernel(self.grid_model, x.shape[0] * x.shape[1] <= DROP_SERIAL_MAX)(
+            nb.indices, nb.counts, self.excl_off, self.excl_idx, self.k_excl, self.nx)
         if copies is None:  # every row is new: use the grid's output buffers as they are
             self.nbr, self.count = nb.indices, nb.counts
             self._aliased = True
@@ -310,12 +324,10 @@ def contacts_for(sc: SelfCollision, model, state) -> Contacts:
 
 
 @cached_variants
-def contact_funcs(real_name: str, dim: int, grid: bool):
-    """``ti.func gather(b, i, x, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, t)
-    -> (correction, contacts)``: particle i's summed (fixed-point) push away from the listed
-    non-neighbour particles closer than t, and their number."""
-    tt = kernel_types(real_name, dim)
-    ti, real = tt.ti, tt.real
+def _excluded_func(grid: bool):
+    """``ti.func excluded(i, j, excl_off, excl_idx, k_excl, nx) -> bool``: the exclusion rule (module
+    docstring): grids by grid steps, other models by the CSR lists of :func:`exclusion_lists`."""
+    ti = kernel_types("float32", 3).ti
     T = ti.template()
 
     @ti.func
@@ -330,6 +342,45 @@ def contact_funcs(real_name: str, dim: int, grid: bool):
                 if excl_idx[e] == j:
                     out = True
         return out
+
+    return excluded
+
+
+@cached_variants
+def _drop_excluded_kernel(grid: bool, serial: bool):
+    """``drop(nbr (B, N, K), count (B, N), excl_off, excl_idx, k_excl, nx)``: removes the excluded
+    candidates from every row in place, keeping the others in their order (:meth:`Contacts.rebuild`)."""
+    tt = kernel_types("float32", 3)
+    ti = tt.ti
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    excluded = _excluded_func(grid)
+
+    @ti.kernel
+    def drop(nbr: i32_3, count: i32_2, excl_off: tt.int_arr, excl_idx: tt.int_arr, k_excl: ti.i32, nx: ti.i32):
+        ti.loop_config(serialize=serial)
+        for b, i in ti.ndrange(nbr.shape[0], nbr.shape[1]):
+            m = ti.min(count[b, i], nbr.shape[2])
+            w = 0
+            for q in range(m):
+                j = nbr[b, i, q]
+                if not excluded(i, j, excl_off, excl_idx, k_excl, nx):
+                    nbr[b, i, w] = j
+                    w += 1
+            count[b, i] = w
+
+    return drop
+
+
+@cached_variants
+def contact_funcs(real_name: str, dim: int, grid: bool):
+    """``ti.func gather(b, i, x, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, t)
+    -> (correction, contacts)``: particle i's summed (fixed-point) push away from the listed
+    non-neighbour particles closer than t, and their number."""
+    tt = kernel_types(real_name, dim)
+    ti, real = tt.ti, tt.real
+    T = ti.template()
+    excluded = _excluded_func(grid)
 
     @ti.func
     def gather(b, i, x: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T, excl_idx: T, k_excl, nx, t):

@@ -488,6 +488,95 @@ class XPBD(Solver):
             opts["compensated"] = True
         return _with_passes(opts, self)
 
+    def can_step_picker_frames(self, model, state) -> bool:
+        """Whether :meth:`step_picker_frames` runs for this model and state: no per-substep pass (bending,
+        strain limit, self-collision), the per-copy layout, the papers' positions (not ``compensated``) and
+        no watchdog or one that rolls back (``on_divergence="rollback"``)."""
+        from tianim.physics.xpbd import choose_xpbd_layout
+
+        if has_passes(model, self.self_collision, self.strain_limit) or self.compensated:
+            return False
+        if self.watchdog is not None and self.watchdog.on_divergence != "rollback":
+            return False
+        layout = choose_xpbd_layout(model, state.batch) if self.layout == "auto" else self.layout
+        return layout == "per_copy"
+
+    def step_picker_frames(self, model, state, dt: float, substeps: int, frames: int, actions, pos, held, low, high,
+                           reach: float, move: float) -> np.ndarray:
+        """``frames`` frames of SoftGym pickers then ``substeps`` XPBD substeps of ``dt`` [s] each, in one launch.
+
+        The same results, bit for bit, as ``frames`` times the NumPy picker move (``envs._softgym.Pickers.act``:
+        release, move by ``move`` [m] x (dx, dy, dz) clipped to ``low .. high``, pick the nearest free particle
+        within ``reach`` [m], carry the held particles as pins at rest) followed by :meth:`step`, and the same
+        watchdog: its checks run per frame afterwards, on the states the launch kept
+        (:func:`tianim.physics.xpbd.run_xpbd_picker_frames`). One difference: a copy that diverges in a frame
+        stays rolled back to that frame's start for the remaining frames (the per-frame loop would go on from
+        there); a caller that rolls the whole call back, as the SoftGym envs do, sees no difference.
+        Only where :meth:`can_step_picker_frames`.
+
+        Parameters
+        ----------
+        actions : (B, C, 4) float32; pos (B, C, 3) float32 and held (B, C) int64 (updated in place);
+        low, high : (B, 3) float32; reach, move : float [m]
+
+        Returns
+        -------
+        diverged : (B,) bool
+            Copies the watchdog flagged in any frame.
+        """
+        from tianim.physics.xpbd import run_xpbd_picker_frames
+
+        if not self.can_step_picker_frames(model, state):
+            raise ValueError("step_picker_frames needs XPBD without per-substep passes or compensated positions, on "
+                             "the per-copy layout, with no watchdog or Watchdog(on_divergence='rollback'); use step() "
+                             "per frame")
+        dt = check_finite_scalar("dt", dt, lo=0.0, lo_open=True)
+        substeps = check_positive_int("substeps", substeps)
+        frames = check_positive_int("frames", frames)
+        check_state(model, state)
+        xa, va, pa, xp, vp = run_xpbd_picker_frames(model, state, dt, substeps, self.iterations, frames, actions,
+                                                    pos, held, low, high, reach, move, self._buffer)
+        wd, terms = self.watchdog, self.watched_energy
+        diverged = np.zeros(state.batch, dtype=bool)
+        if wd is None:  # as step() without a watchdog: non-finite results raise (and are not rolled back)
+            state.t += frames * (dt * substeps)
+            if not _finite(state):
+                bad = np.flatnonzero(~(np.isfinite(state.x).all(axis=(1, 2)) & np.isfinite(state.v).all(axis=(1, 2))))
+                diverged[bad] = True
+                stats = StepStats(self.name, dt, substeps * frames, diverged, "non-finite positions or velocities", {})
+                raise DivergenceError(f"{self.name} diverged: non-finite positions or velocities in copies "
+                                      f"{bad.tolist()} within {frames} picker frames; the watchdog was off, so the "
+                                      "state was not rolled back", bad.tolist(), stats)
+            return diverged
+        for f in range(frames):
+            # the watchdog's call for frame f, as step() makes it: before on the state after the picker move,
+            # after on the state after the physics (a copy flagged earlier stays as its rollback left it)
+            if diverged.any():
+                live = ~diverged
+                state.x[live], state.v[live], state.pinned[live] = xa[f][live], va[f][live], pa[f][live]
+            else:
+                state.x[...], state.v[...], state.pinned[...] = xa[f], va[f], pa[f]
+            token = wd.before(model, state, terms)
+            if diverged.any():
+                state.x[live], state.v[live] = xp[f][live], vp[f][live]
+            else:
+                state.x[...], state.v[...] = xp[f], vp[f]
+            state.t += dt * substeps
+            bad, _reason = wd.after(model, state, token, terms)
+            diverged |= bad
+        return diverged
+
+    def _contact_fused(self, model, state) -> bool:
+        """Self-collision is the only pass, on the per-copy layout, and ``SelfCollision.path`` is not "split":
+        the call runs in one launch (:func:`tianim.physics.xpbd.run_xpbd_contact`, bit-identical)."""
+        from tianim.physics.xpbd import choose_xpbd_layout
+
+        sc = self.self_collision
+        if sc is None or sc.path == "split" or self.strain_limit is not None or model.bending is not None:
+            return False
+        layout = choose_xpbd_layout(model, state.batch) if self.layout == "auto" else self.layout
+        return layout == "per_copy"
+
     def _advance(self, model, state, dt, substeps):
         from tianim.physics.xpbd import run_xpbd
 
@@ -499,6 +588,12 @@ class XPBD(Solver):
             return
         if self.self_collision is not None:
             check_sc_model(self.self_collision, model)
+        if self._contact_fused(model, state):
+            from tianim.physics.xpbd import run_xpbd_contact
+
+            run_xpbd_contact(model, state, dt, substeps, self.iterations, self.self_collision, self._buffer,
+                             compensated=self.compensated)
+            return
         if self.compensated:
             self._buffer("rem", state.x.shape, state.dtype).fill(0)  # one remainder per call (xpbd.run_xpbd)
         run_with_passes(model, state, dt, substeps,

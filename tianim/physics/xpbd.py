@@ -63,6 +63,13 @@ sweep's result does not depend on the order inside a colour: the per-copy loop
 give bit-identical results, with no atomics. Edge-list models sweep their
 springs serially in index order (per copy, copies in parallel).
 
+Self-collision. With :class:`tianim.physics.SelfCollision` as the only per-substep pass, the per-copy
+layout runs every substep of a call and its contacts in one launch (:func:`run_xpbd_contact`): the
+XPBD substep, the test of the copy's neighbour lists and the contact sweeps of
+:mod:`tianim.physics.passes`, per copy serially, in the same order per particle as the two launches per
+substep they replace (bit-identical; ``SelfCollision(path="split")`` runs those). A copy whose lists go
+stale stops inside the launch until Python has rebuilt them.
+
 Why XPBD rather than projective dynamics: XPBD needs no global linear solve
 and no prefactored matrix, so per-copy pins (which would change a projective
 dynamics system matrix and force a refactorisation) cost nothing.
@@ -74,7 +81,9 @@ substeps x iterations (the sweeps propagate a correction a few springs each).
 import numpy as np
 
 from tianim.kernels.contact import contact_response
+from tianim.physics import passes
 from tianim.physics.model import GRID_STENCIL
+from tianim.physics.selfcollision import contact_funcs, contacts_for
 from tianim.kernels import cached_variants, kernel_types
 
 #: Stencil offsets each grid particle owns (the "forward" half: each spring once).
@@ -88,7 +97,8 @@ PARALLEL_MIN_PARTICLES = 1024
 
 
 @cached_variants
-def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, compensated=False):
+def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, compensated=False, sc_iters=0,
+             pickers=False, serial=False):
     t = kernel_types(real_name, dim)
     ti, real, vec, vec_arr = t.ti, t.real, t.vec, t.vec_arr
     real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
@@ -237,36 +247,48 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
         """Compile-time colour order of ``sweeps`` symmetric sweeps."""
         return (tuple(range(N_COLOURS)) + tuple(reversed(range(N_COLOURS)))) * sweeps
 
+    @ti.func
+    def copy_substep(b, x: T, v: T, dx: T, rem: T, lam: T, pinned: T, inv_mass: T, ends: T, k: T, rest: T, damp: T,
+                     coll: T, g, rho, h, nx, n_springs, iters, g_norm):
+        """One substep of copy b, serially: predict, ``iters`` symmetric sweeps, finish (the per-copy layout)."""
+        n = x.shape[1]
+        for i in range(n):
+            predict(b, i, x, v, dx, pinned, inv_mass, g, rho, h)
+        for li in range(lam.shape[1]):
+            lam[b, li] = 0
+        for sweep in range(2 * iters):
+            if ti.static(grid):
+                if sweep % 2 == 0:
+                    for c in ti.static(range(N_COLOURS)):
+                        grid_colour_rows(b, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
+                else:
+                    for c in ti.static(tuple(reversed(range(N_COLOURS)))):
+                        grid_colour_rows(b, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
+            else:
+                for ss in range(n_springs):
+                    s = ss if sweep % 2 == 0 else n_springs - 1 - ss
+                    project(b, ends[2 * s], ends[2 * s + 1], s, s, x, dx, rem, lam, pinned, inv_mass, k,
+                            rest, damp, h)
+        for i in range(n):
+            finish(b, i, x, v, dx, rem, pinned, coll, g_norm, h)
+
     @ti.kernel
     def per_copy(x: vec_arr, v: vec_arr, dx: vec_arr, rem: vec_arr, lam: real2_arr, pinned: mask_arr, inv_mass: real_arr,
                  ends: int_arr, k: real_arr, rest: real_arr, damp: real_arr,
                  coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32, n_springs: ti.i32, nsub: ti.i32,
                  iters: ti.i32):
-        n = x.shape[1]
         g_norm = g.norm()
+        ti.loop_config(serialize=serial)  # one copy: no thread wake-up
         for b in range(x.shape[0]):
             for _sub in range(nsub):
-                for i in range(n):
-                    predict(b, i, x, v, dx, pinned, inv_mass, g, rho, h)
-                for li in range(lam.shape[1]):
-                    lam[b, li] = 0
-                for sweep in range(2 * iters):
-                    if ti.static(grid):
-                        if sweep % 2 == 0:
-                            for c in ti.static(range(N_COLOURS)):
-                                grid_colour_rows(b, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
-                        else:
-                            for c in ti.static(tuple(reversed(range(N_COLOURS)))):
-                                grid_colour_rows(b, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
-                    else:
-                        for ss in range(n_springs):
-                            s = ss if sweep % 2 == 0 else n_springs - 1 - ss
-                            project(b, ends[2 * s], ends[2 * s + 1], s, s, x, dx, rem, lam, pinned, inv_mass, k,
-                                    rest, damp, h)
-                for i in range(n):
-                    finish(b, i, x, v, dx, rem, pinned, coll, g_norm, h)
+                copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h, nx,
+                             n_springs, iters, g_norm)
 
     kernels = {"per_copy": per_copy}
+    if pickers:
+        kernels["picker_frames"] = _picker_kernel(real_name, dim, copy_substep, serial)
+    if sc_iters:
+        kernels["per_copy_contact"] = _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, serial)
     if grid:
         order = sweep_order(1)
 
@@ -348,7 +370,7 @@ def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: st
     data = model.kernel_data(state.dtype)
     grid = model.grid is not None
     kernels = _kernels(state.dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
-                       len(model.colliders) > 0, bool(compensated))
+                       len(model.colliders) > 0, bool(compensated), 0, False, state.batch == 1)
     edges = not grid and model.n_springs > 0
     n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
     lam = buffer("lambda", (state.batch, n_lam), state.dtype)
@@ -376,3 +398,273 @@ def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: st
             for _it in range(iterations - 2):
                 middle(*args)
             last(*args)
+
+
+def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, serial):
+    """The per-copy XPBD substeps with self-collision in one launch (:func:`run_xpbd_contact`).
+
+    Per copy (copies in parallel) and per substep, serially: the XPBD substep (``copy_substep``), the
+    test of the copy's neighbour lists, then ``sc_iters`` Jacobi contact sweeps ping-ponging between x
+    and the work array W (``v += correction / h``, capped at ``vcap`` when > 0) and the colliders
+    again. This is the arithmetic, per particle and in the same order, of the split path: the XPBD
+    launch of one substep, then the passes' ``post`` launch (:mod:`tianim.physics.passes`; its
+    validity test, ``_validity_check``, takes the max and min of the displacements since the build per
+    chunk and then per copy, exact in any order, here in one pass). A copy whose lists are stale
+    stops after the substep's XPBD part (``lim[b] = sub + 1``, ``run[b] = 0``): the caller rebuilds
+    its lists and runs its contacts with the passes' ``fix`` launch, as the split path does."""
+    t = kernel_types(real_name, dim)
+    ti, real, vec, vec_arr = t.ti, t.real, t.vec, t.vec_arr
+    real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
+    i32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
+    T = ti.template()
+    contact_gather = contact_funcs(real_name, dim, grid)
+    respond = contact_response(real_name, dim)
+
+    @ti.func
+    def contact_sweep(b, i, src: T, dst: T, v: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T,
+                      excl_idx: T, k_excl, nx, thick, inv_h, vcap):
+        corr, cnt = contact_gather(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick)
+        corr /= ti.cast(ti.max(cnt, 1), real)
+        dst[b, i] = src[b, i] + corr
+        dv = inv_h * corr
+        if vcap > 0:
+            speed = dv.norm()
+            if speed > vcap:
+                dv *= vcap / speed
+        v[b, i] += dv
+
+    @ti.kernel
+    def per_copy_contact(x: vec_arr, v: vec_arr, dx: vec_arr, rem: vec_arr, lam: real2_arr, pinned: mask_arr,
+                         inv_mass: real_arr, ends: int_arr, k: real_arr, rest: real_arr, damp: real_arr,
+                         coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32, n_springs: ti.i32, iters: ti.i32,
+                         W: vec_arr, nbr: i32_3, count: i32_2, excl_off: int_arr, excl_idx: int_arr, k_excl: ti.i32,
+                         thick: real, g_norm_c: real, xb: vec_arr, margin: real, vcap: real, lim: i32_1, run: i32_1):
+        g_norm = g.norm()
+        inv_h = 1 / h
+        n = x.shape[1]
+        ti.loop_config(serialize=serial)  # one copy: no thread wake-up
+        for b in range(x.shape[0]):
+            sub = 0
+            while sub < lim[b]:
+                copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h, nx,
+                             n_springs, iters, g_norm)
+                hi = ti.Vector([-1e30] * dim, dt=real)
+                lo = ti.Vector([1e30] * dim, dt=real)
+                for i in range(n):
+                    d = x[b, i] - xb[b, i]
+                    hi = ti.max(hi, d)
+                    lo = ti.min(lo, d)
+                w = hi - lo
+                if w.dot(w) <= margin * margin:
+                    for it in range(sc_iters):
+                        for i in range(n):
+                            if it % 2 == 0:
+                                contact_sweep(b, i, x, W, v, pinned, inv_mass, nbr, count, excl_off, excl_idx,
+                                              k_excl, nx, thick, inv_h, vcap)
+                            else:
+                                contact_sweep(b, i, W, x, v, pinned, inv_mass, nbr, count, excl_off, excl_idx,
+                                              k_excl, nx, thick, inv_h, vcap)
+                    if ti.static(sc_iters % 2 == 1):
+                        for i in range(n):
+                            x[b, i] = W[b, i]
+                    if ti.static(colliders):
+                        for i in range(n):
+                            if pinned[b, i] == 0:
+                                x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, g_norm_c, h)
+                    sub += 1
+                else:  # stale lists: stop after this substep's XPBD part (the caller rebuilds, then contacts)
+                    run[b] = 0
+                    lim[b] = sub + 1
+                    sub = lim[b]
+
+    return per_copy_contact
+
+
+def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, self_collision, buffer,
+                     compensated: bool = False) -> None:
+    """XPBD with self-collision (and no other pass): every substep of the call in one launch per copy
+    group, per copy serially (:func:`_contact_kernel`), bit-identical to the split path (one XPBD launch and
+    the passes' ``post`` launch per substep, ``SelfCollision(path="split")``). A copy whose neighbour lists
+    go stale stops inside the launch; its lists are rebuilt (:meth:`tianim.physics.selfcollision.Contacts.rebuild`,
+    the stale copies only), its contacts and colliders run in the passes' ``fix`` launch, and it goes on
+    in the next launch, each copy counting its own substeps.
+
+    Parameters as :func:`run_xpbd` (per-copy layout), with ``self_collision`` the
+    :class:`tianim.physics.SelfCollision` option. ``state.x``/``state.v`` are updated in place."""
+    sc_iters = int(self_collision.iterations)
+    dtype = state.dtype
+    real = dtype.type
+    data = model.kernel_data(dtype)
+    grid = model.grid is not None
+    kernels = _kernels(dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
+                       len(model.colliders) > 0, bool(compensated), sc_iters, False, state.batch == 1)
+    edges = not grid and model.n_springs > 0
+    n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
+    lam = buffer("lambda", (state.batch, n_lam), dtype)
+    rem = buffer("rem", state.x.shape, dtype)
+    if compensated:
+        rem.fill(0)  # one remainder per call, as the split path
+    dx = buffer("dx", state.x.shape, dtype)
+    W = buffer("passes_work", state.x.shape, dtype)
+    pinned = state.pinned.view(np.uint8)
+    g, rho, h = model.gravity.astype(dtype), float(real(model.medium_damping)), float(real(dt))
+    nx = model.grid.nx if grid else 1
+    ny = model.grid.ny if grid else 1
+    ends = np.ascontiguousarray(model.springs.ravel() if edges else np.zeros(2), dtype=np.int32)
+    contacts = contacts_for(self_collision, model, state)
+    contacts.ensure(state.x)
+    thick = float(real(self_collision.thickness))
+    g_norm = float(real(float(np.linalg.norm(model.gravity))))
+    cap = self_collision.max_separation_speed
+    vcap = float(real(0.0 if cap is None else cap))
+    margin = float(real(self_collision.query_margin * (1 - 1e-5)))
+    lim = buffer("contact_lim", (state.batch,), np.int32)
+    run = buffer("contact_run", (state.batch,), np.int32)
+    left = np.full(state.batch, int(substeps), np.int64)
+    kernel = kernels["per_copy_contact"]
+    fix = None
+    while left.any():
+        np.minimum(left, np.iinfo(np.int32).max, out=lim, casting="unsafe")
+        run[...] = 1
+        kernel(state.x, state.v, dx, rem, lam, pinned, data["inv_mass"], ends, data["k"], data["rest"], data["damp"],
+               data["coll"], g, rho, h, nx, model.n_springs if edges else 0, int(iterations), W, contacts.nbr,
+               contacts.count, contacts.excl_off, contacts.excl_idx, contacts.k_excl, thick, g_norm,
+               contacts.x_build, margin, vcap, lim, run)
+        if not run.all():  # stopped after their XPBD part: rebuild their lists, then their contacts and colliders
+            stale = np.flatnonzero(run == 0)
+            contacts.rebuild(state.x, stale)
+            np.subtract(1, run, out=run)
+            if fix is None:
+                serial = state.batch * model.n_particles <= passes.SERIAL_MAX
+                fix = passes._kernels(dtype.name, model.dim, grid, None, 0, sc_iters, len(model.colliders) > 0,
+                                      serial, False)[1]
+            nch = -(-model.n_particles // passes.CHUNK)
+            spread = buffer("passes_spread", (state.batch, 2 * model.dim * nch), dtype)
+            fix(state.x, state.v, W, pinned, data["inv_mass"], np.zeros(4, dtype), data["topo"], data["rest"],
+                contacts.nbr, contacts.count, contacts.excl_off, contacts.excl_idx, data["coll"], h, float(real(0.0)),
+                thick, g_norm, nx, ny, contacts.k_excl, contacts.x_build, spread, run, margin, vcap)
+        left -= lim
+
+
+def _picker_kernel(real_name, dim, copy_substep, serial):
+    """``frames`` frames of picker moves and XPBD substeps per copy in one launch (:func:`run_xpbd_picker_frames`)."""
+    t = kernel_types(real_name, dim)
+    ti, real, vec, vec_arr, work_arr = t.ti, t.real, t.vec, t.vec_arr, t.work_arr
+    real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
+    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    u8_3 = ti.types.ndarray(dtype=ti.u8, ndim=3)
+    vec_1 = ti.types.ndarray(dtype=vec, ndim=1)
+
+    @ti.kernel
+    def picker_frames(x: vec_arr, v: vec_arr, dx: vec_arr, rem: vec_arr, lam: real2_arr, pinned: mask_arr,
+                      inv_mass: real_arr, ends: int_arr, k: real_arr, rest: real_arr, damp: real_arr,
+                      coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32, n_springs: ti.i32, nsub: ti.i32,
+                      iters: ti.i32, act: real2_arr, pos: vec_arr, new: vec_arr, held: i32_2, low: vec_1, high: vec_1,
+                      reach: ti.f64, move: real, frames: ti.i32, xa: work_arr, va: work_arr, pa: u8_3, xp: work_arr,
+                      vp: work_arr):
+        g_norm = g.norm()
+        n = x.shape[1]
+        count = pos.shape[1]
+        ti.loop_config(serialize=serial)  # one copy: no thread wake-up
+        for b in range(x.shape[0]):
+            for f in range(frames):
+                # the picker move (the NumPy form: envs._softgym.Pickers.act): every release first
+                for p in range(count):
+                    if act[b, 4 * p + 3] <= 0 and held[b, p] >= 0:  # actions are finite
+                        pinned[b, held[b, p]] = ti.u8(0)
+                        held[b, p] = -1
+                for p in range(count):
+                    a = ti.Vector([act[b, 4 * p + c] for c in ti.static(range(dim))], dt=real)
+                    new[b, p] = ti.min(ti.max(pos[b, p] + a * move, low[b]), high[b])
+                # picks picker by picker (a taker: pick and free before this frame's picks), on the positions
+                # before the carries; the nearest free particle within reach, distances in float64, first of ties
+                for p in range(count):
+                    if act[b, 4 * p + 3] > 0 and held[b, p] < 0:
+                        best = ti.cast(ti.math.inf, ti.f64)
+                        near = -1
+                        for i in range(n):
+                            d0 = ti.cast(x[b, i][0], ti.f64) - ti.cast(pos[b, p][0], ti.f64)
+                            d1 = ti.cast(x[b, i][1], ti.f64) - ti.cast(pos[b, p][1], ti.f64)
+                            d2 = ti.cast(x[b, i][2], ti.f64) - ti.cast(pos[b, p][2], ti.f64)
+                            dist = ti.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+                            taken = False
+                            for q in range(count):
+                                if held[b, q] == i:
+                                    taken = True
+                            if dist <= reach and not taken and dist < best:
+                                best = dist
+                                near = i
+                        if near >= 0:
+                            held[b, p] = near
+                for p in range(count):  # every held particle follows its picker: a pin, at rest
+                    i = held[b, p]
+                    if i >= 0:
+                        x[b, i] = x[b, i] + (new[b, p] - pos[b, p])
+                        v[b, i] = ti.Vector.zero(real, dim)
+                        pinned[b, i] = ti.u8(1)
+                    pos[b, p] = new[b, p]
+                for i in range(n):
+                    xa[f, b, i] = x[b, i]
+                    va[f, b, i] = v[b, i]
+                    pa[f, b, i] = pinned[b, i]
+                for _sub in range(nsub):
+                    copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h, nx,
+                                 n_springs, iters, g_norm)
+                for i in range(n):
+                    xp[f, b, i] = x[b, i]
+                    vp[f, b, i] = v[b, i]
+
+    return picker_frames
+
+
+def run_xpbd_picker_frames(model, state, dt: float, substeps: int, iterations: int, frames: int, actions, pos, held,
+                           low, high, reach: float, move: float, buffer):
+    """``frames`` frames of SoftGym-style pickers and XPBD on every copy in one launch (per-copy layout, no
+    per-substep passes): per frame the picker move of ``envs._softgym.Pickers.act`` (release, move clipped to
+    the box, pick the nearest free particle within ``reach`` of the picker's position before the move, in
+    float64 and the first of ties, carry every held particle by its picker's displacement as an infinite-mass
+    pin at rest), then ``substeps`` XPBD substeps of ``dt`` [s] (:func:`run_xpbd`). The same arithmetic, in the
+    same order, as that NumPy move followed by one :func:`run_xpbd` call per frame (bit-identical).
+
+    Parameters
+    ----------
+    actions : (B, C, 4) float32
+        Per picker ``(dx, dy, dz, pick)``, the same in every frame; the move is ``move`` [m] times (dx, dy, dz).
+    pos : (B, C, 3) float32
+        Picker positions [m], updated in place. ``held`` (B, C) int64: held particle or -1, updated in place.
+    low, high : (B, 3) float32
+        The pickers' box [m].
+
+    Returns ``(xa, va, pa, xp, vp)``: per frame the positions, velocities and pins after the picker move
+    (F, B, N, D) / (F, B, N) and the positions and velocities after its physics, for the caller's watchdog.
+    ``state.t`` is not advanced.
+    """
+    dtype = state.dtype
+    real = dtype.type
+    data = model.kernel_data(dtype)
+    grid = model.grid is not None
+    kernels = _kernels(dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
+                       len(model.colliders) > 0, False, 0, True, state.batch == 1)
+    edges = not grid and model.n_springs > 0
+    n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
+    lam = buffer("lambda", (state.batch, n_lam), dtype)
+    rem = buffer("rem", state.x.shape, dtype)
+    dx = buffer("dx", state.x.shape, dtype)
+    f_shape = (int(frames),) + state.x.shape
+    xa, va, xp, vp = (buffer(name, f_shape, dtype) for name in ("frames_xa", "frames_va", "frames_xp", "frames_vp"))
+    pa = buffer("frames_pa", f_shape[:3], np.uint8)
+    new = buffer("frames_new", pos.shape, dtype)
+    held32 = np.ascontiguousarray(held, dtype=np.int32)
+    act = np.ascontiguousarray(actions, dtype=dtype).reshape(state.batch, -1)
+    g, rho, h = model.gravity.astype(dtype), float(real(model.medium_damping)), float(real(dt))
+    nx = model.grid.nx if grid else 1
+    ends = np.ascontiguousarray(model.springs.ravel() if edges else np.zeros(2), dtype=np.int32)
+    kernels["picker_frames"](state.x, state.v, dx, rem, lam, state.pinned.view(np.uint8), data["inv_mass"], ends,
+                             data["k"], data["rest"], data["damp"], data["coll"], g, rho, h, nx,
+                             model.n_springs if edges else 0, int(substeps), int(iterations), act, pos, new, held32,
+                             np.ascontiguousarray(low, dtype=dtype), np.ascontiguousarray(high, dtype=dtype),
+                             float(reach), float(real(move)), int(frames), xa, va, pa, xp, vp)
+    held[...] = held32
+    return xa, va, pa.view(bool), xp, vp
