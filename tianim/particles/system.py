@@ -65,7 +65,7 @@ import numpy as np
 from tianim._checks import (as_float_array, check_choice, check_domain, check_finite_scalar, check_int,
                             fmt, real_dtype, seed_list)
 from tianim.particles.emitters import Emitter
-from tianim.particles.forces import force_table
+from tianim.particles.forces import force_table, noise_kernel_rows
 from tianim.stepping import StateArrays, StepStats, draw, rng_states
 
 MODES = ("bounce", "stick", "kill")
@@ -301,7 +301,7 @@ class ParticleModel:
                                          g.gamma_t()], dtype=f))
         #: the tables the step kernel reads, in the model's dtype (read-only)
         self.tables = dict(g=_frozen(self.gravity.astype(f)), forces=_frozen(forces_.astype(f)),
-                           noise=_frozen(noise.astype(f)),
+                           noise=_frozen(noise_kernel_rows(noise).astype(f)),
                            coll=_frozen(coll.astype(f) if len(coll) else np.zeros((0, 7), f)),
                            modes=_frozen(modes if len(modes) else np.zeros(0, np.int32)))
         self._sealed = True
