@@ -552,14 +552,15 @@ class ParticleSolver:
         died, split = np.zeros(B, np.int64), np.zeros((B, 3), np.int64)
         offs = model.burst_offsets
         for b in range(B):  # each copy draws from its own stream, emitters in order
-            with draw(state.rng, b) as rng:
-                lost = []
-                parts = [e.emit(float(t0[b]), float(t1[b]), rng, state.fired[b, offs[k]:offs[k + 1]], lost)
-                         for k, e in enumerate(model.emitters)]
-                missed += [(b, bt) for _, bt in lost]
-                if sum(len(p) for p in parts) == 0:
-                    births.append(None)
-                    continue
+            lost = []  # birth times need no draws: a copy without births draws nothing and is skipped
+            times = [e._birth_times(float(t0[b]), float(t1[b]), state.fired[b, offs[k]:offs[k + 1]], lost)
+                     for k, e in enumerate(model.emitters)]
+            missed += [(b, bt) for _, bt in lost]
+            if sum(len(tk) for tk in times) == 0:
+                births.append(None)
+                continue
+            with draw(state.rng, b) as rng:  # Emitter.emit = draw(_birth_times(...)), emitter by emitter
+                parts = [e.draw(tk, rng) for e, tk in zip(model.emitters, times)]
                 cat = [np.concatenate([getattr(p, f) for p in parts]) for f in ("x", "v", "t", "life")]
                 cat.append(np.concatenate([np.full(len(p), k, np.int32) for k, p in enumerate(parts)]))
                 cat, died[b], split[b] = self._short_lives(model, cat, float(t1[b]), rng)
@@ -606,14 +607,19 @@ class ParticleSolver:
 
     def _spawn(self, model, state, t):
         """Sub-emitter children of the events of the launch that ended at ``t`` (B,) [s]: (placed, dropped) (B,)."""
-        from tianim.particles.subemitters import spawn_children
+        from tianim.particles.subemitters import TRIGGERS, spawn_children
 
-        births = []
-        for b in range(state.batch):
+        # the copies with a triggering event, found for all copies at once: only they draw (a copy without
+        # one would draw nothing), so a launch without events costs no per-copy work
+        hit = np.zeros(state.batch, bool)
+        for sub in model.sub_emitters:
+            hit |= (np.isin(state.event, TRIGGERS[sub.on]) & (state.source == sub.parent)).any(axis=1)
+        births = [None] * state.batch
+        for b in np.flatnonzero(hit):
             with draw(state.rng, b) as rng:
                 kids = spawn_children(model.sub_emitters, len(model.emitters), state.event[b], state.source[b],
                                       state.x[b], state.v[b], float(t[b]), rng)
-            births.append(None if kids is None else (kids[0], kids[1], kids[4], kids[2], kids[3]))
+            births[b] = None if kids is None else (kids[0], kids[1], kids[4], kids[2], kids[3])
         placed, dropped = self._place(model, state, births, t)
         self._warn_dropped(model, state, dropped, t, "sub-emitter children")
         return placed, dropped
