@@ -76,6 +76,46 @@ def test_curl_noise_is_divergence_free(dim):
     assert np.max(np.abs(div)) < 1e-6 * scale and scale > 0.1
 
 
+@pytest.mark.parametrize("real", ["float32", "float64"])
+def test_kernel_sincos_is_within_its_stated_error_over_its_whole_range(real):
+    """The curl noise's branch-free sincos against np.cos/np.sin in float64 of the same arguments, over
+    [-COS_RANGE, COS_RANGE] (uniform), near zero and at the reduction's edges (multiples of pi and pi/2)."""
+    from tianim.particles._kernels import COS_RANGE, COS_TOL, trig_kernels
+
+    rng = np.random.default_rng(0)
+    k = np.arange(-8192, 8193)
+    x = np.concatenate([rng.uniform(-COS_RANGE, COS_RANGE, 400_000), rng.uniform(-8, 8, 100_000), k * np.pi,
+                        (k + 0.5) * np.pi, [COS_RANGE, -COS_RANGE, 0.0, 1e-30]]).astype(real)
+    c, s = np.empty_like(x), np.empty_like(x)
+    trig_kernels(real)[1](x, c, s)
+    x64 = x.astype(np.float64)
+    assert np.abs(c - np.cos(x64)).max() <= COS_TOL[real] and np.abs(s - np.sin(x64)).max() <= COS_TOL[real]
+    # not vacuous: float32's own np.cos/np.sin round to within 7e-8, a third of the stated bound
+    assert COS_TOL[real] < (1e-6 if real == "float32" else 1e-14)
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_kernel_curl_noise_is_the_formula_to_the_stated_tolerance(dim, dtype):
+    """One step of h = 1 s from rest without gravity sets v = a(x) exactly; a(x) against curl_noise (the
+    documented formula in float64) within CURL_TOL, near the origin and up to 400 scales out."""
+    from tianim.particles._kernels import CURL_TOL
+
+    noise = CurlNoise(amplitude=1.5, scale=0.5, modes=8, seed=2)
+    n = 3000
+    x = np.random.default_rng(1).uniform(-1, 1, (n, dim)) * np.repeat([2.0, 200.0], n // 2)[:, None]
+    ps = ParticleSystem(n, forces=[noise], gravity=(0,) * dim, dim=dim, dtype=dtype)
+    ps.x[0] = x
+    ps.alive[0] = 1
+    ps.lifetime[0] = 1e9
+    ps.step(1.0)
+    ref = curl_noise(x.astype(dtype).astype(np.float64), noise)
+    c0, c1 = CURL_TOL[np.dtype(dtype).name]
+    bound = noise.amplitude * (c0 + c1 * np.linalg.norm(x, axis=1) / noise.scale)
+    assert np.all(np.abs(ps.v[0] - ref) <= bound[:, None])
+    assert np.sqrt(np.mean(np.sum(ref ** 2, axis=1))) > noise.amplitude  # the field is not small
+
+
 def test_kernel_applies_the_curl_noise_field():
     noise = CurlNoise(amplitude=1.5, scale=0.5, seed=2)
     ps = one_particle((0, 0, 0), forces=[noise], gravity=(0, 0, 0))

@@ -124,6 +124,20 @@ def test_sub_emitters_batch_equals_separate_runs_and_are_seeded():
     assert np.array_equal(again.x, one[0].x)
 
 
+@pytest.mark.parametrize("emitter", [PointEmitter(cone=0.3), PointEmitter(cone=3.0), SphereEmitter(radius=0.2),
+                                     SphereEmitter(center=(0, 1), radius=0.2, cone=3.0),
+                                     MeshEmitter(vertices=[[0, 1, 0], [1, 1, 0], [0, 1, 1]], faces=[[0, 1, 2]],
+                                                 speed=(1, 2), cone=1.0)], ids=lambda e: type(e).__name__)
+def test_drawing_no_births_consumes_no_random_numbers(emitter):
+    """The solver skips the generator of a copy without births or sub-emitter events (no per-copy work in
+    such launches); that gives the same bits only because drawing zero births leaves the stream as it was."""
+    g = np.random.default_rng(3)
+    before = g.bit_generator.state
+    assert len(emitter.draw(np.zeros(0), g)) == 0
+    assert g.bit_generator.state == before
+    assert g.random() == np.random.default_rng(3).random()
+
+
 def test_sub_emitter_shape_is_placed_relative_to_the_parent():
     drops = PointEmitter(bursts=((0.001, 3),), position=(1, 2, 3), lifetime=0.05)
     ball = SubEmitter(SphereEmitter(center=(0, 0, 0), radius=0.1, lifetime=9.0), parent=0, count=50)

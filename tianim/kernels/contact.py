@@ -18,59 +18,89 @@ whose position update already used the pre-contact velocity (symplectic Euler) a
 wants static friction to hold positions (rest on a slope below the friction angle
 instead of creeping ``g sin(a) h^2`` per step) adds ``h`` times the tangential part
 of the velocity change to the position, as :mod:`tianim.particles._kernels` does.
+
+One form, branch-free: the surface of a collider of a compile-time kind and the impact are written
+with selects (every value computed, the right one kept), so the SIMD lanes of the particle kernel
+vectorise them, and the per-particle solvers (whose collider kinds are run-time values of the table)
+take the same operations; a select keeps exactly the value the former branch computed, so results
+are unchanged bit for bit.
 """
 
 from tianim.kernels import cached_variants, kernel_types
-from tianim.kernels.colliders import PLANE
+from tianim.kernels.colliders import PLANE, SPHERE
 
 
 @cached_variants
-def contact_parts(real_name: str, dim: int):
-    """The two halves of the response, as ``ti.func``s other systems (particles) reuse:
+def contact_funcs(real_name: str, dim: int):
+    """``(surface_of, bounce, vsel)``, branch-free ``ti.func``s:
 
-    * ``surface(xi, coll, c) -> (phi, n)``: signed distance [m] of position ``xi`` to collider row ``c``
-      of the (C, 7) table ``coll`` and the outward unit normal there;
+    * ``surface_of(xi, coll, c, kind) -> (phi, n)``: signed distance [m] of position ``xi`` to collider row
+      ``c`` of the (C, 7) table ``coll`` and the outward unit normal there, for a collider of compile-time
+      ``kind`` (PLANE or SPHERE; a sphere's normal at its centre is +e_{dim-1});
     * ``bounce(vi, n, e, mu, v_rest) -> vi``: the velocity after an impact on a surface of normal ``n``
-      (restitution ``e``, 0 below the resting speed ``v_rest``; Coulomb friction ``mu`` as an impulse).
+      (restitution ``e``, 0 below the resting speed ``v_rest``; Coulomb friction ``mu`` as an impulse),
+      ``vi`` itself unless it moves inward (``vi . n < 0``);
+    * ``vsel(c, a, b)``: vector ``a`` where ``c`` else ``b`` (a select per component).
     """
     t = kernel_types(real_name, dim)
     ti, real = t.ti, t.real
 
     @ti.func
-    def surface(xi, coll: ti.template(), c):
+    def vsel(c, a, b):
+        r = b
+        for k in ti.static(range(dim)):
+            r[k] = ti.select(c, a[k], b[k])
+        return r
+
+    @ti.func
+    def surface_of(xi, coll: ti.template(), c, kind: ti.template()):
         vec_c = ti.Vector.zero(real, dim)  # plane normal, or sphere centre
         for a in ti.static(range(dim)):
             vec_c[a] = coll[c, 4 + a]
         n = vec_c
         phi = ti.cast(0, real)
-        if coll[c, 0] == PLANE:
+        if ti.static(kind == PLANE):
             phi = xi.dot(n) - coll[c, 3]
         else:
             d = xi - vec_c
             dist = d.norm()
             phi = dist - coll[c, 3]
-            n = ti.Vector.zero(real, dim)
-            if dist > 0:
-                n = d / dist
-            else:
-                n[dim - 1] = 1
+            up = ti.Vector.zero(real, dim)
+            up[dim - 1] = 1
+            n = vsel(dist > 0, d / dist, up)
         return phi, n
 
     @ti.func
     def bounce(vi, n, e_in, mu, v_rest):
         vn = vi.dot(n)
-        if vn < 0:
-            e = e_in
-            if -vn <= v_rest:
-                e = 0
-            dvn = -(1 + e) * vn
-            vt = vi - vn * n
-            vt_norm = vt.norm()
-            scale = ti.cast(0, real)
-            if vt_norm > mu * dvn:
-                scale = 1 - mu * dvn / vt_norm
-            vi = scale * vt - e * vn * n
-        return vi
+        e = ti.select(-vn <= v_rest, ti.cast(0, real), e_in)
+        dvn = -(1 + e) * vn
+        vt = vi - vn * n
+        vt_norm = vt.norm()
+        scale = ti.select(vt_norm > mu * dvn, 1 - mu * dvn / vt_norm, ti.cast(0, real))
+        return vsel(vn < 0, scale * vt - e * vn * n, vi)
+
+    return surface_of, bounce, vsel
+
+
+@cached_variants
+def contact_parts(real_name: str, dim: int):
+    """The two halves of the response for a collider kind read from the table, as ``ti.func``s other
+    systems (crowds) reuse:
+
+    * ``surface(xi, coll, c) -> (phi, n)``: :func:`contact_funcs`' ``surface_of`` for the kind
+      ``coll[c, 0]`` of row ``c``;
+    * ``bounce(vi, n, e, mu, v_rest) -> vi``: :func:`contact_funcs`' ``bounce``.
+    """
+    ti = kernel_types(real_name, dim).ti
+    surface_of, bounce, _ = contact_funcs(real_name, dim)
+
+    @ti.func
+    def surface(xi, coll: ti.template(), c):
+        phi, n = surface_of(xi, coll, c, PLANE)
+        if coll[c, 0] != PLANE:
+            phi, n = surface_of(xi, coll, c, SPHERE)
+        return phi, n
 
     return surface, bounce
 

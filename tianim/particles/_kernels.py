@@ -14,16 +14,23 @@ straight-line code inside one body (see :mod:`tianim.physics.lanes`). ``step`` t
 runs their substeps branch-free: every lane computes every operation of the substep (the forces,
 each collider's response, the ageing) and a select keeps the result only where the particle is
 flying with no event yet (an event ends its launch), where it is inside the collider, where
-friction is on. The operations of each particle are those of the scalar response of
-:mod:`tianim.kernels.contact` in the same order, so results are unchanged bit for bit (tested
-against digests of the former per-particle kernel); collider kinds and modes are compile-time
-constants of a variant, so no branch depends on them. The one branch of a substep is per group and
-per collider: its response runs only when some lane of the group is inside it (elsewhere the selects
-would keep every value), which skips the costliest part for particles in flight.
+friction is on. The operations of each particle are :mod:`tianim.kernels.contact`'s branch-free
+surface and bounce (the one form, which the per-particle solvers take too), so results are the
+former per-particle kernel's bit for bit; collider kinds and modes are compile-time constants of a
+variant, so no branch depends on them. The one branch of a substep is per group and per collider:
+its response runs only when some lane of the group is inside it (elsewhere the selects
+would keep every value), which skips the costliest part for particles in flight. The work matrices
+of the curl noise are lane-minor (dim, L), the order in which its scalars are the same operation on L
+lanes (what the vectoriser packs; lane-major, that loop stayed scalar), and its sine and cosine are
+polynomials (:func:`trig_kernels`) instead of calls into the math library. (Loading and storing full
+groups unconditionally, with selects for the slots not flying, was measured 1.6x slower on the
+gravity + drag workload and left out.)
 """
 
+import math
+
 from tianim.kernels import cached_variants, kernel_types
-from tianim.kernels.colliders import PLANE
+from tianim.kernels.contact import contact_funcs
 from tianim.particles.forces import ATTRACTOR, CURL, DRAG, VORTEX
 
 BOUNCE, STICK, KILL = 0, 1, 2
@@ -31,10 +38,93 @@ BOUNCE, STICK, KILL = 0, 1, 2
 
 def step_lanes(real_name: str) -> int:
     """Particles per body of the step kernel: one vector register of the host
-    (:func:`tianim.physics.lanes.host_lanes`: 8 float32 / 4 float64 with AVX2 or AVX-512, 4 / 2 with SSE)."""
+    (:func:`tianim.physics.lanes.host_lanes`: 8 float32 / 4 float64 with AVX2 or AVX-512, 4 / 2 with SSE).
+
+    Two registers (``ParticleSolver(lanes=16)``) give each body two independent chains of substeps, which
+    the core overlaps: measured in one process on 2 cores at 1 M particles, 16 float32 lanes ran the
+    gravity + drag bench 1.37x and the curl-noise bench 1.64x faster than 8. It is not the default because
+    its first call compiles far longer: 100-150 s for one ground collider, more than 6 CPU-minutes for three
+    colliders on a loaded machine (8 lanes: 35-60 s)."""
     from tianim.physics.lanes import host_lanes
 
     return host_lanes(real_name)
+
+
+#: The curl noise's cosine and sine (:func:`trig_kernels`) are within this of cos(x), sin(x) [absolute] for
+#: arguments |x| <= COS_RANGE (measured over that range against np.cos/np.sin in float64 by the tests; the
+#: series' truncation is < 7e-9 of it, the rest is the rounding of the reduction and of Horner's sums).
+COS_TOL = {"float32": 2.5e-7, "float64": 1e-15}
+#: The arguments |x| [rad] over which COS_TOL holds: the Cody-Waite products n * P1, n * P2 are exact for
+#: |n| = |round(x / pi)| <= 8192 (P2 has 11 significant bits). The noise's arguments are k . x / scale
+#: (|k| <= 2): positions within about 12,000 scales of the origin.
+COS_RANGE = 8192 * 3.140625
+
+#: The curl-noise acceleration of the step kernel is within amplitude * (c0 + c1 |x| / scale) of the formula
+#: (:func:`tianim.particles.forces.curl_noise`, float64) per component: (c0, c1) by dtype. The |x| term is the
+#: rounding of the argument k . x / scale in the kernel's precision (any cosine of it has that error); the
+#: rest is :data:`COS_TOL` and the sums over 8 modes (measured: 1.2e-6 amplitude at |x| / scale = 7,
+#: 1.2e-3 at 7,000 in float32; tests/test_particles.py checks both dtypes, 2D and 3D).
+CURL_TOL = {"float32": (2e-6, 4e-7), "float64": (1e-14, 2e-15)}
+
+#: Cody-Waite parts of pi (Cephes ``sinf``/``sin``'s DP1..DP3 for pi/4, times 4): P1 + P2 + P3 = pi to
+#: within 4e-15 (float32 parts) / 5e-21 (float64), P1 and P2 with few significant bits so n * P is exact.
+_PI_PARTS = {"float32": (3.140625, 9.67502593994140625e-4, 1.509957990978376432e-7),
+             "float64": (3.14159250259399414062, 1.50995788317231926907e-7, 1.07806057163162380858e-14)}
+#: Taylor terms kept on [-pi/2, pi/2] (Abramowitz & Stegun 4.3.65-66): float32 cos through r^12, sin through
+#: r^13 (remainders <= (pi/2)^14 / 14! = 6.4e-9, (pi/2)^15 / 15! = 6.3e-10); float64 through r^20, r^21
+#: (1.8e-17, 1.2e-18).
+_TRIG_TERMS = {"float32": 7, "float64": 11}
+
+
+@cached_variants
+def trig_kernels(real_name: str):
+    """``(sincos, trig_kernel)``: a branch-free ``ti.func sincos(x) -> (cos x, sin x)`` the SIMD lanes
+    vectorise (``ti.cos``/``ti.sin`` are calls into the math library, one lane at a time), and a kernel
+    ``trig_kernel(x, c, s)`` writing cos and sin of a 1-D array (tests).
+
+    With n = x / pi rounded to the nearest integer and r = x - n pi in [-pi/2, pi/2] (up to rounding),
+    cos x = (-1)^n cos r and sin x = (-1)^n sin r; n pi is subtracted in three Cody-Waite parts (Cody &
+    Waite 1980, "Software Manual for the Elementary Functions"; the parts of Cephes, Moshier 1989) and
+    cos r, sin r are their Taylor series in r^2 (Horner). Every operation is a multiply, add or abs: no
+    branch, table or call. Accuracy: :data:`COS_TOL` over :data:`COS_RANGE`.
+    """
+    t = kernel_types(real_name, 1)
+    ti, real = t.ti, t.real
+    p1, p2, p3 = _PI_PARTS[real_name]
+    terms = _TRIG_TERMS[real_name]
+    ccoef = [(-1) ** k / math.factorial(2 * k) for k in range(terms)]
+    scoef = [(-1) ** k / math.factorial(2 * k + 1) for k in range(terms)]
+    big = 1.5 * 2.0 ** (52 if real_name == "float64" else 23)
+
+    @ti.func
+    def nearest(y):
+        """y rounded to the nearest integer (ties to even) for |y| < 2^22 (float64: 2^51): (y + 1.5 2^23) -
+        1.5 2^23 in round-to-nearest arithmetic (exact; fast_math is off, so the sum is not folded)."""
+        return (y + real(big)) - real(big)
+
+    @ti.func
+    def horner(z, coef: ti.template()):
+        p = real(coef[terms - 1])
+        for k in ti.static(range(terms - 2, -1, -1)):
+            p = p * z + real(coef[k])
+        return p
+
+    @ti.func
+    def sincos(x):
+        # real(value) makes a constant of the kernel's type (ti.cast of a Python float rounds it to f32 first)
+        n = nearest(x * real(1 / math.pi))
+        r = ((x - n * real(p1)) - n * real(p2)) - n * real(p3)
+        z = r * r
+        half = n * real(0.5)
+        sign = real(1.0) - real(4.0) * ti.abs(half - nearest(half))  # +1 for even n, -1 for odd n
+        return sign * horner(z, ccoef), sign * (r * horner(z, scoef))
+
+    @ti.kernel
+    def trig_kernel(x: t.real_arr, c: t.real_arr, s: t.real_arr):
+        for i in x:
+            c[i], s[i] = sincos(x[i])
+
+    return sincos, trig_kernel
 
 
 @cached_variants
@@ -56,14 +146,8 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
     i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
     i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
     real2d = ti.types.ndarray(dtype=real, ndim=2)
-
-    @ti.func
-    def vsel(c, a, b):
-        """a where c else b, component by component (a select, no branch)."""
-        r = b
-        for k in ti.static(range(dim)):
-            r[k] = ti.select(c, a[k], b[k])
-        return r
+    sincos = trig_kernels(real_name)[0]
+    surface, bounce, vsel = contact_funcs(real_name, dim)  # the one branch-free contact form
 
     @ti.func
     def row_of(m: ti.template(), u: ti.template()):
@@ -74,35 +158,45 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
 
     @ti.func
     def curl_lanes(xs, forces: ti.template(), noise: ti.template(), f: ti.template()):
-        """Curl-noise accelerations (forces.curl_noise) of the L lanes (L, dim): the mode loop outside,
-        the lanes inside; per lane the operations of the per-particle sum, in the same order."""
-        ys = ti.Matrix.zero(real, L, dim)
-        for u in ti.static(range(L)):
-            for a in ti.static(range(dim)):
-                ys[u, a] = xs[u, a] / forces[f, 2]
-        gs = ti.Matrix.zero(real, L, 9)  # gs[u, 3 c + a] = d psi_c / d y_a of lane u
-        for m in range(noise.shape[0]):
+        """Curl-noise accelerations (:func:`tianim.particles.forces.curl_noise`) of the L lanes (L, dim),
+        the mode loop outside, the lanes inside. ``noise``: the rows of :func:`~tianim.particles.forces.
+        noise_kernel_rows`, [k (3), A cos phi (3), A sin phi (3)]. Per mode m and lane, with y = x / scale:
+        W_c = A_mc cos(k_m . y + phi_mc) = (A cos phi)_mc cos(k_m . y) - (A sin phi)_mc sin(k_m . y) (one
+        :func:`trig_kernels` sincos per mode), and curl sum_c psi_c e_c gains k_m x W (2D: W_z (k_y, -k_x))."""
+        # lane-minor (dim, L) work matrices: their scalars, in order, are the same operation on L lanes
+        # (what LLVM's SLP vectoriser packs into one vector register); lane-major ones were left scalar
+        ys = ti.Matrix.zero(real, dim, L)
+        for a in ti.static(range(dim)):
             for u in ti.static(range(L)):
-                arg = ti.cast(0, real)
-                for a in ti.static(range(dim)):
-                    arg += noise[m, a] * ys[u, a]
+                ys[a, u] = xs[u, a] / forces[f, 2]
+        us = ti.Matrix.zero(real, dim, L)
+        for m in range(noise.shape[0]):
+            args = ti.Vector.zero(real, L)
+            for a in ti.static(range(dim)):
+                for u in ti.static(range(L)):
+                    args[u] += noise[m, a] * ys[a, u]
+            co = ti.Vector.zero(real, L)
+            si = ti.Vector.zero(real, L)
+            for u in ti.static(range(L)):
+                co[u], si[u] = sincos(args[u])
+            if ti.static(dim == 2):
+                for u in ti.static(range(L)):
+                    w = noise[m, 5] * co[u] - noise[m, 8] * si[u]
+                    us[0, u] += noise[m, 1] * w
+                    us[1, u] -= noise[m, 0] * w
+            else:
+                ws = ti.Matrix.zero(real, 3, L)
                 for c in ti.static(range(3)):
-                    w = noise[m, 6 + c] * ti.cos(arg + noise[m, 3 + c])
-                    for a in ti.static(range(dim)):
-                        gs[u, 3 * c + a] += w * noise[m, a]
+                    for u in ti.static(range(L)):
+                        ws[c, u] = noise[m, 3 + c] * co[u] - noise[m, 6 + c] * si[u]
+                for a in ti.static(range(3)):  # k x w, component a = k_p w_q - k_q w_p
+                    p, q = (a + 1) % 3, (a + 2) % 3
+                    for u in ti.static(range(L)):
+                        us[a, u] += noise[m, p] * ws[q, u] - noise[m, q] * ws[p, u]
         out = ti.Matrix.zero(real, L, dim)
         for u in ti.static(range(L)):
-            uu = ti.Vector.zero(real, dim)
-            if ti.static(dim == 2):
-                uu[0] = gs[u, 3 * 2 + 1]
-                uu[1] = -gs[u, 3 * 2 + 0]
-            else:
-                uu[0] = gs[u, 3 * 2 + 1] - gs[u, 3 * 1 + 2]
-                uu[1] = gs[u, 3 * 0 + 2] - gs[u, 3 * 2 + 0]
-                uu[2] = gs[u, 3 * 1 + 0] - gs[u, 3 * 0 + 1]
-            a_u = forces[f, 1] * uu
             for a in ti.static(range(dim)):
-                out[u, a] = a_u[a]
+                out[u, a] = forces[f, 1] * us[a, u]
         return out
 
     @ti.func
@@ -155,36 +249,6 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
                     for a in ti.static(range(dim)):
                         acc[u, a] = a_u[a]
         return acc
-
-    @ti.func
-    def surface(xi, coll: ti.template(), c: ti.template(), kind: ti.template()):
-        """(phi, n) of tianim.kernels.contact's ``surface`` for a collider of static ``kind``, branch-free."""
-        vec_c = ti.Vector.zero(real, dim)  # plane normal, or sphere centre
-        for a in ti.static(range(dim)):
-            vec_c[a] = coll[c, 4 + a]
-        n = vec_c
-        phi = ti.cast(0, real)
-        if ti.static(kind == PLANE):
-            phi = xi.dot(n) - coll[c, 3]
-        else:
-            d = xi - vec_c
-            dist = d.norm()
-            phi = dist - coll[c, 3]
-            up = ti.Vector.zero(real, dim)
-            up[dim - 1] = 1
-            n = vsel(dist > 0, d / dist, up)
-        return phi, n
-
-    @ti.func
-    def bounce(vi, n, e_in, mu, v_rest):
-        """tianim.kernels.contact's ``bounce``, computed for every lane and selected where vn < 0."""
-        vn = vi.dot(n)
-        e = ti.select(-vn <= v_rest, ti.cast(0, real), e_in)
-        dvn = -(1 + e) * vn
-        vt = vi - vn * n
-        vt_norm = vt.norm()
-        scale = ti.select(vt_norm > mu * dvn, 1 - mu * dvn / vt_norm, ti.cast(0, real))
-        return vsel(vn < 0, scale * vt - e * vn * n, vi)
 
     @ti.func
     def collide_one(xi, vi, coll: ti.template(), c: ti.template(), event, g_norm, h, prad):

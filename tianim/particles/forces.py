@@ -14,7 +14,8 @@
   scalar and the field is ``(d psi/dy, -d psi/dx)``.
 
 Gravity is the system's ``gravity`` vector. :func:`force_table` packs forces into the (F, 11) table the
-kernel reads; :func:`curl_noise` evaluates the noise field in NumPy (tests, plots).
+kernel reads (and :func:`noise_kernel_rows` the noise's sinusoids); :func:`curl_noise` evaluates the
+noise field in NumPy, in float64 from the formula above (the reference of the tests, plots).
 """
 
 from __future__ import annotations
@@ -91,6 +92,15 @@ def noise_table(noise: CurlNoise, dim: int) -> np.ndarray:
     phi = rng.uniform(0, 2 * np.pi, (m, 3))
     amp = rng.normal(size=(m, 3)) / np.sqrt(m)
     return np.concatenate([k, phi, amp, np.zeros((m, 1))], axis=1)
+
+
+def noise_kernel_rows(table: np.ndarray) -> np.ndarray:
+    """The step kernel's form of a :func:`noise_table`, (M, 9) rows ``[k (3), A cos phi (3), A sin phi (3)]``
+    (float64): with them A cos(k . y + phi) = (A cos phi) cos(k . y) - (A sin phi) sin(k . y), so the kernel
+    takes one sine and cosine per mode instead of three cosines."""
+    table = np.asarray(table, np.float64)
+    k, phi, amp = table[:, 0:3], table[:, 3:6], table[:, 6:9]
+    return np.concatenate([k, amp * np.cos(phi), amp * np.sin(phi)], axis=1)
 
 
 def curl_noise(x, noise: CurlNoise) -> np.ndarray:
