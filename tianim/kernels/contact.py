@@ -31,7 +31,7 @@ from tianim.kernels.colliders import PLANE, SPHERE
 
 
 @cached_variants
-def contact_funcs(real_name: str, dim: int):
+def branchless_contact_funcs(real_name: str, dim: int):
     """``(surface_of, bounce, vsel)``, branch-free ``ti.func``s:
 
     * ``surface_of(xi, coll, c, kind) -> (phi, n)``: signed distance [m] of position ``xi`` to collider row
@@ -88,12 +88,12 @@ def contact_parts(real_name: str, dim: int):
     """The two halves of the response for a collider kind read from the table, as ``ti.func``s other
     systems (crowds) reuse:
 
-    * ``surface(xi, coll, c) -> (phi, n)``: :func:`contact_funcs`' ``surface_of`` for the kind
+    * ``surface(xi, coll, c) -> (phi, n)``: :func:`branchless_contact_funcs`' ``surface_of`` for the kind
       ``coll[c, 0]`` of row ``c``;
-    * ``bounce(vi, n, e, mu, v_rest) -> vi``: :func:`contact_funcs`' ``bounce``.
+    * ``bounce(vi, n, e, mu, v_rest) -> vi``: :func:`branchless_contact_funcs`' ``bounce``.
     """
     ti = kernel_types(real_name, dim).ti
-    surface_of, bounce, _ = contact_funcs(real_name, dim)
+    surface_of, bounce, _ = branchless_contact_funcs(real_name, dim)
 
     @ti.func
     def surface(xi, coll: ti.template(), c):

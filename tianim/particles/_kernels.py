@@ -30,7 +30,7 @@ gravity + drag workload and left out.)
 import math
 
 from tianim.kernels import cached_variants, kernel_types
-from tianim.kernels.contact import contact_funcs
+from tianim.kernels.contact import branchless_contact_funcs
 from tianim.particles.forces import ATTRACTOR, CURL, DRAG, VORTEX
 
 BOUNCE, STICK, KILL = 0, 1, 2
@@ -147,7 +147,7 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
     i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
     real2d = ti.types.ndarray(dtype=real, ndim=2)
     sincos = trig_kernels(real_name)[0]
-    surface, bounce, vsel = contact_funcs(real_name, dim)  # the one branch-free contact form
+    surface, bounce, vsel = branchless_contact_funcs(real_name, dim)  # the one branch-free contact form
 
     @ti.func
     def row_of(m: ti.template(), u: ti.template()):
