@@ -33,7 +33,7 @@ import numpy as np
 from tianim.physics.bending import bending_funcs
 from tianim.kernels.contact import contact_response
 from tianim.kernels import cached_variants, kernel_types
-from tianim.physics.selfcollision import contact_funcs, contacts_for
+from tianim.physics.selfcollision import contact_update_funcs, contacts_for
 from tianim.physics.strain import SOR, strain_funcs
 
 #: Scenes with at most this many particles x copies run the passes' loops serially (no thread wake-up).
@@ -104,7 +104,7 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
     i32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
     kick, project_colour = bending_funcs(real_name, dim)
     strain_gather = strain_funcs(real_name, dim, grid)
-    contact_gather = contact_funcs(real_name, dim, grid)
+    contact_update = contact_update_funcs(real_name, dim, grid)
     respond = contact_response(real_name, dim)
     validity = _validity_check(real_name, dim, serial)
 
@@ -128,15 +128,9 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
     def contact_sweep(b, i, src: T, dst: T, v: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T,
                       excl_idx: T, k_excl, nx, thick, inv_h, run: T, vcap):
         if run[b] != 0:
-            corr, cnt = contact_gather(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
-                                       thick)
-            corr /= ti.cast(ti.max(cnt, 1), real)
+            corr, dv = contact_update(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
+                                      thick, inv_h, vcap)
             dst[b, i] = src[b, i] + corr
-            dv = inv_h * corr
-            if vcap > 0:
-                speed = dv.norm()
-                if speed > vcap:
-                    dv *= vcap / speed
             v[b, i] += dv
         else:
             dst[b, i] = src[b, i]
@@ -230,7 +224,7 @@ def _symplectic_contact_kernel(real_name, dim, grid, colliders, spring_damping, 
     T = ti.template()
     _load, _accel, _collide, fused_symplectic, _gn = substep_funcs(real_name, dim, grid, colliders, spring_damping,
                                                                   medium_damping)
-    contact_gather = contact_funcs(real_name, dim, grid)
+    contact_update = contact_update_funcs(real_name, dim, grid)
     respond = contact_response(real_name, dim)
     check = _validity_check(real_name, dim, serial)
 
@@ -240,15 +234,9 @@ def _symplectic_contact_kernel(real_name, dim, grid, colliders, spring_damping, 
         xn = src[b, i]
         vn = vin[b, i]
         if run[b] != 0:
-            corr, cnt = contact_gather(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
-                                       thick)
-            corr /= ti.cast(ti.max(cnt, 1), real)
+            corr, dv = contact_update(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx,
+                                      thick, inv_h, vcap)
             xn = src[b, i] + corr
-            dv = inv_h * corr
-            if vcap > 0:
-                speed = dv.norm()
-                if speed > vcap:
-                    dv *= vcap / speed
             vn = vin[b, i] + dv
             if ti.static(final and colliders):
                 if pinned[b, i] == 0:

@@ -413,3 +413,29 @@ def contact_funcs(real_name: str, dim: int, grid: bool):
         return corr, cnt
 
     return gather
+
+
+@cached_variants
+def contact_update_funcs(real_name: str, dim: int, grid: bool):
+    """``ti.func update(b, i, x, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, t, inv_h, vcap)
+    -> (dx, dv)``: particle i's Jacobi contact correction (the :func:`contact_funcs` push averaged over its
+    contacts) and the velocity it adds, ``dx / h``, capped at ``vcap`` [m/s] when ``vcap > 0``. The one
+    contact update of every self-collision sweep (the passes' launches and XPBD's contact launch)."""
+    tt = kernel_types(real_name, dim)
+    ti, real = tt.ti, tt.real
+    T = ti.template()
+    gather = contact_funcs(real_name, dim, grid)
+
+    @ti.func
+    def update(b, i, x: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T, excl_idx: T, k_excl, nx, t,
+               inv_h, vcap):
+        corr, cnt = gather(b, i, x, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, t)
+        corr /= ti.cast(ti.max(cnt, 1), real)
+        dv = inv_h * corr
+        if vcap > 0:
+            speed = dv.norm()
+            if speed > vcap:
+                dv *= vcap / speed
+        return corr, dv
+
+    return update

@@ -83,7 +83,7 @@ import numpy as np
 from tianim.kernels.contact import contact_response
 from tianim.physics import passes
 from tianim.physics.model import GRID_STENCIL
-from tianim.physics.selfcollision import contact_funcs, contacts_for
+from tianim.physics.selfcollision import contact_update_funcs, contacts_for
 from tianim.kernels import cached_variants, kernel_types
 
 #: Stencil offsets each grid particle owns (the "forward" half: each spring once).
@@ -419,20 +419,15 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
     i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
     i32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
     T = ti.template()
-    contact_gather = contact_funcs(real_name, dim, grid)
+    contact_update = contact_update_funcs(real_name, dim, grid)
     respond = contact_response(real_name, dim)
 
     @ti.func
     def contact_sweep(b, i, src: T, dst: T, v: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T,
                       excl_idx: T, k_excl, nx, thick, inv_h, vcap):
-        corr, cnt = contact_gather(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick)
-        corr /= ti.cast(ti.max(cnt, 1), real)
+        corr, dv = contact_update(b, i, src, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, thick,
+                                  inv_h, vcap)
         dst[b, i] = src[b, i] + corr
-        dv = inv_h * corr
-        if vcap > 0:
-            speed = dv.norm()
-            if speed > vcap:
-                dv *= vcap / speed
         v[b, i] += dv
 
     @ti.kernel
