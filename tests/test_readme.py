@@ -33,9 +33,10 @@ def _blocks():
 BLOCKS = _blocks()
 
 
-def _env():
+def _env(tmp_path):
     env = dict(os.environ)
     env.setdefault("TIANIM_NUM_THREADS", "2")
+    env["TIANIM_CACHE_DIR"] = str(tmp_path / "tianim-cache")  # a block's caches (SoftGym starts) stay in its folder
     env["MPLBACKEND"] = "Agg"
     return env
 
@@ -58,7 +59,7 @@ def test_readme_block_runs_alone(tmp_path, kind, code):
     if kind == "python":
         script = tmp_path / "block.py"
         script.write_text(code, encoding="utf-8")
-        r = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=_env(), capture_output=True,
+        r = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=_env(tmp_path), capture_output=True,
                            text=True, timeout=600)
         assert r.returncode == 0, f"README block failed:\n{code}\n--- stderr ---\n{r.stderr[-4000:]}"
         return
@@ -68,9 +69,9 @@ def test_readme_block_runs_alone(tmp_path, kind, code):
             argv = [sys.executable, "-m", "tianim"] + argv[1:]
             if "demo" in argv and "--list" not in argv and "--frames" not in argv:
                 argv += ["--frames", "6"]
-            r = subprocess.run(argv, cwd=tmp_path, env=_env(), capture_output=True, text=True, timeout=600)
+            r = subprocess.run(argv, cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True, timeout=600)
         else:
-            r = subprocess.run(line, shell=True, cwd=tmp_path, env=_env(), capture_output=True, text=True,
+            r = subprocess.run(line, shell=True, cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True,
                                timeout=600)
         assert r.returncode == 0, f"README line failed: {line}\n--- stderr ---\n{r.stderr[-4000:]}"
         if "--out" in argv:
@@ -90,7 +91,7 @@ def test_readme_gymnasium_example_is_current_and_says_what_to_import(tmp_path):
     assert kind == "python" and "ArmReach-v0" not in code
     script = tmp_path / "gym_block.py"
     script.write_text(code, encoding="utf-8")
-    r = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=_env(), capture_output=True, text=True,
+    r = subprocess.run([sys.executable, str(script)], cwd=tmp_path, env=_env(tmp_path), capture_output=True, text=True,
                        timeout=600)
     assert r.returncode == 0, r.stderr[-3000:]
     assert "out of date" not in r.stderr and "Warn" not in r.stderr, r.stderr
