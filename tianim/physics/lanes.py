@@ -32,12 +32,26 @@ The state of a call lives in a pool of vector fields of L lanes:
   new state (so no extra loop or barrier). Every neighbour is then one vector load at the constant pack
   offset ``dr nx + dc``: no branch per neighbour row, no lanes reassembled from scalars (the branchy
   fetch it replaced made LLVM merge per-lane pointers and load each lane on its own: 1.4x slower).
-  A lane whose neighbour row lies outside ``[0, ny)`` adds nothing (a select, no branch); a column
-  outside ``[0, nx)`` is the same for every lane (a branch, predicted);
-* one parallel-loop index is a row of packs (``nx`` packs, an inner loop over columns): one integer
-  division per row, none per pack;
-* every operation is that of :func:`tianim.physics.kernels.substep_funcs` in the same order, so the
-  results are bit-identical to the other layouts (tested), for any thread count and batch.
+  A lane whose neighbour row lies outside ``[0, ny)`` adds nothing (a select, no branch);
+* one parallel-loop index is a row of packs (``nx`` packs): one integer division per row, none per pack.
+  The row is swept offset by offset (as the vectorising numba kernel of the cloth bench sweeps its row
+  views): the force buffer of the row starts at ``m g`` (minus medium damping), then for each stencil
+  offset, in :data:`GRID_STENCIL` order, one branch-free pass over the columns that have that neighbour
+  (its parameters, row mask and pack offset loaded once per row) adds the spring force; a last pass
+  updates and stores. Against one pass per pack summing the 12 offsets in a runtime loop (a column test
+  per offset, the offset's parameters reloaded per pack) it ran 1.02-1.09x faster on one thread
+  (64^2-256^2) and 1.08x on two (256^2, parallel path), bit-identical, and compiles faster;
+* every operation is that of :func:`tianim.physics.kernels.substep_funcs` in the same order (per pack the
+  same terms summed in the same order), so the results are bit-identical to the other layouts (tested),
+  for any thread count and batch.
+
+Where the time goes (optimised LLVM IR, ``ti.init(print_kernel_llvm_ir_optimized=True)``, of the offset
+pass): the inner column loop is straight-line ``<4 x float>`` code, one vector load per neighbour
+component, one ``sqrt.v4f32`` and one ``fdiv`` per 4 lanes, no branch and no division of integers. The
+vectors are 16 bytes wide because taichi's optimiser targets generic x86-64 on this host (note above);
+numba's kernel runs 16-lane zmm vectors and one division per spring (``s / |d|``) where tianim's
+arithmetic (``1 / |d|``, then a product per component, kept for bit-identity with the other layouts)
+needs a reciprocal and more products. That width, not the traversal, is the remaining gap.
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
 the pool, and unpacks. Up to :data:`SERIAL_MAX_PARTICLES` (batch x band rows x L x nx) one thread runs every
@@ -48,7 +62,8 @@ On the 2-vCPU machines this project targets, Taichi's workers sleep between
 parallel loops and take a few hundred microseconds to wake, so a substep of a 128x128 cloth (about
 0.3 ms on one thread) runs faster on one thread than split over two with a barrier after it; from
 256x256 on, two threads win.
-The spring loop is a runtime loop so that compiling stays short. The pool grows by doubling (one compile
+The stencil loop and the serial path's substep loop are runtime loops (the source buffer a runtime
+value: one substep body to compile) so that compiling stays short. The pool grows by doubling (one compile
 of the kernels per growth); the kernels take sizes as arguments, so a second scene or another batch
 size compiles nothing new.
 """
@@ -143,17 +158,20 @@ def supports(model, dtype, lanes="auto") -> bool:
 
 class _Pool:
     """The fields of one (float type, dimension): state (4 D, cap) lanes [x, v, xs, vs components],
-    mass (3, cap) lanes [mass, inverse mass, 1 free / 0 pinned], prm [gravity, rho, k, rest, damp],
+    mass (3, cap) lanes [mass, inverse mass, 1 free / 0 pinned], force (D, cap) lanes [the force sum of a
+    substep], prm [gravity, rho, k, rest, damp],
     off [(d_col, d_row) of :data:`GRID_STENCIL`]."""
 
     def __init__(self, ti, real, dim, lanes, capacity):
         fb = ti.FieldsBuilder()
         self.state = ti.Vector.field(lanes, real)
         self.mass = ti.Vector.field(lanes, real)
+        self.force = ti.Vector.field(lanes, real)
         self.prm = ti.field(real)
         self.off = ti.field(ti.i32)
         fb.dense(ti.ij, (4 * dim, capacity)).place(self.state)
         fb.dense(ti.ij, (3, capacity)).place(self.mass)
+        fb.dense(ti.ij, (dim, capacity)).place(self.force)
         fb.dense(ti.i, dim + 1 + 3 * _N_OFF).place(self.prm)
         fb.dense(ti.i, 2 * _N_OFF).place(self.off)
         self.tree = fb.finalize()
@@ -257,7 +275,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
         H rows further down) and rr = r + H (r < 2; lane l holds lane l + 1). A neighbour at any band row
         rr in [-2, H + 2) is then the pack kp + (rr - r) nx, lane for lane: one vector load, no branch.
         The lanes shifted in from beyond the band (lane 0 below, lane L - 1 above) repeat their neighbour and
-        are never used (their global row lies outside [0, ny): masked by add_spring)."""
+        are never used (their global row lies outside [0, ny): masked by substep_row)."""
         if r >= H - 2:
             g = kp - H * nx
             for a in ti.static(range(2 * dim)):
@@ -278,72 +296,71 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
         return f
 
     @ti.func
-    def add_spring(S: ti.template(), prm: ti.template(), f0, f1, f2, xi: ti.template(), vi: ti.template(),
-                   xs: ti.template(), o, dc, dr, kp, r, c, nx, ny, H):
-        """(f0, f1, f2) plus the force of stencil offset o = (dc, dr) on the lanes of pack (r, c) (positions
-        xi, velocities vi, buffer xs): kernels.pair_force lane by lane, nothing where the neighbour is off
-        the grid."""
+    def substep_row(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: ti.template(),
+                    F: ti.template(), src, q, nx, ny, H, dt):
+        """One substep of pack row q, stencil offset by offset: for each offset of GRID_STENCIL (in its order)
+        one branch-free pass over the columns that have that neighbour, adding to the force buffer F; then
+        one pass that updates and stores. Every pack sums the same terms in the same order as
+        :func:`substep` (same bits); the offset's parameters and the row mask are loaded once per row."""
+        b = q // H
+        r = q - b * H
+        k0 = b * (H + 4) * nx + (r + 2) * nx  # pack_index of column 0
+        xs = src * 2 * dim
         zero = lane_vec(0)
+        for c in range(nx):
+            kp = k0 + c
+            m = M[0, kp]
+            f = [m * prm[a] for a in ti.static(range(dim))]  # m g
+            if ti.static(medium_damping):
+                for a in ti.static(range(dim)):
+                    f[a] -= prm[dim] * S[xs + dim + a, kp]
+            for a in ti.static(range(dim)):
+                F[a, kp] = f[a]
         lane_row = ti.Vector([lane * H for lane in range(L)])
-        cc = c + dc
-        j = kp + dr * nx + dc  # the neighbour pack (a ghost pack across a band edge)
-        if 0 <= cc < nx:
+        for o in range(_N_OFF):
+            dc = off[2 * o]
+            dr = off[2 * o + 1]
             g_row = lane_row + r + dr
             valid = (g_row >= 0) & (g_row < ny)
-            d = [xi[a] - S[xs + a, j] for a in ti.static(range(dim))]
-            len2 = d[0] * d[0]
-            for a in ti.static(range(1, dim)):
-                len2 += d[a] * d[a]
-            length = ti.sqrt(len2)
-            inv_len = ti.select(length > 0, 1 / length, zero)
-            s = -prm[h + o] * (length - prm[h + _N_OFF + o])
-            nrm = [d[a] * inv_len for a in ti.static(range(dim))]
-            dot = zero
-            if ti.static(spring_damping):
-                dv = [vi[a] - S[xs + dim + a, j] for a in ti.static(range(dim))]
-                dot = dv[0] * nrm[0]
+            ko = prm[h + o]
+            lo = prm[h + _N_OFF + o]
+            do = prm[h + 2 * _N_OFF + o]
+            dj = dr * nx + dc  # the neighbour pack (a ghost pack across a band edge)
+            for c in range(ti.max(0, -dc), ti.min(nx, nx - dc)):
+                kp = k0 + c
+                j = kp + dj
+                d = [S[xs + a, kp] - S[xs + a, j] for a in ti.static(range(dim))]
+                len2 = d[0] * d[0]
                 for a in ti.static(range(1, dim)):
-                    dot += dv[a] * nrm[a]
-            pf = [spring_force(s, nrm[a], prm[h + 2 * _N_OFF + o], dot) for a in ti.static(range(dim))]
-            f0 += ti.select(valid, pf[0], zero)
-            f1 += ti.select(valid, pf[1], zero)
-            if ti.static(dim == 3):
-                f2 += ti.select(valid, pf[2], zero)
-        return f0, f1, f2
+                    len2 += d[a] * d[a]
+                length = ti.sqrt(len2)
+                inv_len = ti.select(length > 0, 1 / length, zero)
+                sv = -ko * (length - lo)
+                nrm = [d[a] * inv_len for a in ti.static(range(dim))]
+                dot = zero
+                if ti.static(spring_damping):
+                    dv = [S[xs + dim + a, kp] - S[xs + dim + a, j] for a in ti.static(range(dim))]
+                    dot = dv[0] * nrm[0]
+                    for a in ti.static(range(1, dim)):
+                        dot += dv[a] * nrm[a]
+                for a in ti.static(range(dim)):  # a load and a store (`+=` on a field would be an atomic add)
+                    F[a, kp] = F[a, kp] + ti.select(valid, spring_force(sv, nrm[a], do, dot), zero)
+        for c in range(nx):
+            update(S, M, prm, coll, F, src, k0 + c, r, nx, H, dt)
 
     @ti.func
-    def substep(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: ti.template(),
-                src: ti.template(), kp, r, c, nx, ny, H, dt):
-        """One symplectic Euler substep of pack kp (band row r, column c), read from buffer src, written to
-        the other."""
+    def update(S: ti.template(), M: ti.template(), prm: ti.template(), coll: ti.template(), F: ti.template(),
+               src, kp, r, nx, H, dt):
+        """The velocity and position update of pack kp from its summed force F, contacts, ghosts."""
         xs = src * 2 * dim
         xd = (1 - src) * 2 * dim
-        xi = [S[xs + a, kp] for a in ti.static(range(dim))]
-        vi = [S[xs + dim + a, kp] for a in ti.static(range(dim))]
-        m = M[0, kp]
         zero = lane_vec(0)
-        # The force sum is carried across a runtime loop, so it lives in named variables (f2 unused in 2D).
-        f0 = m * prm[0]  # m g
-        f1 = m * prm[1]
-        f2 = zero
-        if ti.static(dim == 3):
-            f2 = m * prm[2]
-        if ti.static(medium_damping):
-            f0 -= prm[dim] * vi[0]
-            f1 -= prm[dim] * vi[1]
-            if ti.static(dim == 3):
-                f2 -= prm[dim] * vi[2]
-        # The stencil in GRID_STENCIL order, as kernels.accel sums it. A runtime loop: unrolled (offsets as
-        # constants) it ran about 1.2x faster but took 30-100 s to compile.
-        for o in range(_N_OFF):
-            f0, f1, f2 = add_spring(S, prm, f0, f1, f2, xi, vi, xs, o, off[2 * o], off[2 * o + 1], kp, r, c, nx, ny, H)
-        f = [f0, f1, f2]
         free = M[2, kp] > 0
         im = M[1, kp]
         for a in ti.static(range(dim)):
-            vn = vi[a] + dt * ti.select(free, f[a] * im, zero)
+            vn = S[xs + dim + a, kp] + dt * ti.select(free, F[a, kp] * im, zero)
             S[xd + dim + a, kp] = vn
-            S[xd + a, kp] = xi[a] + dt * vn
+            S[xd + a, kp] = S[xs + a, kp] + dt * vn
         if ti.static(colliders):  # per lane, on the stored values (exact: a float32 store and load)
             g2 = prm[0] * prm[0]
             for a in ti.static(range(1, dim)):
@@ -359,24 +376,13 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
                         S[xd + dim + a, kp][lane] = vl[a]
         write_ghosts(S, xd, kp, r, nx, H)  # after the contacts: the ghosts copy the stored values
 
-    @ti.func
-    def substep_row(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: ti.template(),
-                    src: ti.template(), q, nx, ny, H, dt):
-        """One substep of the nx packs of pack row q of the call (copy q // H, band row q % H), column by
-        column: one integer division per row, none per pack."""
-        b = q // H
-        r = q - b * H
-        k0 = b * (H + 4) * nx + (r + 2) * nx  # pack_index of column 0
-        for c in range(nx):
-            substep(S, M, prm, off, coll, src, k0 + c, r, c, nx, ny, H, dt)
-
     def make_run(nsub):
         @ti.kernel
         def run(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: t.real2_arr,
-                rows: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real):
+                F: ti.template(), rows: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real):
             for s in ti.static(range(nsub)):  # each top-level loop ends in a barrier
                 for q in range(rows):
-                    substep_row(S, M, prm, off, coll, s % 2, q, nx, ny, H, dt)
+                    substep_row(S, M, prm, off, coll, F, s % 2, q, nx, ny, H, dt)
 
         return run
 
@@ -384,18 +390,13 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     @ti.kernel
     def run_serial(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: t.real2_arr,
-                   rows: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real, nsub: ti.i32):
-        # One thread, every substep of the call in one launch: no barriers, no worker wake-ups, and the
-        # substep loop is a runtime loop (3 substep bodies to compile, not 8).
+                   F: ti.template(), rows: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real, nsub: ti.i32):
+        # One thread, every substep of the call in one launch: no barriers, no worker wake-ups; the substep
+        # loop is a runtime loop and the source buffer a runtime value (one substep body to compile).
         ti.loop_config(serialize=True)
-        for _pair in range(nsub // 2):
+        for s in range(nsub):
             for q in range(rows):
-                substep_row(S, M, prm, off, coll, 0, q, nx, ny, H, dt)
-            for q in range(rows):
-                substep_row(S, M, prm, off, coll, 1, q, nx, ny, H, dt)
-        if nsub % 2 == 1:
-            for q in range(rows):
-                substep_row(S, M, prm, off, coll, 0, q, nx, ny, H, dt)
+                substep_row(S, M, prm, off, coll, F, s % 2, q, nx, ny, H, dt)
 
     runs["serial"] = run_serial
     return pack, runs, unpack
@@ -424,7 +425,7 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     S, M, prm, off = pool.state, pool.mass, pool.prm, pool.off
     pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], g.nx, H)
     dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
-    args = (S, M, prm, off, data["coll"], state.batch * H, g.nx, g.ny, H, dt)
+    args = (S, M, prm, off, data["coll"], pool.force, state.batch * H, g.nx, g.ny, H, dt)
     if path == "serial" or (path == "auto" and packs * L <= SERIAL_MAX_PARTICLES):
         runs["serial"](*args, substeps)
         unpack(S, substeps % 2, state.x, state.v, g.nx, H)
