@@ -43,6 +43,15 @@ from tianim.kernels.contact import contact_response
 from tianim.physics.model import GRID_STENCIL
 from tianim.kernels import cached_variants, kernel_types
 
+#: Work vectors of the solve, as the leading index of its work array W (K, B, N, D): the Newton iterate
+#: v+, the end-of-step positions x + h v+, the CG residual, direction, update (accumulated dv) and
+#: preconditioned residual / J p.
+_VN, _XS, _R, _P, _AP, _Z = range(6)
+#: Per-call real settings, as offsets in the kernel's array C: step [s], relative Newton and CG tolerances.
+_H, _NEWTON_TOL, _CG_TOL = range(3)
+#: Per-call int settings, as offsets in the kernel's array I: grid columns, substeps, iteration caps.
+_NX, _NSUB, _MAX_NEWTON, _MAX_CG = range(4)
+
 #: Defaults of the nonlinear and linear solves, per float type:
 #: (relative Newton tolerance on |g|, relative CG tolerance, Newton iterations, CG iterations).
 DEFAULTS = {
@@ -55,37 +64,48 @@ DEFAULTS = {
 def _kernel(real_name, dim, grid, spring_damping, medium_damping, colliders):
     t = kernel_types(real_name, dim)
     respond = contact_response(real_name, dim)
-    ti, real, vec, vec_arr, mat_arr = t.ti, t.real, t.vec, t.vec_arr, t.mat_arr
+    ti, real, vec_arr, mat_arr, work_arr = t.ti, t.real, t.vec_arr, t.mat_arr, t.work_arr
     real_arr, int_arr, mask_arr = t.real_arr, t.int_arr, t.mask_arr
     stat_arr = ti.types.ndarray(dtype=ti.i32, ndim=2)
     n_stencil = len(GRID_STENCIL)
     eps = float(np.finfo(np.float64 if real_name == "float64" else np.float32).eps)
     T = ti.template()
+    h0 = dim + 1  # P: gravity[D], rho, mass[N], inv_mass[N], k[S], rest[S], damp[S] (kernels.py's P layout)
 
     @ti.func
-    def nb_range(i, off: ti.template()):
+    def nb_range(i, topo: ti.template()):
         lo, hi = 0, n_stencil
         if ti.static(not grid):
-            lo, hi = off[i], off[i + 1]
+            lo, hi = topo[i], topo[i + 1]
         return lo, hi
 
     @ti.func
-    def neighbour(i, e, n, nx, off: ti.template(), spr: ti.template(), oth: ti.template()):
-        """(j, s, ok): the particle and spring parameter index of slot e of particle i."""
+    def neighbour(i, e, n, nx, topo: ti.template()):
+        """(j, s, ok): the particle and spring parameter index of slot e of particle i. ``topo`` is the
+        packed topology of kernels.py: the stencil offsets (d_col, d_row) of GRID_STENCIL on grids, else
+        CSR offsets[N + 1], spring ids[E], other ends[E]."""
         j, s, ok = 0, 0, 1
         if ti.static(grid):
             row = i // nx
             col = i - row * nx
-            cc = col + off[2 * e]
-            rr = row + off[2 * e + 1]
+            cc = col + topo[2 * e]
+            rr = row + topo[2 * e + 1]
             ok = 0
             if 0 <= cc < nx and 0 <= rr < n // nx:
                 ok = 1
                 j = rr * nx + cc
             s = e
         else:
-            j, s = oth[e], spr[e]
+            ne = (topo.shape[0] - n - 1) // 2
+            j, s = topo[n + 1 + ne + e], topo[n + 1 + e]
         return j, s, ok
+
+    @ti.func
+    def spring(P: ti.template(), n, s):
+        """(k, rest, damp) of spring (or stencil offset) s from the packed parameters P."""
+        ns = (P.shape[0] - h0 - 2 * n) // 3
+        base = h0 + 2 * n
+        return P[base + s], P[base + ns + s], P[base + 2 * ns + s]
 
     @ti.func
     def spring_frame(d, rest):
@@ -95,92 +115,100 @@ def _kernel(real_name, dim, grid, spring_damping, medium_damping, colliders):
         return d * inv_len, length, ti.max(0, 1 - rest * inv_len)
 
     @ti.func
-    def residual(b, i, x: T, v: T, vn: T, xs: T, pinned: T, mass: T, off: T, spr: T, oth: T, k: T, rest: T, damp: T, g, rho, h, nx):
+    def residual(b, i, x: T, v: T, W: T, pinned: T, P: T, topo: T, g, rho, h, nx):
         """g_i = m_i (vn_i - v_i) - h f_i(xs, vn) (zero for pinned particles), and the size of its
         terms, ``m_i (|vn_i| + |v_i|) + h sum_s k_s L_s``, which sets its rounding floor."""
         r = ti.Vector.zero(real, dim)
         size = ti.cast(0, real)
         if pinned[b, i] == 0:
-            xi = xs[b, i]
-            vi = vn[b, i]
-            f = mass[i] * g
+            n = x.shape[1]
+            xi = W[_XS, b, i]
+            vi = W[_VN, b, i]
+            mi = P[h0 + i]
+            f = mi * g
             if ti.static(medium_damping):
                 f -= rho * vi
-            lo, hi = nb_range(i, off)
+            lo, hi = nb_range(i, topo)
             for e in range(lo, hi):
-                j, s, ok = neighbour(i, e, xs.shape[1], nx, off, spr, oth)
+                j, s, ok = neighbour(i, e, n, nx, topo)
                 if ok:
-                    nrm, length, _a = spring_frame(xi - xs[b, j], rest[s])
-                    f -= k[s] * (length - rest[s]) * nrm
-                    size += h * k[s] * length
+                    ks, ls, cs = spring(P, n, s)
+                    nrm, length, _a = spring_frame(xi - W[_XS, b, j], ls)
+                    f -= ks * (length - ls) * nrm
+                    size += h * ks * length
                     if ti.static(spring_damping):
-                        f -= damp[s] * (vi - vn[b, j]).dot(nrm) * nrm
-            r = mass[i] * (vi - v[b, i]) - h * f
-            size += mass[i] * (vi.norm() + v[b, i].norm())
+                        f -= cs * (vi - W[_VN, b, j]).dot(nrm) * nrm
+            r = mi * (vi - v[b, i]) - h * f
+            size += mi * (vi.norm() + v[b, i].norm())
         return r, size
 
     @ti.func
-    def jacobian_times(b, i, p: T, xs: T, pinned: T, mass: T, off: T, spr: T, oth: T, k: T, rest: T, damp: T, rho, h, nx):
-        """(J p)_i = (m_i + h rho) p_i + sum_s (h c n n^T + h^2 K_s)(p_i - p_j); zero for pinned i."""
+    def jacobian_times(b, i, W: T, pinned: T, P: T, topo: T, rho, h, nx):
+        """(J p)_i = (m_i + h rho) p_i + sum_s (h c n n^T + h^2 K_s)(p_i - p_j), p = W[_P]; zero for pinned i."""
         out = ti.Vector.zero(real, dim)
         if pinned[b, i] == 0:
-            pi = p[b, i]
-            out = mass[i] * pi
+            n = W.shape[2]
+            pi = W[_P, b, i]
+            out = P[h0 + i] * pi
             if ti.static(medium_damping):
                 out += h * rho * pi
-            xi = xs[b, i]
-            lo, hi = nb_range(i, off)
+            xi = W[_XS, b, i]
+            lo, hi = nb_range(i, topo)
             for e in range(lo, hi):
-                j, s, ok = neighbour(i, e, xs.shape[1], nx, off, spr, oth)
+                j, s, ok = neighbour(i, e, n, nx, topo)
                 if ok:
-                    nrm, _len, alpha = spring_frame(xi - xs[b, j], rest[s])
-                    q = pi - p[b, j]
+                    ks, ls, cs = spring(P, n, s)
+                    nrm, _len, alpha = spring_frame(xi - W[_XS, b, j], ls)
+                    q = pi - W[_P, b, j]
                     qn = q.dot(nrm)
-                    c_n = h * h * k[s] * (1 - alpha)
+                    c_n = h * h * ks * (1 - alpha)
                     if ti.static(spring_damping):
-                        c_n += h * damp[s]
-                    out += c_n * qn * nrm + (h * h * k[s] * alpha) * q
+                        c_n += h * cs
+                    out += c_n * qn * nrm + (h * h * ks * alpha) * q
         return out
 
     @ti.func
-    def diagonal_block(b, i, xs: T, mass: T, off: T, spr: T, oth: T, k: T, rest: T, damp: T, rho, h, nx):
+    def diagonal_block(b, i, W: T, P: T, topo: T, rho, h, nx):
         """The D x D diagonal block of J at particle i."""
+        n = W.shape[2]
         eye = ti.Matrix.identity(real, dim)
-        blk = (mass[i] + (h * rho if ti.static(medium_damping) else 0)) * eye
-        xi = xs[b, i]
-        lo, hi = nb_range(i, off)
+        blk = (P[h0 + i] + (h * rho if ti.static(medium_damping) else 0)) * eye
+        xi = W[_XS, b, i]
+        lo, hi = nb_range(i, topo)
         for e in range(lo, hi):
-            j, s, ok = neighbour(i, e, xs.shape[1], nx, off, spr, oth)
+            j, s, ok = neighbour(i, e, n, nx, topo)
             if ok:
-                nrm, _len, alpha = spring_frame(xi - xs[b, j], rest[s])
-                c_n = h * h * k[s] * (1 - alpha)
+                ks, ls, cs = spring(P, n, s)
+                nrm, _len, alpha = spring_frame(xi - W[_XS, b, j], ls)
+                c_n = h * h * ks * (1 - alpha)
                 if ti.static(spring_damping):
-                    c_n += h * damp[s]
-                blk += c_n * nrm.outer_product(nrm) + (h * h * k[s] * alpha) * eye
+                    c_n += h * cs
+                blk += c_n * nrm.outer_product(nrm) + (h * h * ks * alpha) * eye
         return blk
 
     @ti.kernel
-    def solve(x: vec_arr, v: vec_arr, vn: vec_arr, xs: vec_arr, r: vec_arr, p: vec_arr, ap: vec_arr, z: vec_arr,
-              pre: mat_arr, pinned: mask_arr, mass: real_arr, off: int_arr, spr: int_arr, oth: int_arr,
-              k: real_arr, rest: real_arr, damp: real_arr, g: vec, rho: real, h: real, nx: ti.i32, nsub: ti.i32,
-              newton_tol: real, cg_tol: real, max_newton: ti.i32, max_cg: ti.i32, stats: stat_arr,
-              coll: t.real2_arr):
+    def solve(x: vec_arr, v: vec_arr, W: work_arr, pre: mat_arr, pinned: mask_arr, P: real_arr, topo: int_arr,
+              coll: t.real2_arr, C: real_arr, I: int_arr, stats: stat_arr):
         n = x.shape[1]
+        g = ti.Vector([P[a] for a in range(dim)])
+        rho = P[dim]
         g_norm = g.norm()
+        h, newton_tol, cg_tol = C[_H], C[_NEWTON_TOL], C[_CG_TOL]
+        nx, nsub, max_newton, max_cg = I[_NX], I[_NSUB], I[_MAX_NEWTON], I[_MAX_CG]
         for b in range(x.shape[0]):
             for _sub in range(nsub):
                 for i in range(n):
-                    vn[b, i] = v[b, i]
+                    W[_VN, b, i] = v[b, i]
                 g0 = ti.cast(-1, real)
                 for it in range(max_newton):
                     # Residual at the current guess (positions at the end of the step).
                     for i in range(n):
-                        xs[b, i] = x[b, i] + h * vn[b, i]
+                        W[_XS, b, i] = x[b, i] + h * W[_VN, b, i]
                     gg = ti.cast(0, real)
                     floor = ti.cast(0, real)
                     for i in range(n):
-                        ri, size = residual(b, i, x, v, vn, xs, pinned, mass, off, spr, oth, k, rest, damp, g, rho, h, nx)
-                        r[b, i] = -ri
+                        ri, size = residual(b, i, x, v, W, pinned, P, topo, g, rho, h, nx)
+                        W[_R, b, i] = -ri
                         gg += ri.dot(ri)
                         floor += (eps * size) ** 2
                     if g0 < 0:
@@ -193,47 +221,47 @@ def _kernel(real_name, dim, grid, spring_damping, medium_damping, colliders):
                     # Block-Jacobi preconditioned CG on J dv = -g (r holds -g; dv accumulates in z's partner p).
                     rz = ti.cast(0, real)
                     for i in range(n):
-                        pre[b, i] = diagonal_block(b, i, xs, mass, off, spr, oth, k, rest, damp, rho, h, nx).inverse()
+                        pre[b, i] = diagonal_block(b, i, W, P, topo, rho, h, nx).inverse()
                         zi = ti.Vector.zero(real, dim)
                         if pinned[b, i] == 0:
-                            zi = pre[b, i] @ r[b, i]
-                        z[b, i] = zi
-                        p[b, i] = zi
-                        rz += r[b, i].dot(zi)
-                        ap[b, i] = ti.Vector.zero(real, dim)  # ap doubles as the accumulated update dv
+                            zi = pre[b, i] @ W[_R, b, i]
+                        W[_Z, b, i] = zi
+                        W[_P, b, i] = zi
+                        rz += W[_R, b, i].dot(zi)
+                        W[_AP, b, i] = ti.Vector.zero(real, dim)  # ap doubles as the accumulated update dv
                     stop = cg_tol * cg_tol * gg
                     for _c in range(max_cg):
                         pap = ti.cast(0, real)
                         for i in range(n):
-                            z[b, i] = jacobian_times(b, i, p, xs, pinned, mass, off, spr, oth, k, rest, damp, rho, h, nx)
-                            pap += p[b, i].dot(z[b, i])
+                            W[_Z, b, i] = jacobian_times(b, i, W, pinned, P, topo, rho, h, nx)
+                            pap += W[_P, b, i].dot(W[_Z, b, i])
                         stats[b, 1] += 1
                         if pap <= 0:
                             break
                         alpha = rz / pap
                         rr = ti.cast(0, real)
                         for i in range(n):
-                            ap[b, i] += alpha * p[b, i]
-                            r[b, i] -= alpha * z[b, i]
-                            rr += r[b, i].dot(r[b, i])
+                            W[_AP, b, i] += alpha * W[_P, b, i]
+                            W[_R, b, i] -= alpha * W[_Z, b, i]
+                            rr += W[_R, b, i].dot(W[_R, b, i])
                         if rr <= stop:
                             break
                         rz_new = ti.cast(0, real)
                         for i in range(n):
                             zi = ti.Vector.zero(real, dim)
                             if pinned[b, i] == 0:
-                                zi = pre[b, i] @ r[b, i]
-                            z[b, i] = zi
-                            rz_new += r[b, i].dot(zi)
+                                zi = pre[b, i] @ W[_R, b, i]
+                            W[_Z, b, i] = zi
+                            rz_new += W[_R, b, i].dot(zi)
                         beta = rz_new / rz
                         rz = rz_new
                         for i in range(n):
-                            p[b, i] = z[b, i] + beta * p[b, i]
+                            W[_P, b, i] = W[_Z, b, i] + beta * W[_P, b, i]
                     for i in range(n):
-                        vn[b, i] += ap[b, i]
+                        W[_VN, b, i] += W[_AP, b, i]
                 for i in range(n):
-                    v[b, i] = vn[b, i]
-                    x[b, i] += h * vn[b, i]
+                    v[b, i] = W[_VN, b, i]
+                    x[b, i] += h * W[_VN, b, i]
                     if ti.static(colliders):
                         if pinned[b, i] == 0:
                             x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, g_norm, h)
@@ -276,16 +304,15 @@ def run_implicit_euler(model, state, dt: float, substeps: int, options: dict, bu
     data = model.kernel_data(state.dtype)
     kernel = _kernel(state.dtype.name, model.dim, model.grid is not None, model.has_spring_damping,
                      model.medium_damping > 0, len(model.colliders) > 0)
-    real = state.dtype.type
     b, n, d = state.x.shape
     pre = buffer("preconditioner", (b, n, d, d), state.dtype)
     stats = np.zeros((b, 2), dtype=np.int32)
-    kernel(state.x, state.v, *(buffer(s, state.x.shape, state.dtype) for s in ("vn", "xs", "r", "p", "ap", "z")),
-           pre, state.pinned.view(np.uint8), data["mass"], data["off"], data["spr"], data["oth"], data["k"],
-           data["rest"], data["damp"], model.gravity.astype(state.dtype),
-           # scalars as Python floats holding the state dtype's values (quadrants caches launches on primitives)
-           *(float(real(v)) for v in (model.medium_damping, dt)),
-           model.grid.nx if model.grid is not None else 1, int(substeps),
-           *(float(real(opts[key])) for key in ("newton_tol", "cg_tol")),
-           int(opts["max_newton"]), int(opts["max_cg"]), stats, data["coll"])
+    work = buffer("work", (6,) + state.x.shape, state.dtype)
+    C = np.zeros(3, state.dtype)
+    C[_H], C[_NEWTON_TOL], C[_CG_TOL] = dt, opts["newton_tol"], opts["cg_tol"]
+    I = np.zeros(4, np.int32)
+    I[_NX], I[_NSUB] = model.grid.nx if model.grid is not None else 1, int(substeps)
+    I[_MAX_NEWTON], I[_MAX_CG] = int(opts["max_newton"]), int(opts["max_cg"])
+    kernel(state.x, state.v, work, pre, state.pinned.view(np.uint8), data["params"], data["topo"], data["coll"],
+           C, I, stats)
     return {"newton": stats[:, 0].copy(), "cg": stats[:, 1].copy()}
