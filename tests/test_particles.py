@@ -338,10 +338,10 @@ def test_solver_lanes_option_auto_rule_and_bad_values():
 
 @pytest.mark.slow  # path equality: compiles the lanes kernel with every collider mode twice (~1-2 min cold)
 def test_lane_kernel_equals_one_particle_per_body_bit_for_bit():
-    """The SIMD-lane step (step_lanes particles per body, branch-free selects) against the same kernel with
-    one particle per body, on a pool whose size is no multiple of the lanes, with every collider kind and
-    mode (bounce with friction, stick, kill), three forces and particles dead, stuck and about to die."""
-    from tianim.particles._kernels import particle_kernels, step_lanes
+    """The SIMD-lane step (step_lanes particles per body in groups loaded as vectors, branch-free selects; the
+    pool's last n mod lanes slots one per body) against the one-slot-per-body kernel alone, on a pool whose
+    size is no multiple of the lanes, with every collider kind and mode (bounce with friction, stick, kill), three forces and particles dead, stuck and about to die."""
+    from tianim.particles._kernels import launch_step, particle_kernels, step_lanes
     from tianim.physics import Sphere
 
     n = 1003
@@ -355,17 +355,16 @@ def test_lane_kernel_equals_one_particle_per_body_bit_for_bit():
     age0 = rng.uniform(0, 0.5, (1, n)).astype(np.float32)
     life0 = rng.uniform(0.05, 1.0, (1, n)).astype(np.float32)
     alive0 = rng.choice(np.array([0, 1, 1, 1, 2], np.uint8), (1, n))
-    k = model.tables
+    P = model.tables["P"]
     out = []
     assert step_lanes("float32") > 1
     for lanes in (step_lanes("float32"), 1):
-        step, _ = particle_kernels("float32", 3, model.kinds, model.collider_kinds, False, lanes)
+        kernels = particle_kernels("float32", 3, model.kinds, model.collider_kinds, False, lanes)
         x, v, age, life, alive = (a.copy() for a in (x0, v0, age0, life0, alive0))
         event = np.zeros((1, n), np.uint8)
         events = []
         for _ in range(3):
-            step(x, v, age, life, alive, event, np.zeros_like(x), k["g"], k["forces"], k["noise"], k["coll"],
-                 np.float32(2e-3), 8, np.float32(0))
+            launch_step(kernels, lanes, x, v, np.zeros_like(x), age, life, alive, event, P, np.float32(2e-3), 8)
             events.append(event.copy())
         out.append((x, v, age, alive, np.array(events)))
     for a, b in zip(*out):

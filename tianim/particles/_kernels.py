@@ -9,29 +9,37 @@ Events written per step (``event``): 0 none, 1 died of age, 2 killed by a collid
 same launch wins over a bounce).
 
 SIMD lanes. Taichi's CPU parallel-for calls the loop body once per index, so LLVM vectorises only
-straight-line code inside one body (see :mod:`tianim.physics.lanes`). ``step`` therefore takes
+straight-line code inside one body (see :mod:`tianim.physics.lanes`). ``step_groups`` therefore takes
 :func:`step_lanes` particles per body (8 float32 / 4 float64 on AVX2 hosts: one ymm register) and
-runs their substeps branch-free: every lane computes every operation of the substep (the forces,
-each collider's response, the ageing) and a select keeps the result only where the particle is
-flying with no event yet (an event ends its launch), where it is inside the collider, where
-friction is on. The operations of each particle are :mod:`tianim.kernels.contact`'s branch-free
-surface and bounce (the one form, which the per-particle solvers take too), so results are the
-former per-particle kernel's bit for bit; collider kinds and modes are compile-time constants of a
-variant, so no branch depends on them. The one branch of a substep is per group and per collider:
-its response runs only when some lane of the group is inside it (elsewhere the selects
-would keep every value), which skips the costliest part for particles in flight. The work matrices
-of the curl noise are lane-minor (dim, L), the order in which its scalars are the same operation on L
-lanes (what the vectoriser packs; lane-major, that loop stayed scalar), and its sine and cosine are
-polynomials (:func:`trig_kernels`) instead of calls into the math library. (Loading and storing full
-groups unconditionally, with selects for the slots not flying, was measured 1.6x slower on the
-gravity + drag workload and left out.)
+runs their substeps branch-free (:func:`particle_kernels`' ``advance``): every lane computes every
+operation of the substep (the forces, each collider's response, the ageing) and a select keeps the
+result only where the particle is flying with no event yet (an event ends its launch), where it is
+inside the collider, where friction is on. The operations of each particle are
+:mod:`tianim.kernels.contact`'s branch-free surface and bounce (the one form, which the per-particle
+solvers take too), so results are the one-slot kernel's (``step_one``) bit for bit; collider kinds and
+modes are compile-time constants of a variant, so no branch depends on them. The one branch of a
+substep is per group and per collider: its response runs only when some lane of the group is inside
+it (elsewhere the selects would keep every value), which skips the costliest part for particles in
+flight. The pool is flattened over copies and a group's slots are read as one vector element of the
+arrays (a (N / L, L * dim) view: a few contiguous vector loads instead of an index computation and a
+branch per slot and component: the loads and stores of a launch at 1 M particles took 7.3 ms that
+way and 4.7 ms this way, measured in one process on 2 shared cores); the slots that changed are
+stored one by one (a single vector store of the group made LLVM pack the substeps in the arrays'
+(x, y, z) order, 4 and 2 wide, 1.9x slower per substep). The work matrices of the curl noise are
+lane-minor (dim, L), the order in which its scalars are the same operation on L lanes (what the
+vectoriser packs; lane-major, that loop stayed scalar), and its sine and cosine are polynomials
+(:func:`trig_kernels`) instead of calls into the math library. Parameters: one packed table ``P``
+(:func:`pack_params`, named offsets :data:`ROW_SCALARS`, :data:`PRAD`, :data:`N_NOISE`,
+:func:`param_rows`).
 """
 
 import math
 
+import numpy as np
+
 from tianim.kernels import cached_variants, kernel_types
 from tianim.kernels.contact import branchless_contact_funcs
-from tianim.particles.forces import ATTRACTOR, CURL, DRAG, VORTEX
+from tianim.particles.forces import ATTRACTOR, CURL, DRAG, FORCE_ROW, VORTEX
 
 BOUNCE, STICK, KILL = 0, 1, 2
 
@@ -127,18 +135,65 @@ def trig_kernels(real_name: str):
     return sincos, trig_kernel
 
 
+#: The step kernel's packed parameter table ``P`` (one array of the model's dtype, rows of :data:`P_WIDTH`
+#: columns; :func:`pack_params` writes it, the kernel reads it through these names): row
+#: :data:`ROW_SCALARS` holds gravity [m/s^2] in columns 0..dim-1, the colliders' contact distance
+#: [m] at :data:`PRAD` and the number of noise rows at :data:`N_NOISE`; then come the force rows
+#: (:data:`tianim.particles.forces.FORCE_ROW` columns), the collider rows
+#: (:data:`tianim.kernels.colliders.COLLIDER_ROW`) and the curl-noise rows (9: :func:`~tianim.particles.
+#: forces.noise_kernel_rows`), starting at the rows :func:`param_rows` gives.
+P_WIDTH = FORCE_ROW
+ROW_SCALARS, ROW_FORCES = 0, 1
+PRAD, N_NOISE = 3, 4
+
+
+def param_rows(n_forces: int, n_colliders: int) -> tuple[int, int, int]:
+    """First rows of the force, collider and noise blocks of ``P`` (compile-time constants of a variant:
+    the force and collider counts are its kinds; the noise rows come last, their count a run-time value)."""
+    return ROW_FORCES, ROW_FORCES + n_forces, ROW_FORCES + n_forces + n_colliders
+
+
+def pack_params(gravity, prad, forces, coll, noise, dtype) -> np.ndarray:
+    """``P`` for gravity (dim,), contact distance ``prad`` [m], force rows (F, FORCE_ROW), collider rows
+    (C, COLLIDER_ROW) and noise rows (M, 9), in ``dtype`` (the values the former separate tables held)."""
+    forces, coll, noise = (np.asarray(a, np.float64) for a in (forces, coll, noise))
+    rf, rc, rn = param_rows(len(forces), len(coll))
+    p = np.zeros((rn + len(noise), P_WIDTH), np.float64)
+    p[ROW_SCALARS, :len(gravity)] = gravity
+    p[ROW_SCALARS, PRAD] = prad
+    p[ROW_SCALARS, N_NOISE] = len(noise)
+    p[rf:rc, :forces.shape[1]] = forces
+    p[rc:rn, :coll.shape[1]] = coll
+    p[rn:, :noise.shape[1]] = noise
+    # each value rounded once from float64 to dtype, as the former tables and scalar arguments were
+    return p.astype(dtype)
+
+
 @cached_variants
 def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tuple = (), dem: bool = False,
                      lanes: int = 0):
-    """``step`` and ``dem_accel`` for ``real_name`` positions in ``dim`` D.
+    """``(step_groups, step_one, dem_accel)`` for ``real_name`` positions in ``dim`` D; :func:`launch_step`
+    runs a step with the first two.
 
     ``kinds``: the force kinds of the system's force table, row by row (a tuple of DRAG, ATTRACTOR,
     ...): the force loop is unrolled at compile time for them (each row's values are still run-time
-    arguments, read from the table), so a system pays only for the forces it has (one compile per
-    distinct tuple of kinds). ``colliders``: a (kind, mode) pair per collider row (kind PLANE or
-    SPHERE of :mod:`tianim.kernels.colliders`, mode BOUNCE, STICK or KILL), unrolled the same way
-    (the rows' values stay run-time arguments). ``dem``: the step adds the per-particle
-    accelerations ``extra`` (DEM contact). ``lanes``: particles per body (0: :func:`step_lanes`).
+    values, read from ``P``), so a system pays only for the forces it has (one compile per distinct
+    tuple of kinds). ``colliders``: a (kind, mode) pair per collider row (kind PLANE or SPHERE of
+    :mod:`tianim.kernels.colliders`, mode BOUNCE, STICK or KILL), unrolled the same way. ``dem``: the
+    step adds the per-particle accelerations ``extra`` (DEM contact). ``lanes``: particles per body of
+    ``step_groups`` (0: :func:`step_lanes`).
+
+    Both step kernels run the same substeps (:func:`advance`, one source) on the pool flattened over
+    copies (N = B x capacity slots; no particle's step depends on another's or on its copy):
+
+    * ``step_groups(xg, vg, eg, ag, lg, sg, evg, P, h, substeps)``: group q of L consecutive slots per
+      body, its arrays as vectors of L (x, v, extra: L * dim) components, so each group is loaded and
+      stored as a few contiguous vector moves (what LLVM emits for a vector element of an ndarray; per
+      slot, each component costs an index computation and a scalar load). Every slot of a full group is
+      loaded and stored: a slot not flying is stored with the bits it was loaded with (selects keep
+      them), so its values are unchanged.
+    * ``step_one(x, v, e, age, life, alive, event, P, h, substeps)``: one slot per body (small pools, and
+      the last N mod L slots).
     """
     t = kernel_types(real_name, dim)
     L = int(lanes) or step_lanes(real_name)
@@ -146,8 +201,10 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
     i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
     i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
     real2d = ti.types.ndarray(dtype=real, ndim=2)
+    nd1 = lambda dtype: ti.types.ndarray(dtype=dtype, ndim=1)  # noqa: E731
     sincos = trig_kernels(real_name)[0]
     surface, bounce, vsel = branchless_contact_funcs(real_name, dim)  # the one branch-free contact form
+    RF, RC, RN = param_rows(len(kinds), len(colliders))
 
     @ti.func
     def row_of(m: ti.template(), u: ti.template()):
@@ -157,102 +214,104 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
         return r
 
     @ti.func
-    def curl_lanes(xs, forces: ti.template(), noise: ti.template(), f: ti.template()):
-        """Curl-noise accelerations (:func:`tianim.particles.forces.curl_noise`) of the L lanes (L, dim),
-        the mode loop outside, the lanes inside. ``noise``: the rows of :func:`~tianim.particles.forces.
-        noise_kernel_rows`, [k (3), A cos phi (3), A sin phi (3)]. Per mode m and lane, with y = x / scale:
-        W_c = A_mc cos(k_m . y + phi_mc) = (A cos phi)_mc cos(k_m . y) - (A sin phi)_mc sin(k_m . y) (one
-        :func:`trig_kernels` sincos per mode), and curl sum_c psi_c e_c gains k_m x W (2D: W_z (k_y, -k_x))."""
-        # lane-minor (dim, L) work matrices: their scalars, in order, are the same operation on L lanes
+    def curl_lanes(xs, P: ti.template(), f: ti.template(), n_noise, W: ti.template()):
+        """Curl-noise accelerations (:func:`tianim.particles.forces.curl_noise`) of the W lanes (W, dim),
+        the mode loop outside, the lanes inside. Noise row m of ``P`` (row RN + m): [k (3), A cos phi (3),
+        A sin phi (3)] (:func:`~tianim.particles.forces.noise_kernel_rows`). Per mode m and lane, with
+        y = x / scale: W_c = A_mc cos(k_m . y + phi_mc) = (A cos phi)_mc cos(k_m . y) - (A sin phi)_mc
+        sin(k_m . y) (one :func:`trig_kernels` sincos per mode), and curl sum_c psi_c e_c gains k_m x W
+        (2D: W_z (k_y, -k_x)). ``f``: the force's row of ``P``."""
+        # lane-minor (dim, W) work matrices: their scalars, in order, are the same operation on W lanes
         # (what LLVM's SLP vectoriser packs into one vector register); lane-major ones were left scalar
-        ys = ti.Matrix.zero(real, dim, L)
+        ys = ti.Matrix.zero(real, dim, W)
         for a in ti.static(range(dim)):
-            for u in ti.static(range(L)):
-                ys[a, u] = xs[u, a] / forces[f, 2]
-        us = ti.Matrix.zero(real, dim, L)
-        for m in range(noise.shape[0]):
-            args = ti.Vector.zero(real, L)
+            for u in ti.static(range(W)):
+                ys[a, u] = xs[u, a] / P[f, 2]
+        us = ti.Matrix.zero(real, dim, W)
+        for m in range(n_noise):
+            r = RN + m
+            args = ti.Vector.zero(real, W)
             for a in ti.static(range(dim)):
-                for u in ti.static(range(L)):
-                    args[u] += noise[m, a] * ys[a, u]
-            co = ti.Vector.zero(real, L)
-            si = ti.Vector.zero(real, L)
-            for u in ti.static(range(L)):
+                for u in ti.static(range(W)):
+                    args[u] += P[r, a] * ys[a, u]
+            co = ti.Vector.zero(real, W)
+            si = ti.Vector.zero(real, W)
+            for u in ti.static(range(W)):
                 co[u], si[u] = sincos(args[u])
             if ti.static(dim == 2):
-                for u in ti.static(range(L)):
-                    w = noise[m, 5] * co[u] - noise[m, 8] * si[u]
-                    us[0, u] += noise[m, 1] * w
-                    us[1, u] -= noise[m, 0] * w
+                for u in ti.static(range(W)):
+                    w = P[r, 5] * co[u] - P[r, 8] * si[u]
+                    us[0, u] += P[r, 1] * w
+                    us[1, u] -= P[r, 0] * w
             else:
-                ws = ti.Matrix.zero(real, 3, L)
+                ws = ti.Matrix.zero(real, 3, W)
                 for c in ti.static(range(3)):
-                    for u in ti.static(range(L)):
-                        ws[c, u] = noise[m, 3 + c] * co[u] - noise[m, 6 + c] * si[u]
+                    for u in ti.static(range(W)):
+                        ws[c, u] = P[r, 3 + c] * co[u] - P[r, 6 + c] * si[u]
                 for a in ti.static(range(3)):  # k x w, component a = k_p w_q - k_q w_p
                     p, q = (a + 1) % 3, (a + 2) % 3
-                    for u in ti.static(range(L)):
-                        us[a, u] += noise[m, p] * ws[q, u] - noise[m, q] * ws[p, u]
-        out = ti.Matrix.zero(real, L, dim)
-        for u in ti.static(range(L)):
+                    for u in ti.static(range(W)):
+                        us[a, u] += P[r, p] * ws[q, u] - P[r, q] * ws[p, u]
+        out = ti.Matrix.zero(real, W, dim)
+        for u in ti.static(range(W)):
             for a in ti.static(range(dim)):
-                out[u, a] = forces[f, 1] * us[a, u]
+                out[u, a] = P[f, 1] * us[a, u]
         return out
 
     @ti.func
-    def force(x, v, forces: ti.template(), f: ti.template(), kind: ti.template()):
-        """The acceleration of force row f, of kind ``kind`` (static; not CURL) at one particle."""
+    def force(x, v, P: ti.template(), f: ti.template(), kind: ti.template()):
+        """The acceleration of the force in row f of ``P``, of kind ``kind`` (static; not CURL) at one particle."""
         a = ti.Vector.zero(real, dim)
         if ti.static(kind == DRAG):
             w = ti.Vector.zero(real, dim)
             for k in ti.static(range(dim)):
-                w[k] = forces[f, 6 + k]
+                w[k] = P[f, 6 + k]
             rel = v - w
-            a = -forces[f, 1] * rel - forces[f, 2] * rel.norm() * rel
+            a = -P[f, 1] * rel - P[f, 2] * rel.norm() * rel
         elif ti.static(kind == ATTRACTOR):
             c = ti.Vector.zero(real, dim)
             for k in ti.static(range(dim)):
-                c[k] = forces[f, 3 + k]
+                c[k] = P[f, 3 + k]
             d = c - x
-            s2 = d.dot(d) + forces[f, 2] * forces[f, 2]
-            a = forces[f, 1] * d / (s2 * ti.sqrt(s2))
+            s2 = d.dot(d) + P[f, 2] * P[f, 2]
+            a = P[f, 1] * d / (s2 * ti.sqrt(s2))
         elif ti.static(kind == VORTEX):
             c = ti.Vector.zero(real, dim)
             w = ti.Vector.zero(real, dim)
             for k in ti.static(range(dim)):
-                c[k] = forces[f, 3 + k]
-                w[k] = forces[f, 6 + k]
+                c[k] = P[f, 3 + k]
+                w[k] = P[f, 6 + k]
             d = x - c
             if ti.static(dim == 3):
                 dp = d - d.dot(w) * w
-                a = forces[f, 1] * w.cross(dp) / (dp.dot(dp) + forces[f, 2] * forces[f, 2])
+                a = P[f, 1] * w.cross(dp) / (dp.dot(dp) + P[f, 2] * P[f, 2])
             else:
-                a = forces[f, 1] * ti.Vector([-d[1], d[0]]) / (d.dot(d) + forces[f, 2] * forces[f, 2])
+                a = P[f, 1] * ti.Vector([-d[1], d[0]]) / (d.dot(d) + P[f, 2] * P[f, 2])
         return a
 
     @ti.func
-    def accel_lanes(xs, vs, forces: ti.template(), noise: ti.template()):
-        """The forces' accelerations of the L lanes (L, dim), summed row by row as ``a += force_f``."""
-        acc = ti.Matrix.zero(real, L, dim)
+    def accel_lanes(xs, vs, P: ti.template(), n_noise, W: ti.template()):
+        """The forces' accelerations of the W lanes (W, dim), summed row by row as ``a += force_f``."""
+        acc = ti.Matrix.zero(real, W, dim)
         for f in ti.static(range(len(kinds))):
             if ti.static(kinds[f] == CURL):
-                cu = curl_lanes(xs, forces, noise, f)
-                for u in ti.static(range(L)):
+                cu = curl_lanes(xs, P, RF + f, n_noise, W)
+                for u in ti.static(range(W)):
                     a_u = row_of(acc, u)
                     a_u += row_of(cu, u)
                     for a in ti.static(range(dim)):
                         acc[u, a] = a_u[a]
             else:
-                for u in ti.static(range(L)):
+                for u in ti.static(range(W)):
                     a_u = row_of(acc, u)
-                    a_u += force(row_of(xs, u), row_of(vs, u), forces, f, kinds[f])
+                    a_u += force(row_of(xs, u), row_of(vs, u), P, RF + f, kinds[f])
                     for a in ti.static(range(dim)):
                         acc[u, a] = a_u[a]
         return acc
 
     @ti.func
-    def collide_one(xi, vi, coll: ti.template(), c: ti.template(), event, g_norm, h, prad):
-        """Collider row ``c``'s response of tianim.kernels.contact (restitution, Coulomb friction as an
+    def collide_one(xi, vi, P: ti.template(), c: ti.template(), event, g_norm, h, prad):
+        """Collider ``c``'s response of tianim.kernels.contact (restitution, Coulomb friction as an
         impulse, e = 0 below the resting speed 2 |g| h; the position follows the friction's tangential
         velocity change over the substep, so that static friction holds a particle on a slope below the
         friction angle instead of creeping g sin(a) h^2 per substep), plus the modes, for a particle with
@@ -261,7 +320,7 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
         no event). ``prad`` [m]: the particle's radius (contact when phi < prad). Branch-free."""
         hit = 0
         v_rest = 2 * g_norm * h
-        phi, n = surface(xi, coll, c, colliders[c][0])
+        phi, n = surface(xi, P, RC + c, colliders[c][0])
         phi -= prad
         inside = (phi < 0) & (event == 0)
         if ti.static(colliders[c][1] == KILL):
@@ -273,114 +332,161 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
                 event = ti.select(inside, 3, event)
             else:
                 hit = ti.select(inside & (vi.dot(n) < -v_rest), 1, hit)  # an impact, not resting contact
-                vb = bounce(vi, n, coll[c, 1], coll[c, 2], v_rest)
+                vb = bounce(vi, n, P[RC + c, 1], P[RC + c, 2], v_rest)
                 dv = vb - vi
-                xi = vsel(inside & (coll[c, 2] > 0), xi + h * (dv - dv.dot(n) * n), xi)
+                xi = vsel(inside & (P[RC + c, 2] > 0), xi + h * (dv - dv.dot(n) * n), xi)
                 vi = vsel(inside, vb, vi)
         return xi, vi, event, hit
 
-    @ti.kernel
-    def step(x: t.vec_arr, v: t.vec_arr, age: real2d, life: real2d, alive: t.mask_arr, event: t.mask_arr,
-             extra: t.vec_arr, g: t.real_arr, forces: real2d, noise: real2d, coll: real2d, h: real,
-             substeps: ti.i32, prad: real):
-        """``substeps`` symplectic-Euler steps of h [s] for every live particle (L lanes per body):
-        v += h (g + a(x, v) + extra), x += h v, colliders (contact at distance ``prad`` [m]), age += h,
-        death at age >= life."""
+    @ti.func
+    def advance(xs: ti.template(), vs: ti.template(), es, ages: ti.template(), lives, run, P: ti.template(), h,
+                substeps, W: ti.template()):
+        """``substeps`` symplectic-Euler steps of h [s] of the W lanes whose ``run`` is 1 (flying):
+        v += h (g + a(x, v) + extra), x += h v, colliders (contact at distance P[0, PRAD] [m]), age += h,
+        death at age >= life; a lane stops at its first event. Branch-free but for one test per
+        collider: its response runs only when some lane is inside it (elsewhere the selects would keep
+        every value, so skipping it changes no bit). Updates ``xs``, ``vs``, ``ages`` (W, dim), (W,) in place
+        (template arguments: the caller's variables) and returns (events, hits) (W,)."""
         gv = ti.Vector.zero(real, dim)
         for k in ti.static(range(dim)):
-            gv[k] = g[k]
+            gv[k] = P[ROW_SCALARS, k]
         g_norm = gv.norm()
-        n = x.shape[1]
-        for b, q in ti.ndrange(x.shape[0], (n + L - 1) // L):
+        prad = P[ROW_SCALARS, PRAD]
+        n_noise = ti.cast(P[ROW_SCALARS, N_NOISE], ti.i32)
+        evs = ti.Vector.zero(ti.i32, W)
+        hits = ti.Vector.zero(ti.i32, W)
+        for _ in range(substeps):
+            acc_f = accel_lanes(xs, vs, P, n_noise, W)
+            nx = ti.Matrix.zero(real, W, dim)
+            nv = ti.Matrix.zero(real, W, dim)
+            for u in ti.static(range(W)):
+                xi = row_of(xs, u)
+                vi = row_of(vs, u)
+                acc = gv + row_of(acc_f, u)
+                if ti.static(dem):
+                    acc += row_of(es, u)
+                vi += h * acc
+                xi += h * vi
+                for a in ti.static(range(dim)):
+                    nx[u, a] = xi[a]
+                    nv[u, a] = vi[a]
+            evl = ti.Vector.zero(ti.i32, W)
+            hitl = ti.Vector.zero(ti.i32, W)
+            for c in ti.static(range(len(colliders))):
+                touch = 0
+                for u in ti.static(range(W)):
+                    phi_c, n_c = surface(row_of(nx, u), P, RC + c, colliders[c][0])
+                    touch |= ti.cast(phi_c - prad < 0, ti.i32)
+                if touch != 0:
+                    for u in ti.static(range(W)):
+                        xi, vi, ev, hit = collide_one(row_of(nx, u), row_of(nv, u), P, c, evl[u], g_norm, h, prad)
+                        evl[u] = ev
+                        hitl[u] = ti.max(hitl[u], hit)
+                        for a in ti.static(range(dim)):
+                            nx[u, a] = xi[a]
+                            nv[u, a] = vi[a]
+            for u in ti.static(range(W)):
+                act = (run[u] == 1) & (evs[u] == 0)  # flying and no event yet (an event ends its launch)
+                ev = evl[u]
+                age_u = ages[u] + h
+                ev = ti.select((age_u >= lives[u]) & (ev == 0), 1, ev)
+                hits[u] += ti.select(act, hitl[u], 0)
+                ages[u] = ti.select(act, age_u, ages[u])
+                evs[u] = ti.select(act, ev, evs[u])
+                for a in ti.static(range(dim)):
+                    xs[u, a] = ti.select(act, nx[u, a], xs[u, a])
+                    vs[u, a] = ti.select(act, nv[u, a], vs[u, a])
+        return evs, hits
+
+    @ti.func
+    def finish(status, ev, hits, age, life, h, substeps):
+        """A slot's (event, status, age) at the end of the launch, from its status at the start (0 dead, 1
+        flying, 2 stuck), the flying lane's first event ``ev`` and bounces ``hits``, and its age (flying:
+        advanced; others as loaded). Flying: a bounce is event 4 when nothing else happened; age or a kill
+        frees the slot, a stick makes it stuck. Stuck: only ages (age += h substeps), and dies at its
+        lifetime. Dead: event 0, nothing else changes."""
+        flying = status == 1
+        e = ti.select((ev == 0) & (hits > 0), 4, ev)
+        st = ti.select((e == 1) | (e == 2), 0, ti.select(e == 3, 2, ti.cast(status, ti.i32)))
+        aged = age + h * substeps
+        old = aged >= life
+        stuck = status == 2
+        ev_out = ti.select(flying, e, ti.select(stuck & old, 1, 0))
+        st_out = ti.select(flying, st, ti.select(stuck & old, 0, ti.cast(status, ti.i32)))
+        age_out = ti.select(stuck, aged, age)
+        return ev_out, st_out, age_out
+
+    VX = ti.types.vector(L * dim, real)
+    VL = ti.types.vector(L, real)
+    VS = ti.types.vector(L, ti.u8)
+
+    @ti.kernel
+    def step_groups(xg: nd1(VX), vg: nd1(VX), eg: nd1(VX), ag: nd1(VL), lg: nd1(VL), sg: nd1(VS), evg: nd1(VS),
+                    P: real2d, h: real, substeps: ti.i32):
+        """``substeps`` steps of h [s] (:func:`advance`) of L slots per body (see :func:`particle_kernels`)."""
+        for q in xg:
+            xv, vv, ages, lives, sv = xg[q], vg[q], ag[q], lg[q], sg[q]
             xs = ti.Matrix.zero(real, L, dim)
             vs = ti.Matrix.zero(real, L, dim)
             es = ti.Matrix.zero(real, L, dim)
-            ages = ti.Vector.zero(real, L)
-            lives = ti.Vector.zero(real, L)
             run = ti.Vector.zero(ti.i32, L)
-            evs = ti.Vector.zero(ti.i32, L)
-            hits = ti.Vector.zero(ti.i32, L)
             for u in ti.static(range(L)):
-                i = q * L + u
-                if i < n:
-                    if alive[b, i] == 1:
-                        run[u] = 1
-                        xi, vi = x[b, i], v[b, i]
-                        for a in ti.static(range(dim)):
-                            xs[u, a] = xi[a]
-                            vs[u, a] = vi[a]
-                        if ti.static(dem):
-                            ei = extra[b, i]
-                            for a in ti.static(range(dim)):
-                                es[u, a] = ei[a]
-                        ages[u] = age[b, i]
-                        lives[u] = life[b, i]
-            for _ in range(substeps):
-                acc_f = accel_lanes(xs, vs, forces, noise)
-                nx = ti.Matrix.zero(real, L, dim)
-                nv = ti.Matrix.zero(real, L, dim)
+                run[u] = ti.cast(sv[u] == 1, ti.i32)
+                for a in ti.static(range(dim)):
+                    xs[u, a] = xv[u * dim + a]
+                    vs[u, a] = vv[u * dim + a]
+            if ti.static(dem):
+                ev_ = eg[q]
                 for u in ti.static(range(L)):
-                    xi = row_of(xs, u)
-                    vi = row_of(vs, u)
-                    acc = gv + row_of(acc_f, u)
-                    if ti.static(dem):
-                        acc += row_of(es, u)
-                    vi += h * acc
-                    xi += h * vi
                     for a in ti.static(range(dim)):
-                        nx[u, a] = xi[a]
-                        nv[u, a] = vi[a]
-                evl = ti.Vector.zero(ti.i32, L)
-                hitl = ti.Vector.zero(ti.i32, L)
-                for c in ti.static(range(len(colliders))):
-                    # the response only where some lane is inside (one branch for the L lanes; outside it
-                    # the selects would keep every value, so skipping it changes no bit)
-                    touch = 0
-                    for u in ti.static(range(L)):
-                        phi_c, n_c = surface(row_of(nx, u), coll, c, colliders[c][0])
-                        touch |= ti.cast(phi_c - prad < 0, ti.i32)
-                    if touch != 0:
-                        for u in ti.static(range(L)):
-                            xi, vi, ev, hit = collide_one(row_of(nx, u), row_of(nv, u), coll, c, evl[u], g_norm,
-                                                          h, prad)
-                            evl[u] = ev
-                            hitl[u] = ti.max(hitl[u], hit)
-                            for a in ti.static(range(dim)):
-                                nx[u, a] = xi[a]
-                                nv[u, a] = vi[a]
-                for u in ti.static(range(L)):
-                    act = (run[u] == 1) & (evs[u] == 0)  # flying and no event yet (an event ends its launch)
-                    ev = evl[u]
-                    age_u = ages[u] + h
-                    ev = ti.select((age_u >= lives[u]) & (ev == 0), 1, ev)
-                    hits[u] += ti.select(act, hitl[u], 0)
-                    ages[u] = ti.select(act, age_u, ages[u])
-                    evs[u] = ti.select(act, ev, evs[u])
-                    for a in ti.static(range(dim)):
-                        xs[u, a] = ti.select(act, nx[u, a], xs[u, a])
-                        vs[u, a] = ti.select(act, nv[u, a], vs[u, a])
+                        es[u, a] = ev_[u * dim + a]
+            nages = ages
+            evs, hits = advance(xs, vs, es, nages, lives, run, P, h, substeps, L)
+            evo = ti.Vector.zero(ti.u8, L)
+            so = ti.Vector.zero(ti.u8, L)
             for u in ti.static(range(L)):
-                i = q * L + u
-                if i < n:
-                    if run[u] == 1:
-                        ev = evs[u]
-                        if ev == 0 and hits[u] > 0:
-                            ev = 4
-                        x[b, i], v[b, i], age[b, i] = row_of(xs, u), row_of(vs, u), ages[u]
-                        event[b, i] = ti.cast(ev, ti.u8)
-                        if ev == 1 or ev == 2:
-                            alive[b, i] = ti.cast(0, ti.u8)
-                        elif ev == 3:
-                            alive[b, i] = ti.cast(2, ti.u8)
-                    elif alive[b, i] == 2:  # stuck: only ages
-                        age[b, i] += h * substeps
-                        ev = 0
-                        if age[b, i] >= life[b, i]:
-                            alive[b, i] = ti.cast(0, ti.u8)
-                            ev = 1
-                        event[b, i] = ti.cast(ev, ti.u8)
-                    else:
-                        event[b, i] = ti.cast(0, ti.u8)
+                e, s, a_ = finish(sv[u], evs[u], hits[u], nages[u], lives[u], h, substeps)
+                evo[u] = ti.cast(e, ti.u8)
+                so[u] = ti.cast(s, ti.u8)
+                # per-slot stores where the slot changed (a flying slot: x, v, age; a stuck one: age): one
+                # store of the whole group would have LLVM pack the substeps' arithmetic in the arrays'
+                # (x, y, z) order, in 4- and 2-wide pieces (measured 1.9x slower per substep)
+                if sv[u] == 1:
+                    for a in ti.static(range(dim)):
+                        xg[q][u * dim + a] = xs[u, a]
+                        vg[q][u * dim + a] = vs[u, a]
+                if sv[u] != 0:
+                    ag[q][u] = a_
+            sg[q], evg[q] = so, evo
+
+    @ti.kernel
+    def step_one(x: nd1(t.vec), v: nd1(t.vec), e: nd1(t.vec), age: nd1(real), life: nd1(real), alive: nd1(ti.u8),
+                 event: nd1(ti.u8), P: real2d, h: real, substeps: ti.i32):
+        """``substeps`` steps of h [s] (:func:`advance`) of one slot per body; a slot not flying is only read."""
+        for i in x:
+            status = alive[i]
+            if status == 1:
+                xs = ti.Matrix.zero(real, 1, dim)
+                vs = ti.Matrix.zero(real, 1, dim)
+                es = ti.Matrix.zero(real, 1, dim)
+                xi, vi = x[i], v[i]
+                for a in ti.static(range(dim)):
+                    xs[0, a] = xi[a]
+                    vs[0, a] = vi[a]
+                if ti.static(dem):
+                    ei = e[i]
+                    for a in ti.static(range(dim)):
+                        es[0, a] = ei[a]
+                ages = ti.Vector([age[i]])
+                lives = ti.Vector([life[i]])
+                evs, hits = advance(xs, vs, es, ages, lives, ti.Vector([1]), P, h, substeps, 1)
+                ev, s, a_ = finish(status, evs[0], hits[0], ages[0], lives[0], h, substeps)
+                x[i], v[i], age[i] = row_of(xs, 0), row_of(vs, 0), a_
+                event[i], alive[i] = ti.cast(ev, ti.u8), ti.cast(s, ti.u8)
+            else:
+                ev, s, a_ = finish(status, 0, 0, age[i], life[i], h, substeps)
+                age[i] = a_
+                event[i], alive[i] = ti.cast(ev, ti.u8), ti.cast(s, ti.u8)
 
     @ti.kernel
     def dem_accel(x: t.vec_arr, v: t.vec_arr, alive: t.mask_arr, nbr: i32_3, count: i32_2, prm: t.real_arr,
@@ -415,4 +521,24 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
                             a -= ft * ut / utn
             out[b, i] = a
 
-    return step, dem_accel
+    return step_groups, step_one, dem_accel
+
+
+def launch_step(kernels, lanes: int, x, v, extra, age, life, alive, event, P, h, substeps) -> None:
+    """One launch of the step on the state arrays (B, C[, D]) (C-contiguous: updated in place): the pool
+    flattened over copies, its first L * floor(N / L) slots in groups of ``lanes`` = L (``step_groups``
+    of ``kernels``, :func:`particle_kernels`; lanes 1: none), the rest one per body (``step_one``).
+    The arrays are passed as views (no copy). ``P``: :func:`pack_params`; ``h`` [s]; ``substeps``."""
+    step_groups, step_one = kernels[0], kernels[1]
+    B, C, D = x.shape
+    n = B * C
+    groups = n // lanes if lanes > 1 else 0
+    k = groups * lanes
+    xf, vf, ef = (a.reshape(n, D) for a in (x, v, extra))
+    af, lf, sf, evf = (a.reshape(n) for a in (age, life, alive, event))
+    if groups:
+        vec, lane = (groups, lanes * D), (groups, lanes)
+        step_groups(xf[:k].reshape(vec), vf[:k].reshape(vec), ef[:k].reshape(vec), af[:k].reshape(lane),
+                    lf[:k].reshape(lane), sf[:k].reshape(lane), evf[:k].reshape(lane), P, h, substeps)
+    if k < n:
+        step_one(xf[k:], vf[k:], ef[k:], af[k:], lf[k:], sf[k:], evf[k:], P, h, substeps)

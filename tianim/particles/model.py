@@ -176,6 +176,7 @@ class ParticleModel:
 
     def __init__(self, capacity, emitters=(), forces=(), colliders=(), gravity=None, granular=None, dim=3,
                  dtype=np.float32, domain=None, sub_emitters=()):
+        from tianim.particles._kernels import pack_params
         from tianim.particles.forces import Attractor, CurlNoise, Drag, Vortex
         from tianim.particles.subemitters import SubEmitter
         from tianim.physics.model import Ground, Sphere
@@ -244,6 +245,9 @@ class ParticleModel:
                            noise=_frozen(noise_kernel_rows(noise).astype(f)),
                            coll=_frozen(coll.astype(f) if len(coll) else np.zeros((0, 7), f)),
                            modes=_frozen(modes if len(modes) else np.zeros(0, np.int32)))
+        #: the same, packed into the step kernel's one parameter table (tianim.particles._kernels.pack_params)
+        self.tables["P"] = _frozen(pack_params(self.tables["g"], self.collider_radius, self.tables["forces"],
+                                               self.tables["coll"], self.tables["noise"], f))
         self._sealed = True
 
     def __setattr__(self, name, value):

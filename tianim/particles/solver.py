@@ -73,12 +73,23 @@ class ParticleSolver:
 
     @staticmethod
     def _diverged(state) -> np.ndarray:
-        """(B,) copies with a live particle whose x or v is not finite (a cheap sum first: NaN and inf
-        propagate through it; the exact test only when it is not finite)."""
-        if np.isfinite(state.x.sum()) and np.isfinite(state.v.sum()):
+        """(B,) copies with a live particle whose x or v is not finite. A cheap test first: the dot product
+        of each array with itself (BLAS; NaN and inf propagate through it, and it is 3x faster than a sum
+        at 1 M particles); the exact test only when it is not finite (also when finite values' squares
+        overflow: the exact test decides)."""
+        if all(np.isfinite(np.dot(a.reshape(-1), a.reshape(-1))) for a in (state.x, state.v)):
             return np.zeros(state.batch, bool)
         bad = ~(np.isfinite(state.x).all(axis=2) & np.isfinite(state.v).all(axis=2))
         return (bad & (state.alive != 0)).any(axis=1)
+
+    @staticmethod
+    def _count_events(ev, codes=(1, 2, 3, 4)) -> list:
+        """Slots of each copy whose event is each of ``codes``: a list of (B,) int64. Up to 16 copies, row by
+        row (``np.count_nonzero`` without an axis counts with SIMD; with ``axis=1`` it sums a bool array:
+        6x slower at 1 M slots)."""
+        if ev.shape[0] <= 16:
+            return [np.array([np.count_nonzero(r == k) for r in ev], np.int64) for k in codes]
+        return [np.count_nonzero(ev == k, axis=1).astype(np.int64) for k in codes]
 
     # ---------------------------------------------------------------- work buffers
     def _extra_buffer(self, shape, dtype):
@@ -245,37 +256,39 @@ class ParticleSolver:
         if not np.isfinite(state.t + span).all():
             raise ValueError(f"dt={fmt(dt)} with substeps={substeps} takes the time past the float range; give a smaller dt")
         snap = state.snapshot() if self.on_divergence == "rollback" else None
-        from tianim.particles._kernels import particle_kernels
+        from tianim.particles._kernels import launch_step, particle_kernels
 
-        step, dem_accel = particle_kernels(np.dtype(model.dtype).name, model.dim, model.kinds, model.collider_kinds,
-                                           model.granular is not None, self.lanes_for(model, state.batch))
+        lanes = self.lanes_for(model, state.batch)
+        kernels = particle_kernels(np.dtype(model.dtype).name, model.dim, model.kinds, model.collider_kinds,
+                                   model.granular is not None, lanes)
+        dem_accel = kernels[2]
         B = state.batch
         t0 = state.t.copy()
         t1 = t0 + h * substeps
-        k = model.tables
+        P = model.tables["P"]
         extra = self._extra_buffer(state.x.shape, model.dtype)
         c = {name: np.zeros(B, np.int64) for name in COUNTS}
         sub_dropped = np.zeros(B, np.int64)
-        prad = model.collider_radius
         ev = state.event
 
         def tally(s):
-            c["died"] += np.count_nonzero(ev == 1, axis=1)
-            c["killed"] += np.count_nonzero(ev == 2, axis=1)
-            c["stuck"] += np.count_nonzero(ev == 3, axis=1)
-            c["bounced"] += np.count_nonzero(ev == 4, axis=1)
+            for name, n in zip(("died", "killed", "stuck", "bounced"), self._count_events(ev)):
+                c[name] += n
             if model.sub_emitters:
                 p, d = self._spawn(model, state, t0 + (s + 1) * h)
                 c["spawned"] += p
                 sub_dropped[:] += d
 
-        args = (k["g"], k["forces"], k["noise"], k["coll"], h)
+
+        def launch(n):
+            launch_step(kernels, lanes, state.x, state.v, extra, state.age, state.lifetime, state.alive, ev, P, h, n)
+
         if model.granular is None and not model.sub_emitters:
-            step(state.x, state.v, state.age, state.lifetime, state.alive, ev, extra, *args, substeps, prad)
+            launch(substeps)
             tally(substeps - 1)
         elif model.granular is None:  # sub-emitters: one substep per launch, so events are found where they happen
             for s in range(substeps):
-                step(state.x, state.v, state.age, state.lifetime, state.alive, ev, extra, *args, 1, prad)
+                launch(1)
                 tally(s)
         else:
             grid = self._grid(model, B)
@@ -284,7 +297,7 @@ class ParticleSolver:
                                                                                on_overflow="report")
                 c["contact_overflow"] += np.count_nonzero(nb.counts > nb.max_neighbours, axis=1)
                 dem_accel(state.x, state.v, state.alive, nb.indices, nb.counts, model.dem, extra)
-                step(state.x, state.v, state.age, state.lifetime, state.alive, ev, extra, *args, 1, prad)
+                launch(1)
                 tally(s)
             if c["contact_overflow"].any():
                 state.contact_overflow += c["contact_overflow"]
