@@ -196,38 +196,39 @@ def test_boids_and_vicsek_batch_equals_separate_runs_bit_for_bit():
         assert np.array_equal(ab.x[b], a1.x[0]) and np.array_equal(ab.heading[b], a1.heading[0])
 
 
-def _boids_scene(dim, dtype):
+def _boids_scene(dim, dtype, scan="auto"):
     """Points on cell borders and coincident (a lattice of the cell size, some pairs stacked), every fov
-    regime (< pi, > pi, all round), an obstacle and wander, and a cap that cuts some rows."""
+    regime (< pi, > pi, all round), an obstacle and wander, a cap that cuts some rows, and an agent count
+    that leaves the last group of the lanes scan short (403: not a multiple of 4 or 2)."""
     side = 6.0
+    n = 403
     rng = np.random.default_rng(4)
-    x = rng.random((1, 400, dim)) * side
+    x = rng.random((1, n, dim)) * side
     x[0, :64] = np.round(x[0, :64] * 4) / 4  # on cell borders (cells of 1.5 / 2 = 0.75 m from -1: every third)
     x[0, 64:80] = x[0, 80:96]  # coincident pairs
-    agents = Agents(x[0], v=rng.normal(size=(400, dim)), dtype=dtype)
+    agents = Agents(x[0], v=rng.normal(size=(n, dim)), dtype=dtype)
     obstacle = Sphere((3.0,) * 3, 0.7) if dim == 3 else Wall((2.5, 2.5), (3.5, 3.5))
     model = Boids([Separation(2.0, radius=0.5, fov=2.0), Alignment(1.0, radius=1.5, fov=4.5), Cohesion(0.5, radius=1.0),
                    Wander(0.5, 0.3), Avoid([obstacle])], max_speed=2.0, max_force=3.0, max_neighbours=12,
-                  on_overflow="report", domain=((-1,) * dim, (side + 1,) * dim))
+                  on_overflow="report", domain=((-1,) * dim, (side + 1,) * dim), scan=scan)
     return model.state(agents), model
 
 
 @pytest.mark.parametrize("dim,dtype", [(2, np.float32), (2, np.float64), (3, np.float32)])
-def test_boids_masked_scan_equals_the_branchy_scan_it_replaced_bit_for_bit(monkeypatch, dim, dtype):
-    """The branch-free neighbour scan (the default) against the branchy one it replaced
-    (``boids_kernels(masked=False)``): the same bits after 12 steps, overflowing rows included."""
-    import tianim.crowds._boids_kernels as bk
-
+def test_boids_scans_give_the_same_bits(dim, dtype):
+    """The default neighbour scan (``scan="lanes"``: groups of agents scanning their joined cells together)
+    against the per-agent branch-free scan (``"agent"``) and the branchy scan both replaced (``"branchy"``):
+    the same bits after 12 steps, overflowing rows included."""
     fast, model = _boids_scene(dim, dtype)
+    assert model.scan == "auto"
     fast_stats = S.step(model, fast, 0.05, 12)
-    ref, _ = _boids_scene(dim, dtype)
-    build = bk.boids_kernels
-    monkeypatch.setattr(bk, "boids_kernels", lambda name, d, steps: build(name, d, steps, masked=False))
-    ref_stats = S.step(model, ref, 0.05, 12)
     assert fast_stats.neighbour_overflow.sum() > 0  # the cap was hit
-    assert np.array_equal(fast_stats.neighbour_overflow, ref_stats.neighbour_overflow)
-    for k in ("x", "v", "heading", "wander"):
-        assert np.array_equal(getattr(fast, k), getattr(ref, k)), k
+    for scan in ("agent", "branchy"):
+        ref, ref_model = _boids_scene(dim, dtype, scan)
+        ref_stats = S.step(ref_model, ref, 0.05, 12)
+        assert np.array_equal(fast_stats.neighbour_overflow, ref_stats.neighbour_overflow), scan
+        for k in ("x", "v", "heading", "wander"):
+            assert np.array_equal(getattr(fast, k), getattr(ref, k)), (scan, k)
 
 
 _THREAD_SCRIPT = textwrap.dedent("""
@@ -271,6 +272,7 @@ _THREAD_SCRIPT = textwrap.dedent("""
     (lambda: Boids([], max_speed=1, min_speed=2), ValueError, "min_speed"),
     (lambda: Boids([], max_neighbours=0), ValueError, "max_neighbours"),
     (lambda: Boids([], on_overflow="ignore"), ValueError, "on_overflow"),
+    (lambda: Boids([], scan="simd"), ValueError, "scan"),
     (lambda: Boids([], domain=((0, 0), (1,))), ValueError, "domain"),
     (lambda: Vicsek(box=-1), ValueError, "box"),
     (lambda: Vicsek(box=4, radius=2), ValueError, "radius"),

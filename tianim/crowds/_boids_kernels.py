@@ -26,9 +26,13 @@ PRM = ("max_speed", "max_force", "min_speed", "dt",
 #: Below this length the lateral part of an obstacle normal counts as zero (obstacle dead ahead).
 LATERAL_MIN = 1e-3
 
+#: (a, b): a group of lanes scans its joined query box when ``b x joined cells <= a x the sum of the lanes'
+#: own cells``, else each agent scans its own box (the results are the same bits either way).
+LANE_CELLS_RATIO = (3, 2)
+
 
 @cached_variants
-def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True):
+def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True, lanes: int = 1):
     """``boids_steps`` (``steps`` steps per launch, unrolled) for ``real_name`` positions in ``dim`` D.
 
     ``masked`` (default): the neighbour scan is branch-free (every candidate of the scanned cells goes
@@ -45,6 +49,7 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True)
     i32_1 = ti.types.ndarray(dtype=ti.i32, ndim=1)
     grid = grid_funcs(real_name, dim)
     real2d = ti.types.ndarray(dtype=real, ndim=2)
+    real3d = ti.types.ndarray(dtype=real, ndim=3)
 
     @ti.func
     def limit(a, cap):
@@ -104,17 +109,13 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True)
         return out
 
     @ti.func
-    def agent(b, s, x: ti.template(), v: ti.template(), hd: ti.template(), goal: ti.template(), coll: ti.template(),
-              walls: ti.template(), ws: ti.template(), noise: ti.template(), step, prm: ti.template(),
-              geom: ti.template(), dims: ti.template(), start: ti.template(), order: ti.template(),
-              xs: ti.template(), vs: ti.template(), over: ti.template(), r, r2, cap):
-        """One step of the agent at sorted position s of copy b, its neighbour sums added up while
-        scanning the grid's cells (no neighbour list): the first ``cap`` points j != i with
-        |x_j - x_i|^2 <= r2 in the grid's order count, as the rows of ``NeighbourGrid.query`` would."""
-        max_speed, max_force, min_speed, dt = prm[0], prm[1], prm[2], prm[3]
+    def scan(b, s, xi, hi, geom: ti.template(), dims: ti.template(), start: ti.template(), xs: ti.template(),
+             vs: ti.template(), prm: ti.template(), r, r2, cap):
+        """The neighbour sums of the agent at sorted position s of copy b (position xi, heading hi), added up
+        while scanning the grid's cells (no neighbour list): the first ``cap`` points j != i with
+        |x_j - x_i|^2 <= r2 in the grid's order count, as the rows of ``NeighbourGrid.query`` would.
+        Returns (sep, ali, coh, ns, na, nc, seen): the three sums, their counts and the hits within r."""
         rs2, cs, ra2, ca, rc2, cc = prm[5], prm[6], prm[8], prm[9], prm[11], prm[12]
-        i = order[b, s]
-        xi, vi, hi = xs[b, s], vs[b, s], hd[b, i]
         sep = ti.Vector.zero(real, dim)
         ali = ti.Vector.zero(real, dim)
         coh = ti.Vector.zero(real, dim)
@@ -165,6 +166,15 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True)
                             ns += ms
                             na += ma
                             nc += mc
+        return sep, ali, coh, ns, na, nc, seen
+
+    @ti.func
+    def finish(b, i, xi, vi, hi, sep, ali, coh, ns, na, nc, seen, x: ti.template(), v: ti.template(),
+               hd: ti.template(), goal: ti.template(), coll: ti.template(), walls: ti.template(), ws: ti.template(),
+               noise: ti.template(), step, prm: ti.template(), over: ti.template(), cap):
+        """The rest of one step of agent i of copy b from its neighbour sums (:func:`scan`): steering, the
+        speed clamp, the move, obstacles; writes only agent i (x, v, hd, ws, over)."""
+        max_speed, max_force, min_speed, dt = prm[0], prm[1], prm[2], prm[3]
         if seen > cap:
             over[b, i] += 1
         acc = ti.Vector.zero(real, dim)
@@ -225,10 +235,135 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True)
             hi = vi / speed
         x[b, i], v[b, i], hd[b, i] = xi, vi, hi
 
+    @ti.func
+    def agent(b, s, x: ti.template(), v: ti.template(), hd: ti.template(), goal: ti.template(), coll: ti.template(),
+              walls: ti.template(), ws: ti.template(), noise: ti.template(), step, prm: ti.template(),
+              geom: ti.template(), dims: ti.template(), start: ti.template(), order: ti.template(),
+              xs: ti.template(), vs: ti.template(), over: ti.template(), r, r2, cap):
+        """One step of the agent at sorted position s of copy b: :func:`scan`, then :func:`finish`."""
+        i = order[b, s]
+        xi, vi, hi = xs[b, s], vs[b, s], hd[b, i]
+        sep, ali, coh, ns, na, nc, seen = scan(b, s, xi, hi, geom, dims, start, xs, vs, prm, r, r2, cap)
+        finish(b, i, xi, vi, hi, sep, ali, coh, ns, na, nc, seen, x, v, hd, goal, coll, walls, ws, noise, step, prm,
+               over, cap)
+
+    @ti.func
+    def group(b, g, x: ti.template(), v: ti.template(), hd: ti.template(), goal: ti.template(), coll: ti.template(),
+              walls: ti.template(), ws: ti.template(), noise: ti.template(), step, prm: ti.template(),
+              geom: ti.template(), dims: ti.template(), start: ti.template(), order: ti.template(),
+              xs: ti.template(), vs: ti.template(), over: ti.template(), sums: ti.template(), r, r2, cap):
+        """One step of the ``lanes`` agents at sorted positions g L .. g L + L - 1 of copy b (the last group
+        may be short). The lanes' query boxes are joined into one box; when it holds few more cells than
+        the lanes' own boxes together (:data:`LANE_CELLS_RATIO`), the lanes scan it together: every candidate
+        is loaded once and tested against all L agents at once (straight-line lanes, which LLVM's SLP
+        vectoriser packs into SIMD registers), else each agent scans its own box (:func:`scan`). Each lane
+        adds up exactly the terms of :func:`scan`, in the same order: its own candidates come in the joined
+        box's rows in their own (z, y, cell, index) order, and every other candidate lies outside its own
+        box, so farther than r (``grid.box_t`` is a superset), and adds +0.0 (no change to a sum that
+        starts at +0.0). The results are those of the per-agent path, bit for bit."""
+        n = x.shape[1]
+        rs2, cs, ra2, ca, rc2, cc = prm[5], prm[6], prm[8], prm[9], prm[11], prm[12]
+        S = ti.Vector.zero(ti.i32, lanes)
+        X = ti.Matrix.zero(real, lanes, dim)
+        H = ti.Matrix.zero(real, lanes, dim)
+        ulo = ti.Vector.zero(ti.i32, dim)
+        uhi = ti.Vector.zero(ti.i32, dim)
+        own = 0
+        for l in ti.static(range(lanes)):
+            s = ti.min(g * lanes + l, n - 1)  # a short group repeats its last agent (scanned, not stepped)
+            S[l] = s
+            xi = xs[b, s]
+            hi = hd[b, order[b, s]]
+            tt, padh = grid.cell_units(xi, r, geom, dims)
+            lo, hi_c = grid.box_t(tt, padh, dims)
+            cells = 1
+            for a in ti.static(range(dim)):
+                X[l, a] = xi[a]
+                H[l, a] = hi[a]
+                cells *= hi_c[a] - lo[a] + 1
+                if ti.static(l == 0):
+                    ulo[a], uhi[a] = lo[a], hi_c[a]
+                else:
+                    ulo[a] = ti.min(ulo[a], lo[a])
+                    uhi[a] = ti.max(uhi[a], hi_c[a])
+            own += cells
+        joined = 1
+        for a in ti.static(range(dim)):
+            joined *= uhi[a] - ulo[a] + 1
+        if r >= 0 and joined * LANE_CELLS_RATIO[1] <= own * LANE_CELLS_RATIO[0]:
+            SEP = ti.Matrix.zero(real, lanes, dim)
+            ALI = ti.Matrix.zero(real, lanes, dim)
+            COH = ti.Matrix.zero(real, lanes, dim)
+            NS = ti.Vector.zero(ti.i32, lanes)
+            NA = ti.Vector.zero(ti.i32, lanes)
+            NC = ti.Vector.zero(ti.i32, lanes)
+            SEEN = ti.Vector.zero(ti.i32, lanes)
+            z0, z1 = grid.z_range(ulo, uhi)
+            for z in range(z0, z1 + 1):
+                for y in range(ulo[1], uhi[1] + 1):
+                    base = y
+                    if ti.static(dim == 3):
+                        base = z * dims[1] + y
+                    base = base * dims[0]
+                    for k in range(start[b, base + ulo[0]], start[b, base + uhi[0] + 1]):
+                        xk = xs[b, k]
+                        vk = vs[b, k]
+                        for l in ti.static(range(lanes)):
+                            d = ti.Vector.zero(real, dim)
+                            hl = ti.Vector.zero(real, dim)
+                            for a in ti.static(range(dim)):
+                                d[a] = xk[a] - X[l, a]
+                                hl[a] = H[l, a]
+                            d2 = d.dot(d)
+                            hit = ti.cast(d2 <= r2, ti.i32) & ti.cast(k != S[l], ti.i32)
+                            SEEN[l] += hit
+                            use = hit & ti.cast(SEEN[l] <= cap, ti.i32) & ti.cast(d2 > 0, ti.i32)
+                            ms, ma, mc = in_view(hl.dot(d), d2, rs2, cs, ra2, ca, rc2, cc)
+                            ms &= use
+                            ma &= use
+                            mc &= use
+                            q = d / d2
+                            for a in ti.static(range(dim)):
+                                SEP[l, a] = ti.select(ms != 0, SEP[l, a] - q[a], SEP[l, a])
+                                ALI[l, a] += ti.select(ma != 0, vk[a], ti.cast(0.0, real))
+                                COH[l, a] += ti.select(mc != 0, d[a], ti.cast(0.0, real))
+                            NS[l] += ms
+                            NA[l] += ma
+                            NC[l] += mc
+            for l in ti.static(range(lanes)):
+                s = S[l]
+                for a in ti.static(range(dim)):
+                    sums[b, s, a], sums[b, s, dim + a], sums[b, s, 2 * dim + a] = SEP[l, a], ALI[l, a], COH[l, a]
+                sums[b, s, 3 * dim], sums[b, s, 3 * dim + 1] = ti.cast(NS[l], real), ti.cast(NA[l], real)
+                sums[b, s, 3 * dim + 2], sums[b, s, 3 * dim + 3] = ti.cast(NC[l], real), ti.cast(SEEN[l], real)
+        else:
+            for l in range(lanes):  # (a runtime loop: one copy of scan in the compiled body)
+                s = ti.min(g * lanes + l, n - 1)
+                sep, ali, coh, ns, na, nc, seen = scan(b, s, xs[b, s], hd[b, order[b, s]], geom, dims, start, xs, vs,
+                                                       prm, r, r2, cap)
+                for a in ti.static(range(dim)):
+                    sums[b, s, a], sums[b, s, dim + a], sums[b, s, 2 * dim + a] = sep[a], ali[a], coh[a]
+                sums[b, s, 3 * dim], sums[b, s, 3 * dim + 1] = ti.cast(ns, real), ti.cast(na, real)
+                sums[b, s, 3 * dim + 2], sums[b, s, 3 * dim + 3] = ti.cast(nc, real), ti.cast(seen, real)
+        for l in range(lanes):
+            s = g * lanes + l
+            if s < n:
+                i = order[b, s]
+                sep = ti.Vector.zero(real, dim)
+                ali = ti.Vector.zero(real, dim)
+                coh = ti.Vector.zero(real, dim)
+                for a in ti.static(range(dim)):
+                    sep[a], ali[a], coh[a] = sums[b, s, a], sums[b, s, dim + a], sums[b, s, 2 * dim + a]
+                finish(b, i, xs[b, s], vs[b, s], hd[b, i], sep, ali, coh, ti.cast(sums[b, s, 3 * dim], ti.i32),
+                       ti.cast(sums[b, s, 3 * dim + 1], ti.i32), ti.cast(sums[b, s, 3 * dim + 2], ti.i32),
+                       ti.cast(sums[b, s, 3 * dim + 3], ti.i32), x, v, hd, goal, coll, walls, ws, noise, step, prm,
+                       over, cap)
+
     @ti.kernel
     def boids_steps(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, goal: t.vec_arr, coll: real2d, walls: real2d,
                     ws: t.vec_arr, noise: t.work_arr, prm: t.real_arr, geom: f64_1, dims: i32_1, cell: i32_2,
-                    start: i32_2, order: i32_2, xs: t.vec_arr, vs: t.vec_arr, over: i32_2, r: ti.f64, cap: ti.i32):
+                    start: i32_2, order: i32_2, xs: t.vec_arr, vs: t.vec_arr, over: i32_2, sums: real3d, r: ti.f64,
+                    cap: ti.i32):
         """``steps`` steps of dt for every agent, in place: per step the grid is rebuilt (cell ids,
         the counting sort per copy, velocities gathered into sorted order), then each agent (one
         thread, reading only the sorted copies xs, vs of the old state and its own heading) sums its
@@ -237,7 +372,8 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True)
         max_speed], x += dt v, and agents inside an obstacle are put back on its surface with their
         inward normal velocity removed. over[b, i] += 1 for each step in which agent i had more than
         ``cap`` neighbours within r (only the first cap in grid order were used). noise (S, B, N) the
-        wander noise of each step."""
+        wander noise of each step. With ``lanes`` > 1, one thread steps a group of that many agents
+        (:func:`group`)."""
         r2 = ti.cast(-1.0, real)
         if r >= 0:
             r2 = ti.cast(r, real) * ti.cast(r, real)
@@ -248,8 +384,13 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True)
                 grid.sort_copy(b, x, cell, start, order, xs)
             for b, k in ti.ndrange(x.shape[0], x.shape[1]):
                 vs[b, k] = v[b, order[b, k]]
-            for b, s in ti.ndrange(x.shape[0], x.shape[1]):
-                agent(b, s, x, v, hd, goal, coll, walls, ws, noise, st, prm, geom, dims, start, order, xs, vs,
-                      over, r, r2, cap)
+            if ti.static(lanes > 1):
+                for b, g in ti.ndrange(x.shape[0], (x.shape[1] + lanes - 1) // lanes):
+                    group(b, g, x, v, hd, goal, coll, walls, ws, noise, st, prm, geom, dims, start, order, xs, vs,
+                          over, sums, r, r2, cap)
+            else:
+                for b, s in ti.ndrange(x.shape[0], x.shape[1]):
+                    agent(b, s, x, v, hd, goal, coll, walls, ws, noise, st, prm, geom, dims, start, order, xs, vs,
+                          over, r, r2, cap)
 
     return boids_steps

@@ -142,7 +142,7 @@ class Boids(CrowdModel):
     WRITES = ("x", "v", "heading", "t", "ticks", "rng", "wander")
 
     def __init__(self, behaviours, max_speed=2.0, max_force=1.0, min_speed=0.0, domain=None,
-                 max_neighbours=64, on_overflow="warn", seed=0, seeds=None):
+                 max_neighbours=64, on_overflow="warn", seed=0, seeds=None, scan="auto"):
         if not isinstance(behaviours, (list, tuple)):
             raise TypeError(f"behaviours={fmt(behaviours)} must be a list of Separation, Alignment, ... objects")
         self.behaviours = {}
@@ -158,6 +158,7 @@ class Boids(CrowdModel):
         self.min_speed = check_finite_scalar("min_speed", min_speed, lo=0.0, hi=self.max_speed)
         self.max_neighbours = check_int("max_neighbours", max_neighbours, lo=1, hi=4096)
         self.on_overflow = check_choice("on_overflow", on_overflow, ("warn", "raise", "report"))
+        self.scan = check_choice("scan", scan, SCANS)
         prm = dict(max_speed=self.max_speed, max_force=self.max_force, min_speed=self.min_speed)
         names = dict(max_speed="max_speed", max_force="max_force", min_speed="min_speed")
         radius = 0.0
@@ -263,7 +264,7 @@ class Boids(CrowdModel):
         h = self.radius / CELLS_PER_RADIUS if self.radius > 0 else float(np.max(np.asarray(hi) - np.asarray(lo)))
         grid = NeighbourGrid(lo, hi, h, N, batch=B, max_neighbours=1, dtype=f)
         return dict(grid=grid, noise=np.zeros((STEPS_PER_LAUNCH, B, N, D), f), vs=np.zeros((B, N, D), f),
-                    over=np.zeros((B, N), np.int32))
+                    over=np.zeros((B, N), np.int32), sums=np.zeros((B, N, 3 * D + 4), f))
 
     def _advance(self, state: CrowdState, dt, steps, s) -> dict:
         from tianim.crowds._boids_kernels import boids_kernels
@@ -292,9 +293,9 @@ class Boids(CrowdModel):
                     with draw(state.rng, b) as rng:
                         for k in range(chunk):
                             s["noise"][k, b] = rng.standard_normal(s["noise"].shape[2:])
-            launch(boids_kernels(name, state.dim, chunk),
+            launch(boids_kernels(name, state.dim, chunk, **_scan_args(self.scan, f)),
                    state.x, state.v, state.heading, state.goal, coll, walls, state.wander, s["noise"], prm,
-                   geom, dims, cell, start, order, xs, s["vs"], s["over"], r, self.max_neighbours)
+                   geom, dims, cell, start, order, xs, s["vs"], s["over"], s["sums"], r, self.max_neighbours)
             left -= chunk
             for _ in range(chunk):
                 state.t += dt
@@ -316,6 +317,26 @@ CELLS_PER_RADIUS = 2
 #: Steps run in one kernel launch (unrolled; the grid is rebuilt before every step; each variant compiles
 #: once: 2 steps compile in ~4 s, 4 in ~9 s, and ran no faster at 10 k agents).
 STEPS_PER_LAUNCH = 2
+
+
+#: The neighbour scans (``Boids(scan=)``), all giving the same bits: ``"lanes"`` (groups of agents scan their
+#: joined cells together, :func:`tianim.crowds._boids_kernels.boids_kernels` ``lanes``), ``"agent"`` (one agent a
+#: thread, branch-free), ``"branchy"`` (one agent a thread, a branch per candidate: the reference the others were
+#: tested against); ``"auto"`` is ``"lanes"``.
+SCANS = ("auto", "lanes", "agent", "branchy")
+
+#: Lanes per group of the ``"lanes"`` scan, by dtype: one 16-byte SIMD register (what taichi's LLVM vectorises
+#: to on the hosts measured, see :mod:`tianim.physics.lanes`).
+SCAN_LANES = {"float32": 4, "float64": 2}
+
+
+def _scan_args(scan, dtype) -> dict:
+    """The ``boids_kernels`` keyword arguments of scan ``scan`` for positions of ``dtype``."""
+    if scan == "branchy":
+        return {"masked": False}
+    if scan == "agent":
+        return {}
+    return {"lanes": SCAN_LANES[np.dtype(dtype).name]}
 
 
 def _prm_names():
