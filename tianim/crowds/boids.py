@@ -134,6 +134,8 @@ class Boids(CrowdModel):
         ``"raise"`` the step raises RuntimeError and the state is left as it was before the call.
     seed, seeds : the default wander streams of :meth:`state`: copy b draws from
         ``np.random.default_rng(seeds[b])`` (``seeds`` defaults to seed, seed + 1, ...).
+    scan : "auto", "lanes", "agent" or "branchy"
+        The kernel's neighbour scan (:data:`SCANS`; a speed choice only: every scan gives the same bits).
 
     Step it with :class:`tianim.crowds.CrowdSolver` on ``state = boids.state(agents)``.
     """
