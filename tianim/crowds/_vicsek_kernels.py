@@ -7,6 +7,16 @@ grid's order: bit-identical for any thread count.
 
 from tianim.kernels import cached_variants, kernel_types
 
+#: Named offsets of ``update``'s packed parameter array ``prm`` (positions' dtype): speed [m/s], dt [s],
+#: box side [m], then the noise amplitude eta of copy b at ``ETA + b``.
+SPEED, DT, BOX, ETA = 0, 1, 2, 3
+
+
+def pack_update(prm, speed, dt, box, eta) -> None:
+    """Write ``update``'s parameters into ``prm`` (ETA + B,) at the offsets above (eta: (B,))."""
+    prm[SPEED], prm[DT], prm[BOX] = speed, dt, box
+    prm[ETA:] = eta
+
 
 @cached_variants
 def vicsek_kernels(real_name: str):
@@ -29,13 +39,13 @@ def vicsek_kernels(real_name: str):
             acc[b, i] = s
 
     @ti.kernel
-    def update(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, acc: t.vec_arr, u: real2d, eta: t.real_arr,
-               speed: real, dt: real, box: real):
+    def update(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, acc: t.vec_arr, u: real2d, prm: t.real_arr):
         """theta_i = arg(acc_i) + eta_b (u_i - 1/2); heading = (cos, sin) theta_i; x += speed dt heading,
-        wrapped into [0, box)."""
+        wrapped into [0, box). ``prm``: speed, dt, box and eta per copy at the named offsets (:func:`pack_update`)."""
+        speed, dt, box = prm[SPEED], prm[DT], prm[BOX]
         for b, i in ti.ndrange(hd.shape[0], hd.shape[1]):
             s = acc[b, i]
-            th = ti.atan2(s[1], s[0]) + eta[b] * (u[b, i] - 0.5)
+            th = ti.atan2(s[1], s[0]) + prm[ETA + b] * (u[b, i] - 0.5)
             h = ti.Vector([ti.cos(th), ti.sin(th)])
             xi = x[b, i] + speed * dt * h
             for a in ti.static(range(2)):

@@ -105,11 +105,12 @@ class Vicsek(CrowdModel):
         return dict(grid=grid, acc=np.zeros_like(state.x), u=np.zeros((B, N), f), shifted=np.zeros_like(state.x))
 
     def _advance(self, state: CrowdState, dt, steps, s) -> dict:
-        from tianim.crowds._vicsek_kernels import vicsek_kernels
+        from tianim.crowds._vicsek_kernels import ETA, pack_update, vicsek_kernels
 
         accumulate, update = vicsek_kernels(np.dtype(state.x.dtype).name)
         f = state.x.dtype
-        eta = np.ascontiguousarray(np.broadcast_to(self.noise, (state.batch,)), f)
+        prm = np.empty(ETA + state.batch, f)
+        pack_update(prm, self.speed, dt, self.box, np.broadcast_to(self.noise, (state.batch,)))
         grid, sh = s["grid"], s["shifted"]
         for _ in range(steps):
             grid.build(state.x, check=False)
@@ -120,7 +121,7 @@ class Vicsek(CrowdModel):
             for b in range(state.batch):
                 with draw(state.rng, b) as rng:
                     s["u"][b] = rng.random(state.n)
-            update(state.x, state.v, state.heading, s["acc"], s["u"], eta, self.speed, dt, self.box)
+            update(state.x, state.v, state.heading, s["acc"], s["u"], prm)
             state.t += dt
             state.ticks += 1
         return {}
