@@ -19,6 +19,21 @@ from tianim.kernels.grid import grid_funcs
 #: RVO2's RVO_EPSILON: below it two ORCA lines count as parallel.
 RVO_EPSILON = 1e-5
 
+#: Named offsets of the kernels' packed grid arguments (:func:`pack_grid`): ``geom`` (float64) holds the grid's
+#: geometry ``[lower_0 .. lower_{D-1}, cell_size]`` (as ``NeighbourGrid.kernel_buffers``, read by
+#: ``grid_funcs``), then the neighbour distance ``reach`` [m] and each copy's start time t0 [s]; ``dims`` (int32)
+#: the cells per axis, then each copy's step count tick0 (the perturbation's hash input). D = 2.
+REACH, T0 = 3, 4
+TICK0 = 2
+
+
+def pack_grid(geom_out, dims_out, grid_geom, grid_dims, reach, t, ticks) -> None:
+    """Write the packed ``geom`` (T0 + B,) float64 and ``dims`` (TICK0 + B,) int32 arguments: the grid's
+    geometry and cells, the neighbour distance ``reach`` [m], the copies' times ``t`` (B,) [s] and steps
+    ``ticks`` (B,)."""
+    geom_out[:REACH], geom_out[REACH], geom_out[T0:] = grid_geom, reach, t
+    dims_out[:TICK0], dims_out[TICK0:] = grid_dims, ticks
+
 
 @cached_variants
 def _agent_step(real_name: str):
@@ -231,23 +246,23 @@ def orca_kernels(real_name: str, steps: int = 1):
 
     @ti.kernel
     def orca_steps(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, target: real3d, prm: t.real_arr, work: real4d,
-                   nd: real3d, ni: i32_3, out: real3d, arrival: f64_2, t0: f64_1, tick0: t.int_arr, closest: real2d,
-                   geom: f64_1, dims: t.int_arr, cell: i32_2, start: i32_2, order: i32_2, xs: t.vec_arr,
-                   reach: ti.f64):
+                   nd: real3d, ni: i32_3, out: real3d, arrival: f64_2, closest: real2d, geom: f64_1, dims: t.int_arr,
+                   cell: i32_2, start: i32_2, order: i32_2, xs: t.vec_arr):
         """``steps`` ORCA steps of all agents: velocities, positions, headings, arrival times.
 
-        Each step rebuilds the grid (cell ids, the counting sort per copy: geom, dims, cell, start, order,
-        xs as :attr:`tianim.spatial.NeighbourGrid.kernel_buffers`), then every agent takes its
+        Each step rebuilds the grid (cell ids, the counting sort per copy: cell, start, order, xs as
+        :attr:`tianim.spatial.NeighbourGrid.kernel_buffers`; geom and dims packed with the neighbour distance
+        ``reach``, the copies' start times t0_b and step counts tick0_b, :func:`pack_grid`), then every agent takes its
         K = nd.shape[2] nearest neighbours closer than ``reach`` (the neighbour distance [m]) by
         ``grid_funcs.nearest`` (squared distances nd, indices ni (B, N, K); nearest first, ties by index).
         target (B, N, 4) = [goal_x, goal_y, preferred speed, active]; out (B, N, 6) = [x_new, v_new,
         v_pref] with x_new = x + dt v_new; work (B, N, K, 8) = [ORCA line (point, direction), projected
-        line]; arrival[b, i] = t0[b] + dt + ... + dt (s + 1 times) where |goal - x_new| <= arrival radius for the first
+        line]; arrival[b, i] = t0_b + dt + ... + dt (s + 1 times) where |goal - x_new| <= arrival radius for the first
         time, after step s of the launch; closest[b, i] = min(closest, distance to the nearest neighbour
         at the start of each step). prm = [radius (half the combined radius, incl. safety), time horizon,
         dt, max_speed, (unused), arrival radius, perturbation, approach time]. As RVO2's examples do against the
         deadlocks of perfectly symmetric scenes, the preferred velocity gets a perturbation of that
-        fraction of its magnitude, in a direction hashed from (agent, tick), tick0[b] + s the copy's step
+        fraction of its magnitude, in a direction hashed from (agent, tick), tick0_b + s the copy's step
         count since its reset: the same in every copy, batched or not, and for any thread count.
         The preferred velocity points at the goal at the preferred speed, capped at |goal - x| / approach
         time (dt by default: an agent lands on its goal); inactive agents (active = 0) prefer rest.
@@ -258,11 +273,11 @@ def orca_kernels(real_name: str, steps: int = 1):
             for b in range(x.shape[0]):
                 grid.sort_copy(b, x, cell, start, order, xs)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                t_end = t0[b]
+                t_end = geom[T0 + b]
                 for _ in ti.static(range(s + 1)):  # t0 + dt + dt ..., as step-by-step calls add it up
                     t_end += ti.cast(prm[2], ti.f64)
                 agent_step(x, v, hd, target, prm, work, nd, ni, out, arrival, closest, geom, dims, start, order,
-                           xs, reach, t_end, tick0[b] + s, b, i)
+                           xs, geom[REACH], t_end, dims[TICK0 + b] + s, b, i)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 x[b, i] = ti.Vector([out[b, i, 0], out[b, i, 1]])
                 v[b, i] = ti.Vector([out[b, i, 2], out[b, i, 3]])
@@ -296,14 +311,13 @@ def orca_copy_kernels(real_name: str, serial: bool = False):
 
     @ti.kernel
     def orca_copy_steps(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, target: real3d, prm: t.real_arr, work: real4d,
-                        nd: real3d, ni: i32_3, out: real3d, arrival: f64_2, t0: f64_1, tick0: t.int_arr,
-                        closest: real2d, geom: f64_1, dims: t.int_arr, cell: i32_2, start: i32_2, order: i32_2,
-                        xs: t.vec_arr, reach: ti.f64, steps: ti.i32):
+                        nd: real3d, ni: i32_3, out: real3d, arrival: f64_2, closest: real2d, geom: f64_1,
+                        dims: t.int_arr, cell: i32_2, start: i32_2, order: i32_2, xs: t.vec_arr, steps: ti.i32):
         """``steps`` steps as ``orca_steps`` (same arguments), one thread per copy."""
         if ti.static(serial):
             ti.loop_config(serialize=True)
         for b in range(x.shape[0]):
-            t_end = t0[b]
+            t_end = geom[T0 + b]
             for s in range(steps):
                 t_end += ti.cast(prm[2], ti.f64)
                 for i in range(x.shape[1]):
@@ -311,7 +325,7 @@ def orca_copy_kernels(real_name: str, serial: bool = False):
                 grid.sort_copy(b, x, cell, start, order, xs)
                 for i in range(x.shape[1]):
                     agent_step(x, v, hd, target, prm, work, nd, ni, out, arrival, closest, geom, dims, start, order,
-                               xs, reach, t_end, tick0[b] + s, b, i)
+                               xs, geom[REACH], t_end, dims[TICK0 + b] + s, b, i)
                 for i in range(x.shape[1]):
                     x[b, i] = ti.Vector([out[b, i, 0], out[b, i, 1]])
                     v[b, i] = ti.Vector([out[b, i, 2], out[b, i, 3]])

@@ -128,12 +128,15 @@ class ORCA(PedestrianModel):
         return super()._work_key(state) + (self.max_neighbors,)
 
     def _make_work(self, state: CrowdState) -> dict:
+        from tianim.crowds._orca_kernels import T0, TICK0
+
         B, N, _ = state.x.shape
         f = state.x.dtype
         K = self.max_neighbors
         return dict(grid=self._grid(state), work=np.zeros((B, N, K, 8), f), out=np.zeros((B, N, 6), f),
                     nd=np.zeros((B, N, K), f), ni=np.zeros((B, N, K), np.int32), target=np.zeros((B, N, 4), f),
-                    prm=np.zeros(8, f), prm_of=(None, None), name=np.dtype(f).name)
+                    prm=np.zeros(8, f), prm_of=(None, None), name=np.dtype(f).name,
+                    geom=np.zeros(T0 + B, np.float64), dims=np.zeros(TICK0 + B, np.int32))
 
     def _advance(self, state: CrowdState, dt, steps, w) -> dict:
         made_for = w["prm_of"]  # (model, dt) the row was written for (a solver's buffers serve any model)
@@ -141,13 +144,15 @@ class ORCA(PedestrianModel):
             self._prm(state.x.dtype, dt, w["prm"])  # kept context; rewritten only for another model or dt
             w["prm_of"] = (self, dt)
         prm = w["prm"]
-        geom, dims, cell, start, order, xs = w["grid"].kernel_buffers
+        grid_geom, grid_dims, cell, start, order, xs = w["grid"].kernel_buffers
         name = w["name"]
-        args = (state.x, state.v, state.heading, self._target(state, w["target"]), prm, w["work"], w["nd"], w["ni"],
-                w["out"], state.arrival_time, state.t, state.ticks, state.closest, geom, dims, cell, start, order, xs,
-                self.neighbour_dist)
         from tianim.crowds._launch import launch
-        from tianim.crowds._orca_kernels import orca_copy_kernels, orca_kernels
+        from tianim.crowds._orca_kernels import orca_copy_kernels, orca_kernels, pack_grid
+
+        geom, dims = w["geom"], w["dims"]
+        pack_grid(geom, dims, grid_geom, grid_dims, self.neighbour_dist, state.t, state.ticks)
+        args = (state.x, state.v, state.heading, self._target(state, w["target"]), prm, w["work"], w["nd"], w["ni"],
+                w["out"], state.arrival_time, state.closest, geom, dims, cell, start, order, xs)
 
         copy = self.path == "copy" or (self.path == "auto" and state.n <= COPY_KERNEL_MAX_AGENTS)
         k = self.steps_per_launch  # agent path: k unrolled steps a launch; copy path: all steps in one launch
