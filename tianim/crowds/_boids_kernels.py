@@ -36,6 +36,18 @@ PRM = ("max_speed", "max_force", "min_speed", "dt",
 #: Below this length the lateral part of an obstacle normal counts as zero (obstacle dead ahead).
 LATERAL_MIN = 1e-3
 
+#: Named offsets past the grid's own entries (D + 1 in ``geom``, D in ``dims``) of the kernel's packed grid
+#: arguments: the scan radius r [m] (float64; r < 0: no neighbours) and the neighbour cap K (int32).
+RADIUS, CAP = 1, 0
+
+
+def pack_grid(geom_out, dims_out, grid_geom, grid_dims, r, cap) -> None:
+    """Write the packed ``geom`` (D + 2,) float64 = [lower, cell_size, r] and ``dims`` (D + 1,) int32 = [cells, cap]."""
+    d = len(grid_dims)
+    geom_out[: d + 1], geom_out[d + 1] = grid_geom, r
+    dims_out[:d], dims_out[d] = grid_dims, cap
+
+
 #: (a, b): a group of lanes scans its joined query box when ``b x joined cells <= a x the sum of the lanes'
 #: own cells``, else each agent scans its own box (the results are the same bits either way).
 LANE_CELLS_RATIO = (3, 2)
@@ -372,8 +384,7 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True,
     @ti.kernel
     def boids_steps(x: t.vec_arr, v: t.vec_arr, hd: t.vec_arr, goal: t.vec_arr, coll: real2d, walls: real2d,
                     ws: t.vec_arr, noise: t.work_arr, prm: t.real_arr, geom: f64_1, dims: i32_1, cell: i32_2,
-                    start: i32_2, order: i32_2, xs: t.vec_arr, vs: t.vec_arr, over: i32_2, sums: real3d, r: ti.f64,
-                    cap: ti.i32):
+                    start: i32_2, order: i32_2, xs: t.vec_arr, vs: t.vec_arr, over: i32_2, sums: real3d):
         """``steps`` steps of dt for every agent, in place: per step the grid is rebuilt (cell ids,
         the counting sort per copy, velocities gathered into sorted order), then each agent (one
         thread, reading only the sorted copies xs, vs of the old state and its own heading) sums its
@@ -382,8 +393,11 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True,
         max_speed], x += dt v, and agents inside an obstacle are put back on its surface with their
         inward normal velocity removed. over[b, i] += 1 for each step in which agent i had more than
         ``cap`` neighbours within r (only the first cap in grid order were used). noise (S, B, N) the
-        wander noise of each step. With ``lanes`` > 1, one thread steps a group of that many agents
+        wander noise of each step. ``geom`` and ``dims``: the grid's (``NeighbourGrid.kernel_buffers``) followed by
+        ``r`` and ``cap`` (:func:`pack_grid`); sums (B, N, 3 D + 4) the lanes scan's scratch. With ``lanes`` > 1, one thread steps a group of that many agents
         (:func:`group`)."""
+        r = geom[dim + RADIUS]  # the packed grid arguments (pack_grid)
+        cap = dims[dim + CAP]
         r2 = ti.cast(-1.0, real)
         if r >= 0:
             r2 = ti.cast(r, real) * ti.cast(r, real)

@@ -266,10 +266,11 @@ class Boids(CrowdModel):
         h = self.radius / CELLS_PER_RADIUS if self.radius > 0 else float(np.max(np.asarray(hi) - np.asarray(lo)))
         grid = NeighbourGrid(lo, hi, h, N, batch=B, max_neighbours=1, dtype=f)
         return dict(grid=grid, noise=np.zeros((STEPS_PER_LAUNCH, B, N, D), f), vs=np.zeros((B, N, D), f),
-                    over=np.zeros((B, N), np.int32), sums=np.zeros((B, N, 3 * D + 4), f))
+                    over=np.zeros((B, N), np.int32), sums=np.zeros((B, N, 3 * D + 4), f), geom=np.zeros(D + 2, np.float64),
+                    dims=np.zeros(D + 1, np.int32))
 
     def _advance(self, state: CrowdState, dt, steps, s) -> dict:
-        from tianim.crowds._boids_kernels import boids_kernels
+        from tianim.crowds._boids_kernels import boids_kernels, pack_grid
         from tianim.crowds._launch import launch
 
         f = state.x.dtype
@@ -284,8 +285,9 @@ class Boids(CrowdModel):
             else:
                 s[key][...] = table
         prm, coll, walls = s["prm"], s["coll"], s["walls"]
-        geom, dims, cell, start, order, xs = s["grid"].kernel_buffers
-        r = self.radius if self.radius > 0 else -1.0
+        grid_geom, grid_dims, cell, start, order, xs = s["grid"].kernel_buffers
+        geom, dims = s["geom"], s["dims"]
+        pack_grid(geom, dims, grid_geom, grid_dims, self.radius if self.radius > 0 else -1.0, self.max_neighbours)
         s["over"].fill(0)
         left = steps
         while left > 0:
@@ -297,7 +299,7 @@ class Boids(CrowdModel):
                             s["noise"][k, b] = rng.standard_normal(s["noise"].shape[2:])
             launch(boids_kernels(name, state.dim, chunk, **_scan_args(self.scan, f)),
                    state.x, state.v, state.heading, state.goal, coll, walls, state.wander, s["noise"], prm,
-                   geom, dims, cell, start, order, xs, s["vs"], s["over"], s["sums"], r, self.max_neighbours)
+                   geom, dims, cell, start, order, xs, s["vs"], s["over"], s["sums"])
             left -= chunk
             for _ in range(chunk):
                 state.t += dt
