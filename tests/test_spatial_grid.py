@@ -509,3 +509,19 @@ def test_finite_check_fast_path_accepts_huge_finite_values_and_rejects_inf():
     x[0, 2, 0] = -np.inf
     with pytest.raises(ValueError, match=r"x\[0, 2, 0\] = -inf is not finite"):
         grid.build(x)
+
+
+def test_pack_grid_lays_out_the_grid_then_the_kernel_values_and_refuses_a_wrong_size():
+    """``kernels.grid.pack_grid``: the grid's geometry and cells first (where grid_funcs reads them), then the
+    kernel's scalars and per-copy arrays in order; a buffer of the wrong size is a ValueError naming it."""
+    from tianim.kernels.grid import pack_grid
+    from tianim.spatial import NeighbourGrid
+
+    g = NeighbourGrid((-1, 0), (3, 2), 0.5, 10, batch=3)
+    geom_src, dims_src = g.kernel_buffers[:2]
+    geom, dims = np.zeros(3 + 1 + 3), np.zeros(2 + 3, np.int32)
+    pack_grid(geom, dims, geom_src, dims_src, (2.5, np.array([0.1, 0.2, 0.3])), (np.array([4, 5, 6], np.int32),))
+    assert geom.tolist() == [-1.0, 0.0, 0.5, 2.5, 0.1, 0.2, 0.3]
+    assert dims.tolist() == [8, 4, 4, 5, 6]
+    with pytest.raises(ValueError, match="dims_out"):
+        pack_grid(geom, np.zeros(6, np.int32), geom_src, dims_src, (2.5, np.zeros(3)), (np.zeros(3, np.int32),))

@@ -37,15 +37,9 @@ PRM = ("max_speed", "max_force", "min_speed", "dt",
 LATERAL_MIN = 1e-3
 
 #: Named offsets past the grid's own entries (D + 1 in ``geom``, D in ``dims``) of the kernel's packed grid
-#: arguments: the scan radius r [m] (float64; r < 0: no neighbours) and the neighbour cap K (int32).
-RADIUS, CAP = 1, 0
-
-
-def pack_grid(geom_out, dims_out, grid_geom, grid_dims, r, cap) -> None:
-    """Write the packed ``geom`` (D + 2,) float64 = [lower, cell_size, r] and ``dims`` (D + 1,) int32 = [cells, cap]."""
-    d = len(grid_dims)
-    geom_out[: d + 1], geom_out[d + 1] = grid_geom, r
-    dims_out[:d], dims_out[d] = grid_dims, cap
+#: arguments (:func:`tianim.kernels.grid.pack_grid`): the scan radius r [m] (float64; r < 0: no neighbours) and
+#: the neighbour cap K (int32).
+RADIUS, CAP = 0, 0
 
 
 #: (a, b): a group of lanes scans its joined query box when ``b x joined cells <= a x the sum of the lanes'
@@ -393,10 +387,10 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True,
         max_speed], x += dt v, and agents inside an obstacle are put back on its surface with their
         inward normal velocity removed. over[b, i] += 1 for each step in which agent i had more than
         ``cap`` neighbours within r (only the first cap in grid order were used). noise (S, B, N) the
-        wander noise of each step. ``geom`` and ``dims``: the grid's (``NeighbourGrid.kernel_buffers``) followed by
-        ``r`` and ``cap`` (:func:`pack_grid`); sums (B, N, 3 D + 4) the lanes scan's scratch. With ``lanes`` > 1, one thread steps a group of that many agents
-        (:func:`group`)."""
-        r = geom[dim + RADIUS]  # the packed grid arguments (pack_grid)
+        wander noise of each step. ``geom`` and ``dims``: the grid's (``NeighbourGrid.kernel_buffers``)
+        followed by ``r`` and ``cap`` (``kernels.grid.pack_grid``); sums (B, N, 3 D + 4) the lanes scan's
+        scratch. With ``lanes`` > 1, one thread steps a group of that many agents (:func:`group`)."""
+        r = geom[dim + 1 + RADIUS]  # the packed grid arguments (kernels.grid.pack_grid)
         cap = dims[dim + CAP]
         r2 = ti.cast(-1.0, real)
         if r >= 0:

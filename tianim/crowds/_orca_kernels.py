@@ -19,20 +19,12 @@ from tianim.kernels.grid import grid_funcs
 #: RVO2's RVO_EPSILON: below it two ORCA lines count as parallel.
 RVO_EPSILON = 1e-5
 
-#: Named offsets of the kernels' packed grid arguments (:func:`pack_grid`): ``geom`` (float64) holds the grid's
-#: geometry ``[lower_0 .. lower_{D-1}, cell_size]`` (as ``NeighbourGrid.kernel_buffers``, read by
-#: ``grid_funcs``), then the neighbour distance ``reach`` [m] and each copy's start time t0 [s]; ``dims`` (int32)
-#: the cells per axis, then each copy's step count tick0 (the perturbation's hash input). D = 2.
+#: Named offsets of the kernels' packed grid arguments (:func:`tianim.kernels.grid.pack_grid`; D = 2): ``geom``
+#: (float64) holds the grid's ``[lower_0, lower_1, cell_size]``, then the neighbour distance ``reach`` [m] and each
+#: copy's start time t0 [s]; ``dims`` (int32) the cells per axis, then each copy's step count tick0 (the
+#: perturbation's hash input).
 REACH, T0 = 3, 4
 TICK0 = 2
-
-
-def pack_grid(geom_out, dims_out, grid_geom, grid_dims, reach, t, ticks) -> None:
-    """Write the packed ``geom`` (T0 + B,) float64 and ``dims`` (TICK0 + B,) int32 arguments: the grid's
-    geometry and cells, the neighbour distance ``reach`` [m], the copies' times ``t`` (B,) [s] and steps
-    ``ticks`` (B,)."""
-    geom_out[:REACH], geom_out[REACH], geom_out[T0:] = grid_geom, reach, t
-    dims_out[:TICK0], dims_out[TICK0:] = grid_dims, ticks
 
 
 @cached_variants
@@ -252,8 +244,8 @@ def orca_kernels(real_name: str, steps: int = 1):
 
         Each step rebuilds the grid (cell ids, the counting sort per copy: cell, start, order, xs as
         :attr:`tianim.spatial.NeighbourGrid.kernel_buffers`; geom and dims packed with the neighbour distance
-        ``reach``, the copies' start times t0_b and step counts tick0_b, :func:`pack_grid`), then every agent takes its
-        K = nd.shape[2] nearest neighbours closer than ``reach`` (the neighbour distance [m]) by
+        ``reach``, the copies' start times t0_b and step counts tick0_b, ``kernels.grid.pack_grid``), then
+        every agent takes its K = nd.shape[2] nearest neighbours closer than ``reach`` (the neighbour distance [m]) by
         ``grid_funcs.nearest`` (squared distances nd, indices ni (B, N, K); nearest first, ties by index).
         target (B, N, 4) = [goal_x, goal_y, preferred speed, active]; out (B, N, 6) = [x_new, v_new,
         v_pref] with x_new = x + dt v_new; work (B, N, K, 8) = [ORCA line (point, direction), projected

@@ -270,7 +270,8 @@ class Boids(CrowdModel):
                     dims=np.zeros(D + 1, np.int32))
 
     def _advance(self, state: CrowdState, dt, steps, s) -> dict:
-        from tianim.crowds._boids_kernels import boids_kernels, pack_grid
+        from tianim.crowds._boids_kernels import boids_kernels
+        from tianim.kernels.grid import pack_grid
         from tianim.crowds._launch import launch
 
         f = state.x.dtype
@@ -287,7 +288,7 @@ class Boids(CrowdModel):
         prm, coll, walls = s["prm"], s["coll"], s["walls"]
         grid_geom, grid_dims, cell, start, order, xs = s["grid"].kernel_buffers
         geom, dims = s["geom"], s["dims"]
-        pack_grid(geom, dims, grid_geom, grid_dims, self.radius if self.radius > 0 else -1.0, self.max_neighbours)
+        pack_grid(geom, dims, grid_geom, grid_dims, (self.radius if self.radius > 0 else -1.0,), (self.max_neighbours,))
         s["over"].fill(0)
         left = steps
         while left > 0:

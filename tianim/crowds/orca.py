@@ -147,10 +147,11 @@ class ORCA(PedestrianModel):
         grid_geom, grid_dims, cell, start, order, xs = w["grid"].kernel_buffers
         name = w["name"]
         from tianim.crowds._launch import launch
-        from tianim.crowds._orca_kernels import orca_copy_kernels, orca_kernels, pack_grid
+        from tianim.crowds._orca_kernels import orca_copy_kernels, orca_kernels
+        from tianim.kernels.grid import pack_grid
 
         geom, dims = w["geom"], w["dims"]
-        pack_grid(geom, dims, grid_geom, grid_dims, self.neighbour_dist, state.t, state.ticks)
+        pack_grid(geom, dims, grid_geom, grid_dims, (self.neighbour_dist, state.t), (state.ticks,))
         args = (state.x, state.v, state.heading, self._target(state, w["target"]), prm, w["work"], w["nd"], w["ni"],
                 w["out"], state.arrival_time, state.closest, geom, dims, cell, start, order, xs)
 

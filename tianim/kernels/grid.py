@@ -10,11 +10,31 @@ for every position dtype, ``u_a = floor((x_a - lo_a) / h)`` clamped to ``[0, n_a
 
 from types import SimpleNamespace
 
+import numpy as np
+
 from tianim.kernels import cached_variants, kernel_types
 
 #: Relative widening of a query box, so that points that pass the distance test in float32
 #: (|d|^2 <= r^2 rounded) are never in a cell outside the box.
 BOX_PAD = 1e-6
+
+
+def pack_grid(geom_out, dims_out, grid_geom, grid_dims, reals=(), ints=()) -> None:
+    """Write a fused kernel's packed grid arguments (one convention for every kernel built on :func:`grid_funcs`):
+    ``geom_out`` float64 = ``[lower_0 .. lower_{D-1}, cell_size, *reals]`` and ``dims_out`` int32 =
+    ``[cells_0 .. cells_{D-1}, *ints]``, the grid's own entries (``NeighbourGrid.kernel_buffers``, which
+    ``grid_funcs`` reads at 0 .. D) first, then the kernel's own values from offset D + 1 (geom) and D (dims),
+    each a scalar or a 1-D array, in order; the kernel names their offsets."""
+    d = len(grid_dims)
+    geom_out[: d + 1] = grid_geom
+    dims_out[:d] = grid_dims
+    for name, out, k, values in (("geom_out", geom_out, d + 1, reals), ("dims_out", dims_out, d, ints)):
+        for v in values:
+            n = v.size if isinstance(v, np.ndarray) else 1
+            out[k: k + n] = v
+            k += n
+        if k != len(out):
+            raise ValueError(f"{name} has {len(out)} entries but the grid and the values fill {k}; size it to fit")
 
 
 @cached_variants
