@@ -354,8 +354,9 @@ def _coil_rope():
     ("cloth", 2, 1, None, False), pytest.param("cloth", 3, 2, 0.5, True, marks=pytest.mark.slow),
     ("rope", 1, 2, None, False)])
 def test_xpbd_contact_launch_equals_the_two_launches(scene, iterations, sweeps, cap, compensated):
-    """XPBD with self-collision alone runs every substep of a call in one launch (per copy, stopping when the
-    copy's lists go stale: rebuilt, its contacts run, and it goes on): bit for bit the XPBD launch plus the
+    """XPBD with self-collision alone runs every substep of a call in one launch (per copy; a copy whose lists go
+    stale rebuilds them inside the launch, the lists Python builds, or where a row overflows stops: Python
+    rebuilds them, its contacts run, and it goes on): bit for bit the XPBD launch plus the
     passes' launch per substep (``SelfCollision(path="split")``), over several calls, both copies (each
     rebuilding on its own schedule), odd and even contact sweeps, the separation-speed cap, compensated
     positions, grids and edge models."""
@@ -375,16 +376,28 @@ def test_xpbd_contact_launch_equals_the_two_launches(scene, iterations, sweeps, 
         return
     out = {}
     for path in ("fused", "split"):
-        sc = tp.SelfCollision(THICKNESS, iterations=iterations, margin=0.004, max_separation_speed=cap, path=path)
+        sc = tp.SelfCollision(THICKNESS, iterations=iterations, margin=0.004, max_separation_speed=cap, path=path,
+                              max_neighbours=2)  # rows overflow at first: the launch hands those rebuilds to Python
         solver = tp.XPBD(iterations=sweeps, self_collision=sc, compensated=compensated)
         s = start.copy()
         for _ in range(3):
             solver.step(model, s, 1e-3, 151)
-        out[path] = (s.x.copy(), s.v.copy(), contacts_for(sc, model, s).rebuilt.tolist())
+        c = contacts_for(sc, model, s)
+        out[path] = (s.x.copy(), s.v.copy(), c.rebuilt.tolist(), c.launch_rebuilds, c.rebuilds - c.launch_rebuilds)
+        if path == "fused":  # the last lists, rebuilt in the launch or not, are the lists Python builds
+            fresh = tp.SelfCollision(THICKNESS, iterations=iterations, margin=0.004)
+            built = contacts_for(fresh, model, s.copy())
+            built.rebuild(c.x_build)
+            for b in range(s.batch):
+                for i in range(model.n_particles):
+                    assert sorted(c.nbr[b, i, :c.count[b, i]]) == sorted(built.nbr[b, i, :built.count[b, i]]), (b, i)
     plain = start.copy()
     tp.XPBD(iterations=sweeps, compensated=compensated).step(model, plain, 1e-3, 453)
     assert not np.array_equal(plain.x, out["fused"][0])  # contacts acted
     assert min(out["fused"][2]) > 2 and out["fused"][2] == out["split"][2]
+    # the fused path rebuilt inside its launch, and handed rebuilds to Python too (overflowing rows, the first
+    # build); the split path rebuilds only in Python
+    assert out["fused"][3] > 0 and out["fused"][4] > 1 and out["split"][3] == 0
     assert np.array_equal(out["fused"][0], out["split"][0]) and np.array_equal(out["fused"][1], out["split"][1])
 
 

@@ -204,10 +204,29 @@ class Contacts:
             self.capacity = int(min(4096, max(16, math.ceil(4 * (per_layer + 1)))))
         self.grid = None
         self.x_build = None
-        self.rebuilds = 0  # rebuild calls
+        self.rebuilds = 0  # rebuild calls (Python) and copy rebuilds inside a launch
+        self.launch_rebuilds = 0  # of which inside a launch (rebuild_funcs)
         self.rebuilt = np.zeros(state.batch, np.int64)  # rebuilds per copy
         self._active = None  # (B, N) uint8: the copies a partial rebuild sorts and queries
         self._aliased = False  # nbr/count are the grid's own output buffers
+
+    def kernel_grid(self):
+        """``(cell, start, order, xs, G, dims)``: the current grid's arrays for an in-launch rebuild
+        (:func:`rebuild_funcs`; G float64 as :func:`grid_offsets`), made once per grid."""
+        g = self.grid
+        if getattr(self, "_kgrid", (None,))[0] is not g:
+            G = np.concatenate([g.lower, [g.cell_size], g.upper, [self.radius]]).astype(np.float64)
+            self._kgrid = (g, (g.cell, g.start, g.order, g.sorted_x, G, g.dims))
+        return self._kgrid[1]
+
+    def rebuilt_in_launch(self, counts):
+        """Record the in-launch rebuilds ``counts`` (B,) of one launch (the rows, ``x_build`` and the grid's sort
+        buffers of those copies were written by :func:`rebuild_funcs`)."""
+        total = int(counts.sum())
+        if total:
+            self.rebuilt += counts
+            self.rebuilds += total
+            self.launch_rebuilds += total
 
     def _new_grid(self, x):
         from tianim.spatial import NeighbourGrid
@@ -310,6 +329,32 @@ class Contacts:
         self.rebuilds += 1
 
 
+# Packed parameters of the contact launches (docs/architecture.md, "One argument convention"): the
+# passes' kernels (tianim.physics.passes) and XPBD's contact launch (tianim.physics.xpbd) take their scalars
+# in one real array (the state's dtype) and one int32 array with these offsets, written by pack_params.
+#: Real parameters: substep h [s], thickness [m], |g| [m/s^2], margin^2 test value [m], separation-speed cap
+#: [m/s] (0: none), strain limit eps, medium damping rho [1/s], gravity g (D entries from P_G).
+P_H, P_THICK, P_GNORM, P_MARGIN, P_VCAP, P_EPS, P_RHO, P_G = range(8)
+#: Int parameters: grid columns and rows (1 for other models), exclusion steps k, springs (edge models),
+#: XPBD sweeps.
+I_NX, I_NY, I_KEXCL, I_NSPRINGS, I_ITERS = range(5)
+#: Per-copy int32 state of a multi-substep contact launch (B, 3): substeps to run (the launch lowers it where
+#: the copy stops), 1 while the copy's lists are valid (0: stopped for a Python rebuild), in-launch rebuilds.
+C_LIM, C_RUN, C_REBUILT = range(3)
+
+
+def pack_params(dtype, dim: int, *, h, thick=0.0, g_norm=0.0, margin=0.0, vcap=0.0, eps=0.0, rho=0.0, g=None,
+                nx=1, ny=1, k_excl=0, n_springs=0, iters=0):
+    """``(P, I)``: the packed real (state dtype) and int32 parameters above. Each real is rounded to the
+    dtype as the scalar kernel arguments were (the same bits)."""
+    P = np.zeros(P_G + dim, dtype)
+    P[[P_H, P_THICK, P_GNORM, P_MARGIN, P_VCAP, P_EPS, P_RHO]] = (h, thick, g_norm, margin, vcap, eps, rho)
+    if g is not None:
+        P[P_G:] = g
+    I = np.array([nx, ny, k_excl, n_springs, iters], np.int32)
+    return P, I
+
+
 _CONTACTS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 
@@ -372,6 +417,90 @@ def _drop_excluded_kernel(grid: bool, serial: bool):
             count[b, i] = w
 
     return drop
+
+
+#: Named offsets of the float64 grid array of an in-launch rebuild (:meth:`Contacts.kernel_grid`): the grid's
+#: lower corner (D), cell size, upper corner (D), query radius. The first D + 1 entries are the ``geom`` layout of
+#: :func:`tianim.kernels.grid.grid_funcs` (lower corner, cell size), so the array serves as its ``geom``.
+def grid_offsets(dim: int):
+    """``(LO, H, UP, R)``: offsets of the lower corner, cell size, upper corner and radius (see above)."""
+    return 0, dim, dim + 1, 2 * dim + 1
+
+
+@cached_variants
+def rebuild_funcs(real_name: str, dim: int, grid: bool):
+    """``ti.func rebuild(b, x, xb, nbr, count, cell, start, order, xs, G, dims, excl_off, excl_idx, k_excl, nx)
+    -> ok``: copy b's candidate lists rebuilt inside a launch, serially in the copy: the same lists as
+    :meth:`Contacts.rebuild` (the grid's cell ids and counting sort, :func:`tianim.kernels.grid.grid_funcs`,
+    into the grid's own buffers; the radius query of :mod:`tianim.spatial` in sorted order, rows in cell
+    order; the excluded candidates left out as they are found, instead of a second pass), then ``xb[b] =
+    x[b]``. Returns 0 and changes no row or ``xb`` if a point of the copy lies outside the grid's box
+    (Python makes a new grid); returns 0 after writing the rows if one overflows the capacity K =
+    ``nbr.shape[2]`` (Python grows the rows); in both cases the caller stops the copy and
+    :meth:`Contacts.rebuild` builds its lists as without this function. ``G``: :func:`grid_offsets`."""
+    from tianim.kernels.grid import grid_funcs
+
+    tt = kernel_types(real_name, dim)
+    ti, real = tt.ti, tt.real
+    T = ti.template()
+    g = grid_funcs(real_name, dim)
+    lo_o, h_o, up_o, r_o = grid_offsets(dim)
+    del h_o
+
+    @ti.func
+    def rebuild(b, x: T, xb: T, nbr: T, count: T, cell: T, start: T, order: T, xs: T, G: T, dims: T,
+                excl_off: T, excl_idx: T, k_excl, nx):
+        n = x.shape[1]
+        inside = 1
+        for i in range(n):
+            for a in ti.static(range(dim)):
+                xa = ti.cast(x[b, i][a], ti.f64)
+                if not (xa >= G[lo_o + a] and xa <= G[up_o + a]):
+                    inside = 0
+        ok = inside
+        if inside == 1:
+            for i in range(n):
+                cell[b, i] = g.cell_of(x[b, i], G, dims)
+            g.sort_copy(b, x, cell, start, order, xs)
+            r = G[r_o]
+            r2 = ti.cast(r, real) * ti.cast(r, real)
+            cap = nbr.shape[2]
+            for s in range(n):
+                i = order[b, s]
+                p = xs[b, s]
+                ri = i // nx
+                ci = i - ri * nx
+                m = 0
+                t, padh = g.cell_units(p, r, G, dims)
+                lo, hi = g.box_t(t, padh, dims)
+                z0, z1 = g.z_range(lo, hi)
+                for z in range(z0, z1 + 1):
+                    for y in range(lo[1], hi[1] + 1):
+                        k0, k1 = g.span(b, t, padh, y, z, lo, hi, dims, start)
+                        for k in range(k0, k1):
+                            d = xs[b, k] - p
+                            if d.dot(d) <= r2 and k != s:
+                                j = order[b, k]
+                                keep = True
+                                if ti.static(grid):
+                                    rj = j // nx
+                                    keep = not (abs(ri - rj) <= k_excl and abs(ci - (j - rj * nx)) <= k_excl)
+                                else:
+                                    for e in range(excl_off[i], excl_off[i + 1]):
+                                        if excl_idx[e] == j:
+                                            keep = False
+                                if keep:
+                                    if m < cap:
+                                        nbr[b, i, m] = j
+                                    m += 1
+                count[b, i] = m
+                if m > cap:
+                    ok = 0
+            for i in range(n):
+                xb[b, i] = x[b, i]
+        return ok
+
+    return rebuild
 
 
 @cached_variants
