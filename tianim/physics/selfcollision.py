@@ -465,6 +465,7 @@ def rebuild_funcs(real_name: str, dim: int, grid: bool):
             r = G[r_o]
             r2 = ti.cast(r, real) * ti.cast(r, real)
             cap = nbr.shape[2]
+            inv_nx = 1.0 / ti.cast(nx, ti.f64)
             for s in range(n):
                 i = order[b, s]
                 p = xs[b, s]
@@ -479,20 +480,29 @@ def rebuild_funcs(real_name: str, dim: int, grid: bool):
                         k0, k1 = g.span(b, t, padh, y, z, lo, hi, dims, start)
                         for k in range(k0, k1):
                             d = xs[b, k] - p
-                            if d.dot(d) <= r2 and k != s:
-                                j = order[b, k]
-                                keep = True
-                                if ti.static(grid):
-                                    rj = j // nx
-                                    keep = not (abs(ri - rj) <= k_excl and abs(ci - (j - rj * nx)) <= k_excl)
-                                else:
+                            j = order[b, k]
+                            if ti.static(grid):
+                                # branch-free (hits are unpredictable; as the grid's query): every candidate is
+                                # stored at slot m while the row has room, m advances only on a kept one. j's
+                                # row floor((j + 1/2) / nx) in float64 is exact (1/(2 nx) from any integer,
+                                # far above the rounding), and cheaper than an integer division
+                                rj = ti.cast((ti.cast(j, ti.f64) + 0.5) * inv_nx, ti.i32)
+                                near = ti.cast(abs(ri - rj) <= k_excl, ti.i32) & ti.cast(
+                                    abs(ci - (j - rj * nx)) <= k_excl, ti.i32)
+                                keep = ti.cast(d.dot(d) <= r2, ti.i32) & ti.cast(k != s, ti.i32) & (1 - near)
+                                if m < cap:
+                                    nbr[b, i, m] = j
+                                m += keep
+                            else:
+                                if d.dot(d) <= r2 and k != s:
+                                    keep = True
                                     for e in range(excl_off[i], excl_off[i + 1]):
                                         if excl_idx[e] == j:
                                             keep = False
-                                if keep:
-                                    if m < cap:
-                                        nbr[b, i, m] = j
-                                    m += 1
+                                    if keep:
+                                        if m < cap:
+                                            nbr[b, i, m] = j
+                                        m += 1
                 count[b, i] = m
                 if m > cap:
                     ok = 0
@@ -507,11 +517,12 @@ def rebuild_funcs(real_name: str, dim: int, grid: bool):
 def contact_funcs(real_name: str, dim: int, grid: bool):
     """``ti.func gather(b, i, x, pinned, inv_mass, nbr, count, excl_off, excl_idx, k_excl, nx, t)
     -> (correction, contacts)``: particle i's summed (fixed-point) push away from the listed
-    non-neighbour particles closer than t, and their number."""
+    particles closer than t, and their number. The rows hold no topological neighbour (every build
+    leaves them out: :meth:`Contacts.rebuild`, :func:`rebuild_funcs`), so no candidate is tested for it
+    here (``excl_off, excl_idx, k_excl, nx`` are unused: the one signature of the contact sweeps)."""
     tt = kernel_types(real_name, dim)
     ti, real = tt.ti, tt.real
     T = ti.template()
-    excluded = _excluded_func(grid)
 
     @ti.func
     def gather(b, i, x: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T, excl_idx: T, k_excl, nx, t):
@@ -521,11 +532,13 @@ def contact_funcs(real_name: str, dim: int, grid: bool):
         scale = ti.cast(FIXED_POINT, ti.f64) / ti.cast(t, ti.f64)
         if wi > 0:
             m = ti.min(count[b, i], nbr.shape[2])
+            xi = x[b, i]
+            t2 = t * t
             for q in range(m):
                 j = nbr[b, i, q]
-                d = x[b, i] - x[b, j]
+                d = xi - x[b, j]
                 dist2 = d.dot(d)
-                if dist2 < t * t and not excluded(i, j, excl_off, excl_idx, k_excl, nx):
+                if dist2 < t2:
                     wj = ti.select(pinned[b, j] == 0, inv_mass[j], 0)
                     c = ti.Vector.zero(real, dim)
                     if dist2 > 0:
