@@ -33,8 +33,12 @@ import numpy as np
 from tianim.physics.bending import bending_funcs
 from tianim.kernels.contact import contact_response
 from tianim.kernels import cached_variants, kernel_types
+from tianim.physics import selfcollision as scm
 from tianim.physics.selfcollision import contact_update_funcs, contacts_for
 from tianim.physics.strain import SOR, strain_funcs
+
+P_H, P_THICK, P_GNORM, P_MARGIN, P_VCAP, P_EPS = scm.P_H, scm.P_THICK, scm.P_GNORM, scm.P_MARGIN, scm.P_VCAP, scm.P_EPS
+I_NX, I_NY, I_KEXCL = scm.I_NX, scm.I_NY, scm.I_KEXCL
 
 #: Scenes with at most this many particles x copies run the passes' loops serially (no thread wake-up).
 SERIAL_MAX = 4096
@@ -109,8 +113,8 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
     validity = _validity_check(real_name, dim, serial)
 
     @ti.kernel
-    def pre(x: vec_arr, v: vec_arr, pinned: mask_arr, inv_mass: real_arr, bp: real_arr, h: real, nx: ti.i32,
-            ny: ti.i32):
+    def pre(x: vec_arr, v: vec_arr, pinned: mask_arr, inv_mass: real_arr, bp: real_arr, SP: real_arr, SI: int_arr):
+        h, nx, ny = SP[P_H], SI[I_NX], SI[I_NY]
         ti.loop_config(serialize=serial)
         for b, i in ti.ndrange(x.shape[0], x.shape[1]):
             kick(b, i, x, v, pinned, inv_mass, bp, nx, ny, h)
@@ -138,8 +142,9 @@ def _kernels(real_name, dim, grid, bend_kind, strain_iters, sc_iters, colliders,
     @ti.kernel
     def post(x: vec_arr, v: vec_arr, W: vec_arr, pinned: mask_arr, inv_mass: real_arr, bp: real_arr,
              topo: int_arr, rest: real_arr, nbr: i32_3, count: i32_2, excl_off: int_arr, excl_idx: int_arr,
-             coll: real2_arr, h: real, eps: real, thick: real, g_norm: real, nx: ti.i32, ny: ti.i32,
-             k_excl: ti.i32, xb: vec_arr, spread: real2_arr, run: i32_1, margin: real, vcap: real):
+             coll: real2_arr, xb: vec_arr, spread: real2_arr, run: i32_1, SP: real_arr, SI: int_arr):
+        h, eps, thick, g_norm, margin, vcap = SP[P_H], SP[P_EPS], SP[P_THICK], SP[P_GNORM], SP[P_MARGIN], SP[P_VCAP]
+        nx, ny, k_excl = SI[I_NX], SI[I_NY], SI[I_KEXCL]
         inv_h = 1 / h
         if ti.static(bend_kind == "xpbd"):
             for c in ti.static(range(6)):
@@ -247,8 +252,10 @@ def _symplectic_contact_kernel(real_name, dim, grid, colliders, spring_damping, 
     @ti.kernel
     def substeps(x: vec_arr, v: vec_arr, xs: vec_arr, vs: vec_arr, Wp: vec_arr, dummy: work_arr, pinned: mask_arr,
                  P: real_arr, Tp: int_arr, coll: real2_arr, inv_mass: real_arr, nbr: i32_3, count: i32_2,
-                 excl_off: int_arr, excl_idx: int_arr, h: real, thick: real, g_norm: real, nx: ti.i32,
-                 k_excl: ti.i32, xb: vec_arr, spread: real2_arr, run: i32_1, margin: real, vcap: real, lim: i32_1):
+                 excl_off: int_arr, excl_idx: int_arr, xb: vec_arr, spread: real2_arr, run: i32_1, lim: i32_1,
+                 SP: real_arr, SI: int_arr):
+        h, thick, g_norm, margin, vcap = SP[P_H], SP[P_THICK], SP[P_GNORM], SP[P_MARGIN], SP[P_VCAP]
+        nx, k_excl = SI[I_NX], SI[I_KEXCL]
         inv_h = 1 / h
         # substep k acts on the copies with k < lim[b]; a copy whose lists go stale stops after its substep
         for k in ti.static(range(n_sub)):
@@ -356,8 +363,6 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
     sc_iters = 0 if self_collision is None else int(self_collision.iterations)
     post_needed = bend_kind == "xpbd" or strain_iters or sc_iters
     dtype = state.dtype
-    def real(value):  # a Python float holding the state dtype's value (quadrants caches launches on primitives)
-        return float(dtype.type(value))
     serial = loops == "serial" or (loops == "auto" and state.batch * model.n_particles <= SERIAL_MAX)
     pre, post = _kernels(dtype.name, model.dim, grid, bend_kind, strain_iters, sc_iters, len(model.colliders) > 0,
                          serial)
@@ -366,29 +371,30 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
     nx, ny = (bend.nx, bend.ny) if bend is not None else ((model.grid.nx, model.grid.ny) if grid else (1, 1))
     if grid:
         nx, ny = model.grid.nx, model.grid.ny
-    h = real(dt)
     pinned = state.pinned.view(np.uint8)
     contacts = contacts_for(self_collision, model, state) if sc_iters else None
     W = buffer("passes_work", state.x.shape, dtype)
-    eps = real(strain_limit.max_stretch if strain_limit is not None else 0.0)
-    thick = real(self_collision.thickness if self_collision is not None else 0.0)
-    g_norm = real(float(np.linalg.norm(model.gravity)))
+    eps = strain_limit.max_stretch if strain_limit is not None else 0.0
+    thick = self_collision.thickness if self_collision is not None else 0.0
     cap = None if self_collision is None else self_collision.max_separation_speed
-    vcap = real(0.0 if cap is None else cap)  # 0: no cap
+    vcap = 0.0 if cap is None else cap  # 0: no cap
     if contacts is not None:
         excl_off, excl_idx, k_excl = contacts.excl_off, contacts.excl_idx, contacts.k_excl
     else:
         excl_off, excl_idx, k_excl = _empty((2,)), _empty((1,)), 0
+    # the scalars, packed (selfcollision.pack_params; rounded to the dtype as scalar arguments were)
+    SP, SI = scm.pack_params(dtype, model.dim, h=dt, thick=thick, g_norm=float(np.linalg.norm(model.gravity)),
+                             vcap=vcap, eps=eps, nx=nx, ny=ny, k_excl=k_excl)
     if contacts is not None:
         contacts.ensure(state.x)
         nch = -(-model.n_particles // CHUNK)
         spread = buffer("passes_spread", (state.batch, 2 * model.dim * nch), dtype)
         run = buffer("passes_run", (state.batch,), np.int32)
-        margin = real(self_collision.query_margin * (1 - 1e-5))
+        SP[scm.P_MARGIN] = self_collision.query_margin * (1 - 1e-5)
         _pre2, fix = _kernels(dtype.name, model.dim, grid, None, 0, sc_iters, len(model.colliders) > 0, serial,
                               False)
     else:
-        spread, run, margin = np.zeros((1, 2), dtype), _empty((1,)), real(0)
+        spread, run = np.zeros((1, 2), dtype), _empty((1,))
     fuse = (method == "symplectic_euler" and contacts is not None and self_collision.path != "split"
             and bend_kind is None and not strain_iters)
     if fuse:
@@ -404,19 +410,18 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
             np.minimum(left, n_sub, out=lim, casting="unsafe")
             run[...] = 1
             kernel(state.x, state.v, xs, vs, W, dummy, pinned, data["params"], data["topo"], data["coll"],
-                   data["inv_mass"], contacts.nbr, contacts.count, excl_off, excl_idx, h, thick, g_norm, nx, k_excl,
-                   contacts.x_build, spread, run, margin, vcap, lim)
+                   data["inv_mass"], contacts.nbr, contacts.count, excl_off, excl_idx, contacts.x_build, spread, run,
+                   lim, SP, SI)
             if not run.all():  # stopped after their integration: rebuild, then their contacts (and colliders)
                 contacts.rebuild(state.x, np.flatnonzero(run == 0))
                 np.subtract(1, run, out=run)
                 fix(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], contacts.nbr,
-                    contacts.count, excl_off, excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl,
-                    contacts.x_build, spread, run, margin, vcap)
+                    contacts.count, excl_off, excl_idx, data["coll"], contacts.x_build, spread, run, SP, SI)
             left -= lim
         return
     for _ in range(int(substeps)):
         if bend_kind == "kick":
-            pre(state.x, state.v, pinned, data["inv_mass"], bp, h, nx, ny)
+            pre(state.x, state.v, pinned, data["inv_mass"], bp, SP, SI)
         advance_one()
         if not post_needed:
             continue
@@ -425,11 +430,10 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
         else:
             nbr, count, xb = _empty((1, 1, 1)), _empty((1, 1)), state.x
         post(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], nbr, count, excl_off,
-             excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl, xb, spread, run, margin, vcap)
+             excl_idx, data["coll"], xb, spread, run, SP, SI)
         if contacts is not None and not run.all():
             # some copies moved too far for their lists: rebuild theirs, then their contacts (and colliders) only
             contacts.rebuild(state.x, np.flatnonzero(run == 0))
             np.subtract(1, run, out=run)
             fix(state.x, state.v, W, pinned, data["inv_mass"], bp, data["topo"], data["rest"], contacts.nbr,
-                contacts.count, excl_off, excl_idx, data["coll"], h, eps, thick, g_norm, nx, ny, k_excl,
-                contacts.x_build, spread, run, margin, vcap)
+                contacts.count, excl_off, excl_idx, data["coll"], contacts.x_build, spread, run, SP, SI)

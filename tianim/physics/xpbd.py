@@ -561,11 +561,9 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
                                       serial, False)[1]
             nch = -(-model.n_particles // passes.CHUNK)
             spread = buffer("passes_spread", (state.batch, 2 * model.dim * nch), dtype)
-            real = dtype.type
             fix(state.x, state.v, W, pinned, data["inv_mass"], np.zeros(4, dtype), data["topo"], data["rest"],
-                contacts.nbr, contacts.count, contacts.excl_off, contacts.excl_idx, data["coll"], float(P[scm.P_H]),
-                float(real(0.0)), float(P[scm.P_THICK]), float(P[scm.P_GNORM]), nx, ny, contacts.k_excl,
-                contacts.x_build, spread, run, float(P[scm.P_MARGIN]), float(P[scm.P_VCAP]))
+                contacts.nbr, contacts.count, contacts.excl_off, contacts.excl_idx, data["coll"], contacts.x_build,
+                spread, run, P, I)
         left -= cs[:, scm.C_LIM]
 
 
