@@ -440,10 +440,10 @@ def rebuild_funcs(real_name: str, dim: int, grid: bool):
     -> ok``: copy b's candidate lists rebuilt inside a launch, serially in the copy: the same lists as
     :meth:`Contacts.rebuild` (the grid's cell ids and counting sort, :func:`tianim.kernels.grid.grid_funcs`,
     into the grid's own buffers; the radius query of :mod:`tianim.spatial` in sorted order, rows in cell
-    order; the excluded candidates left out as they are found, instead of a second pass), then ``xb[b] =
-    x[b]``. Returns 0 and changes no row or ``xb`` if a point of the copy lies outside the grid's box
-    (Python makes a new grid); returns 0 after writing the rows if one overflows the capacity K =
-    ``nbr.shape[2]`` (Python grows the rows); in both cases the caller stops the copy and
+    order; then each row's excluded hits left out, as the drop pass of :meth:`Contacts.rebuild`), then
+    ``xb[b] = x[b]``. Returns 0 and changes no row or ``xb`` if a point of the copy lies outside the grid's
+    box (Python makes a new grid); returns 0 after writing the rows if a row's hits (before the drop, as
+    Python's query counts them) overflow the capacity K = ``nbr.shape[2]`` (Python grows the rows); in both cases the caller stops the copy and
     :meth:`Contacts.rebuild` builds its lists as without this function. ``G``: :func:`grid_offsets`."""
     from tianim.kernels.grid import grid_funcs
 
@@ -486,33 +486,37 @@ def rebuild_funcs(real_name: str, dim: int, grid: bool):
                     for y in range(lo[1], hi[1] + 1):
                         k0, k1 = g.span(b, t, padh, y, z, lo, hi, dims, start)
                         for k in range(k0, k1):
+                            # branch-free (hits are unpredictable; as the grid's query): every candidate is
+                            # stored at slot m while the row has room, m advances only on a hit
                             d = xs[b, k] - p
-                            j = order[b, k]
-                            if ti.static(grid):
-                                # branch-free (hits are unpredictable; as the grid's query): every candidate is
-                                # stored at slot m while the row has room, m advances only on a kept one. j's
-                                # row floor((j + 1/2) / nx) in float64 is exact (1/(2 nx) from any integer,
-                                # far above the rounding), and cheaper than an integer division
-                                rj = ti.cast((ti.cast(j, ti.f64) + 0.5) * inv_nx, ti.i32)
-                                near = ti.cast(abs(ri - rj) <= k_excl, ti.i32) & ti.cast(
-                                    abs(ci - (j - rj * nx)) <= k_excl, ti.i32)
-                                keep = ti.cast(d.dot(d) <= r2, ti.i32) & ti.cast(k != s, ti.i32) & (1 - near)
-                                if m < cap:
-                                    nbr[b, i, m] = j
-                                m += keep
-                            else:
-                                if d.dot(d) <= r2 and k != s:
-                                    keep = True
-                                    for e in range(excl_off[i], excl_off[i + 1]):
-                                        if excl_idx[e] == j:
-                                            keep = False
-                                    if keep:
-                                        if m < cap:
-                                            nbr[b, i, m] = j
-                                        m += 1
-                count[b, i] = m
-                if m > cap:
+                            if m < cap:
+                                nbr[b, i, m] = order[b, k]
+                            m += ti.cast(d.dot(d) <= r2, ti.i32) & ti.cast(k != s, ti.i32)
+                if m > cap:  # the hits overflow the row (as Python's query reports it): Python grows the rows
                     ok = 0
+                m = ti.min(m, cap)
+                # then the excluded hits left out, the others kept in their order (Contacts.rebuild's drop)
+                w = 0
+                for q in range(m):
+                    j = nbr[b, i, q]
+                    if ti.static(grid):
+                        # j's row floor((j + 1/2) / nx) in float64 is exact (1/(2 nx) from any integer, far
+                        # above the rounding) and cheaper than an integer division; branch-free again
+                        rj = ti.cast((ti.cast(j, ti.f64) + 0.5) * inv_nx, ti.i32)
+                        near = ti.cast(abs(ri - rj) <= k_excl, ti.i32) & ti.cast(abs(ci - (j - rj * nx)) <= k_excl,
+                                                                                  ti.i32)
+                        nbr[b, i, w] = j
+                        w += 1 - near
+                    else:
+                        keep = True
+                        for e in range(excl_off[i], excl_off[i + 1]):
+                            if excl_idx[e] == j:
+                                keep = False
+                        if keep:
+                            nbr[b, i, w] = j
+                            w += 1
+                m = w
+                count[b, i] = m
             for i in range(n):
                 xb[b, i] = x[b, i]
         return ok
