@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 import tianim.physics as tp
-from tianim._ti import package_name
 
 THICKNESS = 0.016
 #: Stated tolerance: every non-neighbour pair stays at least THICKNESS * (1 - TOL) apart in every frame.
@@ -369,11 +368,6 @@ def test_xpbd_contact_launch_equals_the_two_launches(scene, iterations, sweeps, 
         start.x[1, :, 1] -= 0.3  # copy 1 starts near the ground: it folds onto itself sooner
     else:
         model, start = _coil_rope()
-    if package_name() == "quadrants":  # the fused XPBD launch is refused there (and "auto" splits)
-        sc = tp.SelfCollision(THICKNESS, path="fused")
-        with pytest.raises(ValueError, match="path='fused'"):
-            tp.XPBD(iterations=sweeps, self_collision=sc).step(model, start.copy(), 1e-3, 1)
-        return
     out = {}
     for path in ("fused", "split"):
         sc = tp.SelfCollision(THICKNESS, iterations=iterations, margin=0.004, max_separation_speed=cap, path=path,

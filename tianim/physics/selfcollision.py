@@ -94,9 +94,9 @@ class SelfCollision:
         substep inside the contact launch, :mod:`tianim.physics.passes`; XPBD on the per-copy layout: every
         substep of the call and its contacts in one launch, :func:`tianim.physics.xpbd.run_xpbd_contact`),
         ``"split"`` (the solver's substep launch, then the passes' launch, per substep); ``"auto"``: fused.
-        Bit-identical; other solvers, layouts and pass mixes always split. XPBD's fused launch runs on
-        taichi only: under ``TIANIM_BACKEND=quadrants`` "auto" splits and "fused" is refused (quadrants 1.3.3
-        ran it with missed list rebuilds; not yet understood).
+        Bit-identical; other solvers, layouts and pass mixes always split. (Quadrants 1.3.3 ran an earlier
+        form of XPBD's fused launch with missed list rebuilds, a copy's substep limit rewritten inside its
+        ``while`` loop; the launch now rebuilds in place and reads the limit once, and runs on both packages.)
     substeps_per_launch : int, optional
         Substeps per fused launch when its loops run in parallel (1 to 8; they are unrolled, so the
         compile time grows with it). Default: :data:`tianim.physics.passes.SC_SUBSTEPS_PER_LAUNCH`;

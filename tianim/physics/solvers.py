@@ -571,20 +571,11 @@ class XPBD(Solver):
         the call runs in one launch (:func:`tianim.physics.xpbd.run_xpbd_contact`, bit-identical)."""
         from tianim.physics.xpbd import choose_xpbd_layout
 
-        from tianim._ti import package_name
-
         sc = self.self_collision
         if sc is None or sc.path == "split" or self.strain_limit is not None or model.bending is not None:
             return False
         layout = choose_xpbd_layout(model, state.batch) if self.layout == "auto" else self.layout
-        if layout != "per_copy":
-            return False
-        if package_name() == "quadrants":  # its launch misses stale lists there (CI's quadrants pass: fewer
-            if sc.path == "fused":  # rebuilds, other bits); the split path is exact on both packages
-                raise ValueError("SelfCollision(path='fused') with XPBD runs on taichi only (under quadrants "
-                                 "it misses stale neighbour lists); use path='auto' or 'split'")
-            return False
-        return True
+        return layout == "per_copy"
 
     def _advance(self, model, state, dt, substeps):
         from tianim.physics.xpbd import run_xpbd
