@@ -388,8 +388,11 @@ def _excluded_func(grid: bool):
     def excluded(i, j, excl_off: T, excl_idx: T, k_excl, nx):
         out = False
         if ti.static(grid):
-            ri = i // nx
-            rj = j // nx
+            # rows floor((i + 1/2) / nx) in float64: exact (1/(2 nx) from any integer, far above the
+            # rounding) and cheaper than integer divisions (as rebuild_funcs)
+            inv_nx = 1.0 / ti.cast(nx, ti.f64)
+            ri = ti.cast((ti.cast(i, ti.f64) + 0.5) * inv_nx, ti.i32)
+            rj = ti.cast((ti.cast(j, ti.f64) + 0.5) * inv_nx, ti.i32)
             out = abs(ri - rj) <= k_excl and abs((i - ri * nx) - (j - rj * nx)) <= k_excl
         else:
             for e in range(excl_off[i], excl_off[i + 1]):
