@@ -354,7 +354,7 @@ def choose_xpbd_layout(model, batch: int) -> str:
 
 
 def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: str, buffer,
-             keep_remainder: bool = False, compensated: bool = False, lanes="auto") -> None:
+             keep_remainder: bool = False, compensated: bool = False, lanes=0) -> None:
     """Advance every copy of ``state`` by ``substeps`` XPBD substeps of ``dt`` [s], in place.
 
     The solver itself, without validation: use :class:`tianim.physics.solvers.XPBD` (which validates,
@@ -709,7 +709,7 @@ def _picker_kernel(real_name, dim, copy_substep, serial, lane=None):
 
 
 def run_xpbd_picker_frames(model, state, dt: float, substeps: int, iterations: int, frames: int, actions, pos, held,
-                           low, high, reach: float, move: float, buffer, lanes="auto"):
+                           low, high, reach: float, move: float, buffer, lanes=0):
     """``frames`` frames of SoftGym-style pickers and XPBD on every copy in one launch (per-copy layout, no
     per-substep passes): per frame the picker move of ``envs._softgym.Pickers.act`` (release, move clipped to
     the box, pick the nearest free particle within ``reach`` of the picker's position before the move, in
