@@ -25,6 +25,7 @@ def _cloth(n, damping):
                     pins="none", colliders=[tp.Ground(height=0.005, restitution=0.0, friction=0.75)])
 
 
+@pytest.mark.slow  # the lanes kernels compile for minutes (XPBD's lanes= docstring)
 @pytest.mark.parametrize("lanes", [4, 8])
 @pytest.mark.parametrize("damping", [0.0, 0.05])
 @pytest.mark.parametrize("batch", [1, 3])
@@ -45,8 +46,11 @@ def test_lanes_equal_scalar_sweep(lanes, damping, batch):
     assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
 
 
-def test_lanes_bad_count_is_refused():
+@pytest.mark.parametrize("lanes", [5, True, "8"])
+def test_lanes_bad_count_is_refused(lanes):
+    with pytest.raises(ValueError, match="lanes="):
+        tp.XPBD(lanes=lanes)
     model = _cloth(32, 0.0)
     s = model.state(batch=1, dtype=np.float32)
-    with pytest.raises(ValueError, match="lanes=5"):
-        run_xpbd(model, s, 0.0025, 1, 1, "per_copy", _buffer(), lanes=5)
+    with pytest.raises(ValueError, match="lanes="):
+        run_xpbd(model, s, 0.0025, 1, 1, "per_copy", _buffer(), lanes=lanes)

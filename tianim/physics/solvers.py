@@ -266,7 +266,7 @@ class _Explicit(Solver):
 
     def options(self) -> dict:
         opts = {"layout": self.layout}
-        if self.lanes != "auto":
+        if self.lanes != 0:
             opts["lanes"] = self.lanes
         return _with_passes(opts, self)
 
@@ -462,6 +462,14 @@ class XPBD(Solver):
         1.2-1.5x per substep, and results then depend in their last bits on how substeps are split
         over calls (the remainder starts from zero each call). Off keeps the papers' form, and the
         frozen env versions' bits.
+    lanes : 0, "auto", 4 or 8
+        0 (default): the scalar sweep. Otherwise the per-copy layout's substeps on SIMD lanes, L springs of
+        one colour at a time (:mod:`tianim.physics.xpbd_lanes`; "auto": the host's float32 width where the
+        model is a float32 3-D cloth grid whose rows cut into bands of a multiple of 4, else the scalar
+        sweep), in calls without per-substep passes and without ``compensated``. Bit-identical to the scalar
+        sweep (the six SoftGym envs' trajectories at fixed seeds, single and 3 copies, equal), but off by
+        default: its kernels compile for minutes on first use (ClothFlatten-v0 with "auto": 653 s, its
+        vector env 280 s more, against 15 s and 9 s scalar; then cached on disk).
 
     A model with bending gets one XPBD bending pass after each substep (:mod:`tianim.physics.bending`).
     With any of the three the call runs one substep per launch (:mod:`tianim.physics.passes`).
@@ -471,8 +479,11 @@ class XPBD(Solver):
     watched_energy = ("kinetic", "gravity")
 
     def __init__(self, iterations: int = 1, layout: str = "auto", watchdog=True, self_collision=None,
-                 strain_limit=None, compensated: bool = False):
+                 strain_limit=None, compensated: bool = False, lanes=0):
         super().__init__(watchdog)
+        from tianim.physics.xpbd_lanes import check_lanes
+
+        self.lanes = check_lanes(lanes)
         self.iterations = check_positive_int("iterations", iterations)
         self.layout = check_choice("layout", layout, XPBD_LAYOUTS)
         if not isinstance(compensated, (bool, np.bool_)):
@@ -486,6 +497,8 @@ class XPBD(Solver):
         opts = {"iterations": self.iterations, "layout": self.layout}
         if self.compensated:
             opts["compensated"] = True
+        if self.lanes != 0:
+            opts["lanes"] = self.lanes
         return _with_passes(opts, self)
 
     def can_step_picker_frames(self, model, state) -> bool:
@@ -535,7 +548,8 @@ class XPBD(Solver):
         frames = check_positive_int("frames", frames)
         check_state(model, state)
         xa, va, pa, xp, vp = run_xpbd_picker_frames(model, state, dt, substeps, self.iterations, frames, actions,
-                                                    pos, held, low, high, reach, move, self._buffer)
+                                                    pos, held, low, high, reach, move, self._buffer,
+                                                    lanes=self.lanes)
         wd, terms = self.watchdog, self.watched_energy
         diverged = np.zeros(state.batch, dtype=bool)
         if wd is None:  # as step() without a watchdog: non-finite results raise (and are not rolled back)
@@ -584,7 +598,7 @@ class XPBD(Solver):
             raise ValueError("layout='parallel' needs a cloth grid model; use 'auto' or 'per_copy'")
         if not has_passes(model, self.self_collision, self.strain_limit):
             run_xpbd(model, state, dt, substeps, self.iterations, self.layout, self._buffer,
-                     compensated=self.compensated)
+                     compensated=self.compensated, lanes=self.lanes)
             return
         if self.self_collision is not None:
             check_sc_model(self.self_collision, model)

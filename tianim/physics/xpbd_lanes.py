@@ -54,14 +54,22 @@ def supports(model, L: int) -> bool:
     return g is not None and model.dim == 3 and L in LANE_CHOICES and g.ny % L == 0 and (g.ny // L) % 4 == 0
 
 
+def check_lanes(lanes):
+    """``lanes`` checked: "auto", 0 (the scalar sweep) or one of :data:`LANE_CHOICES`."""
+    if isinstance(lanes, str) and lanes == "auto":
+        return lanes
+    if isinstance(lanes, (bool, np.bool_)) or not isinstance(lanes, (int, np.integer)) or \
+            (lanes != 0 and lanes not in LANE_CHOICES):
+        raise ValueError(f"lanes={lanes!r} must be 'auto', 0 (scalar) or one of {LANE_CHOICES}")
+    return int(lanes)
+
+
 def lanes_for(model, dtype, lanes="auto") -> int:
     """Lanes of this layout for ``model`` and ``dtype``: ``lanes`` when a count (checked), "auto": the host's
     float32 register width (:func:`tianim.physics.lanes.host_lanes`, at most 8) where :func:`supports`
     holds, halved to 4 if not; 0 (the scalar layout) for float64 or a grid that fits neither."""
-    if not (isinstance(lanes, str) and lanes == "auto"):
-        if isinstance(lanes, (bool, np.bool_)) or not isinstance(lanes, (int, np.integer)) or \
-                (lanes != 0 and lanes not in LANE_CHOICES):
-            raise ValueError(f"lanes={lanes!r} must be 'auto', 0 (scalar) or one of {LANE_CHOICES}")
+    lanes = check_lanes(lanes)
+    if lanes != "auto":
         if lanes and not (np.dtype(dtype) == np.float32 and supports(model, int(lanes))):
             raise ValueError(f"lanes={lanes!r} needs a float32 3-D cloth grid whose rows cut into {lanes} bands of a "
                              f"multiple of 4 rows; use lanes='auto' or 0")
