@@ -46,6 +46,7 @@ def test_lanes_equal_scalar_sweep(lanes, damping, batch):
 
 @pytest.mark.parametrize("lanes", [5, True, "8"])
 def test_lanes_bad_count_is_refused(lanes):
+    assert tp.XPBD(lanes=8).options()["lanes"] == 8 and "lanes" not in tp.XPBD().options()
     with pytest.raises(ValueError, match="lanes="):
         tp.XPBD(lanes=lanes)
     model = _cloth(32, 0.0)

@@ -266,7 +266,7 @@ class _Explicit(Solver):
 
     def options(self) -> dict:
         opts = {"layout": self.layout}
-        if self.lanes != 0:
+        if self.lanes != "auto":
             opts["lanes"] = self.lanes
         return _with_passes(opts, self)
 
