@@ -166,6 +166,8 @@ class ORCA(PedestrianModel):
             state.ticks += chunk
             for _ in range(chunk):  # step by step: the same times for any chunking
                 state.t += dt
+            # the next launch's start times and step counts (packed copies of state.t and state.ticks)
+            pack_grid(geom, dims, grid_geom, grid_dims, (self.neighbour_dist, state.t), (state.ticks,))
         return {}
 
 
