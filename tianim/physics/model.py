@@ -40,6 +40,21 @@ GRID_STENCIL = (
     (1, 1, 1), (-1, -1, 1), (1, -1, 1), (-1, 1, 1),
     (2, 0, 2), (-2, 0, 2), (0, 2, 2), (0, -2, 2),
 )
+#: Stencil offsets each grid particle owns (the "forward" half: d_col > 0, or d_col = 0 and d_row > 0), so
+#: that every spring is visited once (XPBD's sweeps, the energy kernel).
+GRID_FORWARD = tuple(o for o, (dc, dr, _) in enumerate(GRID_STENCIL) if dc > 0 or (dc == 0 and dr > 0))
+#: Colours of the grid springs, springs of one colour sharing no particle: (forward direction index, parity).
+GRID_COLOURS = 2 * len(GRID_FORWARD)
+
+
+def grid_colour_geometry(c: int):
+    """(o, dc, dr, a, vertical, parity) of spring colour ``c`` (0 .. GRID_COLOURS - 1): forward stencil offset
+    o = (dc, dr), a = |dr| if ``vertical`` (dc = 0) else |dc|; its springs start at the particles whose
+    (col // a) (or (row // a) when ``vertical``) has this parity (:mod:`tianim.physics.xpbd`, "Sweep order")."""
+    o = GRID_FORWARD[c // 2]
+    dc, dr, _ = GRID_STENCIL[o]
+    vertical = dc == 0
+    return o, dc, dr, abs(dr) if vertical else abs(dc), vertical, c % 2
 
 
 @dataclass(frozen=True)

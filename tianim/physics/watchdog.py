@@ -37,7 +37,7 @@ import weakref
 
 import numpy as np
 
-from tianim.physics.model import GRID_STENCIL
+from tianim.physics.model import GRID_FORWARD
 from tianim.kernels import cached_variants, kernel_types
 from tianim.stepping import DivergenceError  # noqa: F401  (the one divergence error, re-exported here)
 
@@ -49,7 +49,7 @@ ON_DIVERGENCE = ("raise", "rollback")
 #: Energy terms a solver can watch (columns of :func:`fast_energy`).
 TERMS = {"kinetic": 0, "spring": 1, "gravity": 2}
 
-_FORWARD = tuple(o for o, (dc, dr, _) in enumerate(GRID_STENCIL) if dc > 0 or (dc == 0 and dr > 0))
+
 @cached_variants
 def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool, springs: bool = True):
     t = kernel_types(real_name, dim)
@@ -79,7 +79,7 @@ def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool, springs: 
                 for i in range(n):
                     row = i // nx
                     col = i - row * nx
-                    for o in ti.static(_FORWARD):
+                    for o in ti.static(GRID_FORWARD):
                         cc = col + off[2 * o]
                         rr = row + off[2 * o + 1]
                         if 0 <= cc < nx and 0 <= rr < n // nx:

@@ -82,16 +82,13 @@ import numpy as np
 
 from tianim.kernels.contact import contact_response
 from tianim.physics import passes
-from tianim.physics.model import GRID_STENCIL
+from tianim.physics.model import GRID_COLOURS as N_COLOURS, GRID_FORWARD as FORWARD
+from tianim.physics.model import grid_colour_geometry as colour_geometry
 from tianim.physics.selfcollision import contact_update_funcs, contacts_for
 from tianim.physics.xpbd_lanes import lane_funcs
 from tianim.physics import xpbd_lanes
 from tianim.kernels import cached_variants, kernel_types
 
-#: Stencil offsets each grid particle owns (the "forward" half: each spring once).
-FORWARD = tuple(o for o, (dc, dr, _) in enumerate(GRID_STENCIL) if dc > 0 or (dc == 0 and dr > 0))
-#: Colours of the grid springs: (forward direction index, parity).
-N_COLOURS = 2 * len(FORWARD)
 #: On a GPU, grids with at least this many particles (per copy) run the per-particle parallel layout.
 #: On the CPU the per-copy layout is used: measured on 2 cores, a 64x64 stiff cloth at 20 substeps took
 #: 22 ms/frame per copy against 65 ms/frame parallel (24 parallel loops per substep cost more than they save).
@@ -172,14 +169,6 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
             v[b, i] = dx[b, i] / h
             if ti.static(colliders):
                 x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, g_norm, h)
-
-    def colour_geometry(c):
-        """Compile-time (o, dc, dr, a, vertical, parity) of colour c: forward stencil offset o = (dc, dr);
-        springs start at particles whose (col // a) (or (row // a) when ``vertical``) has this parity."""
-        o = FORWARD[c // 2]
-        dc, dr, _ = GRID_STENCIL[o]
-        vertical = dc == 0
-        return o, dc, dr, abs(dr) if vertical else abs(dc), vertical, c % 2
 
     @ti.func
     def colour_count(c: ti.template(), n, nx):

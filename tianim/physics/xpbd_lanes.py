@@ -31,11 +31,9 @@ import numpy as np
 from tianim import _ti
 from tianim.kernels import cached_variants, kernel_types
 from tianim.kernels.contact import contact_response
-from tianim.physics.model import GRID_STENCIL
+from tianim.physics.model import GRID_COLOURS as N_COLOURS, GRID_FORWARD as FORWARD
+from tianim.physics.model import grid_colour_geometry as colour_geometry
 
-#: Stencil offsets each grid particle owns (the "forward" half), as :data:`tianim.physics.xpbd.FORWARD`.
-FORWARD = tuple(o for o, (dc, dr, _) in enumerate(GRID_STENCIL) if dc > 0 or (dc == 0 and dr > 0))
-N_COLOURS = 2 * len(FORWARD)
 #: Rows of the pool per pack (named offsets; dim = 3): positions, velocities, substep displacements
 #: (3 rows each), W (inverse mass, 0 where pinned), inverse mass, free (1) / pinned (0), then one
 #: multiplier row per forward direction.
@@ -191,13 +189,6 @@ def lane_funcs(real_name, L, spring_damping, medium_damping, colliders):
                 S[ROW_DX + a, q][lj] = ej[a] - cj[a]
                 S[ROW_X + a, p][li] = xi[a] + ci[a]
                 S[ROW_X + a, q][lj] = xj[a] - cj[a]
-
-    def colour_geometry(c):
-        """As ``colour_geometry`` of :mod:`tianim.physics.xpbd`: (o, dc, dr, a, vertical, parity)."""
-        o = FORWARD[c // 2]
-        dc, dr, _ = GRID_STENCIL[o]
-        vertical = dc == 0
-        return o, dc, dr, abs(dr) if vertical else abs(dc), vertical, c % 2
 
     @ti.func
     def pair(S: T, base, r, col, rr, cc, dr: ti.template(), lrow, kh2, rl, ch, nx, H):
