@@ -24,6 +24,12 @@ the same order (the papers' positions, not ``compensated``): results are bit-ide
 per-copy layout, for any thread count and batch (tested). ``pinned`` and ``inv_mass`` enter as the
 packed ``W = select(pinned == 0, inv_mass, 0)`` (the scalar code's value) and a free mask; the
 multipliers live with the start particle of their spring, one row per forward stencil direction.
+
+Compile size. The colour is a runtime value (its geometry read from a 6-way branch, ``a`` as a shift), so
+one copy of the sweep code serves the 12 colours of both sweep directions: with the colour a compile-time
+constant, each of the 24 colour visits of a substep was its own inlined copy of the vector and lane-edge
+spring code, and the kernels of one env took minutes to compile (a 32x32 cloth's run, 8 lanes: 278 s cold;
+now 11.5 s, 4 lanes 71 -> 3.6 s; same bits).
 """
 
 import numpy as np
@@ -191,37 +197,54 @@ def lane_funcs(real_name, L, spring_damping, medium_damping, colliders):
                 S[ROW_X + a, q][lj] = xj[a] - cj[a]
 
     @ti.func
-    def pair(S: T, base, r, col, rr, cc, dr: ti.template(), lrow, kh2, rl, ch, nx, H):
+    def pair(S: T, base, r, col, rr, cc, dr, lrow, kh2, rl, ch, nx, H):
         """The springs from pack (r, col) to (rr, cc) = (r + dr, col + dc), col and cc inside the grid."""
         p = base + r * nx + col
         if 0 <= rr < H:
             vspring(S, p, base + rr * nx + cc, lrow, kh2, rl, ch)
-        else:
-            if ti.static(dr > 0):  # rr >= H: lane l + 1 of band row rr - H (none beyond the last lane)
-                for l in ti.static(range(L - 1)):
-                    lspring(S, p, l, base + (rr - H) * nx + cc, l + 1, lrow, kh2, rl, ch)
-            if ti.static(dr < 0):  # rr < 0: lane l - 1 of band row rr + H
-                for l in ti.static(range(1, L)):
-                    lspring(S, p, l, base + (rr + H) * nx + cc, l - 1, lrow, kh2, rl, ch)
+        elif dr > 0:  # rr >= H: lane l + 1 of band row rr - H (none beyond the last lane)
+            for l in ti.static(range(L - 1)):
+                lspring(S, p, l, base + (rr - H) * nx + cc, l + 1, lrow, kh2, rl, ch)
+        else:  # rr < 0: lane l - 1 of band row rr + H
+            for l in ti.static(range(1, L)):
+                lspring(S, p, l, base + (rr + H) * nx + cc, l - 1, lrow, kh2, rl, ch)
 
     @ti.func
-    def colour(S: T, base, c: ti.template(), k: T, rest: T, damp: T, h, nx, H):
-        """Every spring of colour c of the copy at packs base.. (``grid_colour_rows``' springs)."""
-        o, dc, dr, a, vertical, parity = ti.static(colour_geometry(c))
+    def geometry(c):
+        """:func:`~tianim.physics.model.grid_colour_geometry` of a runtime colour c: (o, dc, dr, a - 1,
+        vertical, parity), a - 1 as a shift (a is 1 or 2)."""
+        o, dc, dr, sh, vertical = 0, 0, 0, 0, 0
+        for f in ti.static(range(nf)):
+            if c // 2 == f:
+                go, gdc, gdr, ga, gv, _p = ti.static(colour_geometry(2 * f))
+                o, dc, dr, sh, vertical = go, gdc, gdr, ga - 1, int(gv)
+        return o, dc, dr, sh, vertical, c % 2
+
+    @ti.func
+    def colour(S: T, base, c, k: T, rest: T, damp: T, h, nx, H):
+        """Every spring of colour c (a runtime value: one copy of this code serves the 12 colours) of the copy
+        at packs base.. (``grid_colour_rows``' springs). A colour's springs share no particle, so the visiting
+        order inside it does not change a bit; the geometry's a (1 or 2) enters as the shift sh = a - 1."""
+        o, dc, dr, sh, vertical, parity = geometry(c)
+        a = 1 << sh
         kh2 = k[o] * h * h
         rl = rest[o]
         ch = damp[o] * h
         lrow = ROW_LAM + c // 2
-        if ti.static(vertical):
-            for t in range(((H + 2 * a - 1) // (2 * a)) * a):
-                r = 2 * a * (t // a) + a * parity + t % a
-                if r < H:
-                    for col in range(nx):
-                        pair(S, base, r, col, r + dr, col, dr, lrow, kh2, rl, ch, nx, H)
-        else:
-            for r in range(H):
-                for t in range(((nx + 2 * a - 1) // (2 * a)) * a):
-                    col = 2 * a * (t // a) + a * parity + t % a
+        n_outer = H  # horizontal colours: every band row, the colour's columns
+        n_inner = (((nx + 2 * a - 1) >> (sh + 1)) << sh)
+        if vertical:  # vertical colours: the colour's band rows, every column
+            n_outer = (((H + 2 * a - 1) >> (sh + 1)) << sh)
+            n_inner = nx
+        for t in range(n_outer):
+            r = t
+            if vertical:
+                r = ((t >> sh) << (sh + 1)) + (parity << sh) + (t & (a - 1))
+            if r < H:
+                for u in range(n_inner):
+                    col = u
+                    if not vertical:
+                        col = ((u >> sh) << (sh + 1)) + (parity << sh) + (u & (a - 1))
                     cc = col + dc
                     if col < nx and 0 <= cc < nx:
                         pair(S, base, r, col, r + dr, cc, dr, lrow, kh2, rl, ch, nx, H)
@@ -244,13 +267,10 @@ def lane_funcs(real_name, L, spring_damping, medium_damping, colliders):
                 S[ROW_X + a, p] = S[ROW_X + a, p] + e
             for f in ti.static(range(nf)):
                 S[ROW_LAM + f, p] = ti.Vector.zero(real, L)
-        for sweep in range(2 * iters):
-            if sweep % 2 == 0:
-                for c in ti.static(range(N_COLOURS)):
-                    colour(S, base, c, k, rest, damp, h, nx, H)
-            else:
-                for c in ti.static(tuple(reversed(range(N_COLOURS)))):
-                    colour(S, base, c, k, rest, damp, h, nx, H)
+        for sweep in range(2 * iters):  # symmetric sweeps: colours 0..11, then 11..0
+            for ci in range(N_COLOURS):
+                c = ci if sweep % 2 == 0 else N_COLOURS - 1 - ci
+                colour(S, base, c, k, rest, damp, h, nx, H)
         for q in range(H * nx):  # finish: v = dx / h and the colliders, free particles only
             p = base + q
             free = S[ROW_FREE, p] != 0
