@@ -201,38 +201,50 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
             project(b, i, rr * nx + cc, o, i * nf + c // 2, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h)
 
     @ti.func
-    def grid_colour_rows(b, c: ti.template(), x: T, dx: T, rem: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T,
-                         damp: T, h, nx):
+    def geometry(c):
+        """:func:`~tianim.physics.model.grid_colour_geometry` of a runtime colour c: (o, dc, dr, a - 1,
+        vertical, parity), a - 1 as a shift (a is 1 or 2)."""
+        o, dc, dr, sh, vertical = 0, 0, 0, 0, 0
+        for f in ti.static(range(nf)):
+            if c // 2 == f:
+                go, gdc, gdr, ga, gv, _p = ti.static(colour_geometry(2 * f))
+                o, dc, dr, sh, vertical = go, gdc, gdr, ga - 1, int(gv)
+        return o, dc, dr, sh, vertical, c % 2
+
+    @ti.func
+    def grid_colour_rows(b, c, x: T, dx: T, rem: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T, damp: T, h, nx):
         """Every spring of colour c of copy b, row by row and column by column (the per-copy layout).
 
         The same springs as ``grid_colour`` over ``m in range(colour_count(c))``, visited in row-major
-        order of their start particle, without a runtime integer division per spring. Springs of one
-        colour share no particle, so the visiting order inside a colour does not change a bit."""
-        o, dc, dr, a, vertical, parity = ti.static(colour_geometry(c))
+        order of their start particle, without a runtime integer division per spring (a, 1 or 2, enters
+        as the shift sh = a - 1). Springs of one colour share no particle, so the visiting order inside a
+        colour does not change a bit. c is a runtime value: one copy of this code serves the 24 colour
+        visits of a substep (a compile-time c inlined 24 copies of ``project`` per substep)."""
+        o, dc, dr, sh, vertical, parity = geometry(c)
+        a = 1 << sh
         n = x.shape[1]
         ny = n // nx
-        if ti.static(vertical):
-            for t in range(((ny + 2 * a - 1) // (2 * a)) * a):
-                row = 2 * a * (t // a) + a * parity + t % a
-                rr = row + dr
-                if row < ny and 0 <= rr < ny:
-                    for col in range(nx):
-                        cc = col + dc
-                        if 0 <= cc < nx:
-                            i = row * nx + col
-                            project(b, i, rr * nx + cc, o, i * nf + c // 2, x, dx, rem, lam, pinned, inv_mass, k,
-                                    rest, damp, h)
-        else:
-            for row in range(ny):
-                rr = row + dr
-                if 0 <= rr < ny:
-                    for t in range(((nx + 2 * a - 1) // (2 * a)) * a):
-                        col = 2 * a * (t // a) + a * parity + t % a
-                        cc = col + dc
-                        if col < nx and 0 <= cc < nx:
-                            i = row * nx + col
-                            project(b, i, rr * nx + cc, o, i * nf + c // 2, x, dx, rem, lam, pinned, inv_mass, k,
-                                    rest, damp, h)
+        n_outer = ny  # horizontal colours: every row, the colour's columns
+        n_inner = ((nx + 2 * a - 1) >> (sh + 1)) << sh
+        if vertical:  # vertical colours: the colour's rows, every column
+            n_outer = ((ny + 2 * a - 1) >> (sh + 1)) << sh
+            n_inner = nx
+        lo = c // 2
+        for t in range(n_outer):
+            row = t
+            if vertical:
+                row = ((t >> sh) << (sh + 1)) + (parity << sh) + (t & (a - 1))
+            rr = row + dr
+            if row < ny and 0 <= rr < ny:
+                for u in range(n_inner):
+                    col = u
+                    if not vertical:
+                        col = ((u >> sh) << (sh + 1)) + (parity << sh) + (u & (a - 1))
+                    cc = col + dc
+                    if col < nx and 0 <= cc < nx:
+                        i = row * nx + col
+                        project(b, i, rr * nx + cc, o, i * nf + lo, x, dx, rem, lam, pinned, inv_mass, k, rest,
+                                damp, h)
 
     def sweep_order(sweeps):
         """Compile-time colour order of ``sweeps`` symmetric sweeps."""
@@ -249,12 +261,9 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
             lam[b, li] = 0
         for sweep in range(2 * iters):
             if ti.static(grid):
-                if sweep % 2 == 0:
-                    for c in ti.static(range(N_COLOURS)):
-                        grid_colour_rows(b, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
-                else:
-                    for c in ti.static(tuple(reversed(range(N_COLOURS)))):
-                        grid_colour_rows(b, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
+                for ci in range(N_COLOURS):  # symmetric sweeps: colours 0..11, then 11..0
+                    c = ci if sweep % 2 == 0 else N_COLOURS - 1 - ci
+                    grid_colour_rows(b, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
             else:
                 for ss in range(n_springs):
                     s = ss if sweep % 2 == 0 else n_springs - 1 - ss
