@@ -18,10 +18,12 @@ from tianim.physics.model import Ground, GridTopology, Model, Sphere
 from tianim.physics.selfcollision import SelfCollision
 from tianim.physics.strain import StrainLimit
 from tianim.physics.planner import StepPlan, omega_max, plan_steps
-from tianim.physics.solvers import (
-    EXPLICIT_METHODS, METHODS, RK4, SOLVERS, STIFF_METHODS, ExplicitEuler, ImplicitEuler, Solver, StepStats,
-    SymplecticEuler, VelocityVerlet, XPBD, accelerations, choose_layout, make_solver, stable_dt, step,
-)
+from tianim.physics.solver_base import Solver
+from tianim.physics.explicit import RK4, ExplicitEuler, SymplecticEuler, VelocityVerlet, accelerations, choose_layout
+from tianim.physics.implicit_solver import ImplicitEuler
+from tianim.physics.xpbd_solver import XPBD
+from tianim.physics.solvers import EXPLICIT_METHODS, METHODS, SOLVERS, STIFF_METHODS, make_solver, stable_dt, step
+from tianim.stepping import StepStats
 from tianim.physics.watchdog import DivergenceError, Watchdog
 
 __all__ = [

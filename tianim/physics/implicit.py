@@ -272,7 +272,7 @@ def _kernel(real_name, dim, grid, spring_damping, medium_damping, colliders):
 def run_implicit_euler(model, state, dt: float, substeps: int, options: dict, buffer) -> dict:
     """Advance every copy of ``state`` by ``substeps`` backward Euler steps of ``dt`` [s], in place.
 
-    The solver itself, without validation: use :class:`tianim.physics.solvers.ImplicitEuler` (which
+    The solver itself, without validation: use :class:`tianim.physics.implicit_solver.ImplicitEuler` (which
     validates, watches for divergence and advances ``state.t``).
 
     Parameters

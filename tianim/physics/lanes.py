@@ -408,7 +408,7 @@ PATHS = ("auto", "serial", "parallel")
 
 def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto", lanes="auto") -> None:
     """Advance ``state`` by ``substeps`` symplectic Euler steps of ``dt`` in the lanes layout
-    (no validation: :func:`tianim.physics.solvers.launch` is the caller). ``data`` is
+    (no validation: :func:`tianim.physics.explicit.launch` is the caller). ``data`` is
     ``model.kernel_data(state.dtype)``. ``path``: ``"serial"`` (one thread, the whole call in one
     launch), ``"parallel"`` (parallel loops, :data:`SUBSTEPS_PER_LAUNCH` substeps per launch) or
     ``"auto"`` (serial up to :data:`SERIAL_MAX_PARTICLES` batch x padded grid). ``lanes``: particles per

@@ -8,7 +8,7 @@ the mass-weighted stiffness ``M^-1/2 K M^-1/2`` linearised at the given position
 particles removed, per-spring blocks ``k [n n^T + max(0, 1 - l/L)(I - n n^T)]``, Baraff &
 Witkin 1998 eq. 8-9); it converges from below and is capped by the rigorous bound
 :func:`tianim.physics.theory.omega_bound`. Stability uses the rigorous limit of each solver
-(:meth:`Solver.stable_dt <tianim.physics.solvers.Solver.stable_dt>`, never above the true
+(:meth:`Solver.stable_dt <tianim.physics.solver_base.Solver.stable_dt>`, never above the true
 limit) times ``safety``.
 
 Accuracy. The error of a method on a linear mode of frequency omega after one frame is, from its
@@ -31,7 +31,8 @@ import numpy as np
 
 from tianim._checks import check_finite_scalar, check_positive_int
 from tianim.physics import theory
-from tianim.physics.solvers import METHODS, SOLVERS, STIFF_METHODS, Solver, make_solver
+from tianim.physics.solver_base import Solver
+from tianim.physics.solvers import METHODS, SOLVERS, STIFF_METHODS, make_solver
 
 #: Fraction of the stability limit that :func:`plan_steps` uses.
 SAFETY = 0.8

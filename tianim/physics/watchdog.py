@@ -5,7 +5,7 @@ turned off. A blow-up is
 
 * non-finite positions or velocities (NaN-safe: every comparison is written so that NaN fails it), or
 * energy that the solver created: the watched energy ``E`` (the solver's
-  :attr:`~tianim.physics.solvers.Solver.watched_energy`: kinetic + spring + gravity for the
+  :attr:`~tianim.physics.solver_base.Solver.watched_energy`: kinetic + spring + gravity for the
   explicit methods; kinetic + gravity for XPBD and backward Euler, whose unconverged
   stiff constraints carry no physical spring energy) is compared **against the scene, not
   against the call**. Per copy the watchdog keeps
@@ -188,7 +188,7 @@ class _Memory:
 
 
 class Watchdog:
-    """Watches :meth:`Solver.step <tianim.physics.solvers.Solver.step>` calls for blow-ups (module docstring).
+    """Watches :meth:`Solver.step <tianim.physics.solver_base.Solver.step>` calls for blow-ups (module docstring).
 
     Parameters
     ----------
