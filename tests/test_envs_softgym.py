@@ -469,16 +469,16 @@ def test_one_launch_action_repeat_equals_the_frame_loop(env_id):
 
 def _faulty_frames(fault):
     """``run_xpbd_picker_frames`` with ``fault(xa, va, pa, xp, vp)`` applied to the frames it kept."""
-    import tianim.physics.xpbd as xpbd
+    import tianim.physics.xpbd_picker as picker
 
-    frames = xpbd.run_xpbd_picker_frames
+    frames = picker.run_xpbd_picker_frames
 
     def faulty(*args, **kwargs):
         out = frames(*args, **kwargs)
         fault(*out)
         return out
 
-    return xpbd, frames, faulty
+    return picker, frames, faulty
 
 
 def test_one_launch_nan_in_a_frame_ends_that_copy_as_the_frame_loop():
@@ -506,8 +506,8 @@ def test_one_launch_nan_in_a_frame_ends_that_copy_as_the_frame_loop():
             xp[4, 1, 7] = np.nan
 
     lsim.solver._advance = nan_advance
-    xpbd, frames, faulty = _faulty_frames(nan_frame)
-    xpbd.run_xpbd_picker_frames = faulty
+    picker, frames, faulty = _faulty_frames(nan_frame)
+    picker.run_xpbd_picker_frames = faulty
     try:
         start, _ = fused.reset(seed=3)
         loop.reset(seed=3)
@@ -515,7 +515,7 @@ def test_one_launch_nan_in_a_frame_ends_that_copy_as_the_frame_loop():
         obs, r, term, _, info = fused.step(acts[0])
         obs_l, r_l, term_l, _, _ = loop.step(acts[0])
     finally:
-        xpbd.run_xpbd_picker_frames = frames
+        picker.run_xpbd_picker_frames = frames
     assert term.tolist() == [False, True, False] and np.array_equal(term, term_l)
     assert np.array_equal(obs, obs_l) and np.array_equal(r, r_l) and np.array_equal(obs[1], start[1])
     mf, ml = fsim.solver.watchdog._memory[fsim.state], lsim.solver.watchdog._memory[lsim.state]
@@ -543,8 +543,8 @@ def test_one_launch_energy_the_solver_creates_ends_that_copy_alone():
             if f + 1 < xp.shape[0]:
                 va[f + 1, 1, :, 1] += np.float32(3.0 * (f + 1)) * ~pa[f + 1, 1]
 
-    xpbd, frames, faulty = _faulty_frames(speed_up)
-    xpbd.run_xpbd_picker_frames = faulty
+    picker, frames, faulty = _faulty_frames(speed_up)
+    picker.run_xpbd_picker_frames = faulty
     try:
         start, _ = faulty_env.reset(seed=3)
         calm_obs, _ = calm.reset(seed=3)
@@ -552,15 +552,15 @@ def test_one_launch_energy_the_solver_creates_ends_that_copy_alone():
         for t in range(6):
             before = faulty_env.unwrapped._sim.observe().copy()
             obs, r, term, _, info = faulty_env.step(acts[t])
-            xpbd.run_xpbd_picker_frames = frames
+            picker.run_xpbd_picker_frames = frames
             obs_c, r_c, term_c, _, _ = calm.step(acts[t])
-            xpbd.run_xpbd_picker_frames = faulty
+            picker.run_xpbd_picker_frames = faulty
             assert not term[[0, 2]].any() and not term_c.any()
             assert np.array_equal(obs[[0, 2]], obs_c[[0, 2]]) and np.array_equal(r[[0, 2]], r_c[[0, 2]])
             if term[1]:
                 break
     finally:
-        xpbd.run_xpbd_picker_frames = frames
+        picker.run_xpbd_picker_frames = frames
     assert term[1] and info["diverged"][1] and np.array_equal(obs[1], before[1])  # back to where its step began
 
 

@@ -28,7 +28,7 @@ In a batch only the stale copies are rebuilt (:meth:`Contacts.rebuild`), so each
 when they would if it ran alone. Each build drops the excluded candidates from the rows: on a flat cloth
 every particle within the query radius is a topological neighbour, and the sweeps then test none of them;
 the rows never hold an excluded pair, so the sweeps do not test for one. XPBD's one-launch path
-(:func:`tianim.physics.xpbd.run_xpbd_contact`) rebuilds a stale copy's lists inside its launch
+(:func:`tianim.physics.xpbd_contact.run_xpbd_contact`) rebuilds a stale copy's lists inside its launch
 (:func:`rebuild_funcs`: the same lists, the excluded candidates left out as they are found), so a call
 runs in one launch however often its lists go stale; it hands a rebuild to Python only when a point left
 the grid's box or a row overflows. The margin and the rebuild schedule change no result (below): the
@@ -92,7 +92,7 @@ class SelfCollision:
     path : {"auto", "fused", "split"}
         How symplectic Euler and XPBD run with self-collision alone: ``"fused"`` (symplectic Euler: its
         substep inside the contact launch, :mod:`tianim.physics.passes`; XPBD on the per-copy layout: every
-        substep of the call and its contacts in one launch, :func:`tianim.physics.xpbd.run_xpbd_contact`),
+        substep of the call and its contacts in one launch, :func:`tianim.physics.xpbd_contact.run_xpbd_contact`),
         ``"split"`` (the solver's substep launch, then the passes' launch, per substep); ``"auto"``: fused.
         Bit-identical; other solvers, layouts and pass mixes always split. (Quadrants 1.3.3 ran an earlier
         form of XPBD's fused launch with missed list rebuilds, a copy's substep limit rewritten inside its
@@ -337,7 +337,7 @@ class Contacts:
 
 
 # Packed parameters of the contact launches (docs/architecture.md, "One argument convention"): the
-# passes' kernels (tianim.physics.passes) and XPBD's contact launch (tianim.physics.xpbd) take their scalars
+# passes' kernels (tianim.physics.passes) and XPBD's contact launch (tianim.physics.xpbd_contact) take their scalars
 # in one real array (the state's dtype) and one int32 array with these offsets, written by pack_params.
 #: Real parameters: substep h [s], thickness [m], |g| [m/s^2], margin^2 test value [m], separation-speed cap
 #: [m/s] (0: none), strain limit eps, medium damping rho [1/s], gravity g (D entries from P_G).

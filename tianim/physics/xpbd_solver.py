@@ -107,7 +107,7 @@ class XPBD(Solver):
         release, move by ``move`` [m] x (dx, dy, dz) clipped to ``low .. high``, pick the nearest free particle
         within ``reach`` [m], carry the held particles as pins at rest) followed by :meth:`step`, and the same
         watchdog: its checks run per frame afterwards, on the states the launch kept
-        (:func:`tianim.physics.xpbd.run_xpbd_picker_frames`). One difference: a copy that diverges in a frame
+        (:func:`tianim.physics.xpbd_picker.run_xpbd_picker_frames`). One difference: a copy that diverges in a frame
         stays rolled back to that frame's start for the remaining frames (the per-frame loop would go on from
         there); a caller that rolls the whole call back, as the SoftGym envs do, sees no difference.
         Only where :meth:`can_step_picker_frames`.
@@ -122,7 +122,7 @@ class XPBD(Solver):
         diverged : (B,) bool
             Copies the watchdog flagged in any frame.
         """
-        from tianim.physics.xpbd import run_xpbd_picker_frames
+        from tianim.physics.xpbd_picker import run_xpbd_picker_frames
 
         if not self.can_step_picker_frames(model, state):
             raise ValueError("step_picker_frames needs XPBD without per-substep passes or compensated positions, on "
@@ -167,7 +167,7 @@ class XPBD(Solver):
 
     def _contact_fused(self, model, state) -> bool:
         """Self-collision is the only pass, on the per-copy layout, and ``SelfCollision.path`` is not "split":
-        the call runs in one launch (:func:`tianim.physics.xpbd.run_xpbd_contact`, bit-identical)."""
+        the call runs in one launch (:func:`tianim.physics.xpbd_contact.run_xpbd_contact`, bit-identical)."""
         from tianim.physics.xpbd import choose_xpbd_layout
 
         sc = self.self_collision
@@ -188,7 +188,7 @@ class XPBD(Solver):
         if self.self_collision is not None:
             check_sc_model(self.self_collision, model)
         if self._contact_fused(model, state):
-            from tianim.physics.xpbd import run_xpbd_contact
+            from tianim.physics.xpbd_contact import run_xpbd_contact
 
             run_xpbd_contact(model, state, dt, substeps, self.iterations, self.self_collision, self._buffer,
                              compensated=self.compensated)
