@@ -309,7 +309,8 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
     if sc_iters:
         from tianim.physics.xpbd_contact import _contact_kernel
 
-        kernels["per_copy_contact"] = _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, serial)
+        kernels["per_copy_contact"] = _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, serial,
+                                                      lane, lanes)
     if grid:
         order = sweep_order(1)
 

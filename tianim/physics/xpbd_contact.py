@@ -14,12 +14,17 @@ from tianim.kernels.contact import contact_response
 from tianim.physics import passes
 from tianim.physics.model import GRID_FORWARD as FORWARD
 from tianim.physics.selfcollision import contact_update_funcs, contacts_for
+from tianim.physics import xpbd_lanes
 from tianim.physics.xpbd import _kernels
 from tianim.kernels import kernel_types
 
 
-def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, serial):
+def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, serial, lane=None, L=0):
     """The per-copy XPBD substeps with self-collision in one launch (:func:`run_xpbd_contact`).
+
+    ``lane``: the SIMD-lane funcs of ``L`` lanes (:func:`tianim.physics.xpbd_lanes.lane_funcs`): each substep's
+    XPBD part packs the copy into the pool field ``S`` (the kernel's first argument), runs ``lane_substep``
+    there and unpacks it (bit-identical to ``copy_substep``); None: ``copy_substep``, and ``S`` is 0.
 
     Per copy (copies in parallel) and per substep, serially: the XPBD substep (``copy_substep``), the
     test of the copy's neighbour lists, then ``sc_iters`` Jacobi contact sweeps ping-ponging between x
@@ -48,7 +53,8 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
     rebuild = scm.rebuild_funcs(real_name, dim, grid)
     P_H, P_THICK, P_GNORM, P_MARGIN, P_VCAP, P_RHO, P_G = (scm.P_H, scm.P_THICK, scm.P_GNORM, scm.P_MARGIN,
                                                          scm.P_VCAP, scm.P_RHO, scm.P_G)
-    I_NX, I_KEXCL, I_NSPRINGS, I_ITERS = scm.I_NX, scm.I_KEXCL, scm.I_NSPRINGS, scm.I_ITERS
+    I_NX, I_NY, I_KEXCL, I_NSPRINGS, I_ITERS = scm.I_NX, scm.I_NY, scm.I_KEXCL, scm.I_NSPRINGS, scm.I_ITERS
+    pack_copy, lane_substep, unpack_copy = lane if lane is not None else (None, None, None)
     C_LIM, C_RUN, C_REBUILT = scm.C_LIM, scm.C_RUN, scm.C_REBUILT
 
     @ti.func
@@ -60,7 +66,7 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
         v[b, i] += dv
 
     @ti.kernel
-    def per_copy_contact(x: vec_arr, v: vec_arr, dx: vec_arr, rem: vec_arr, lam: real2_arr, pinned: mask_arr,
+    def per_copy_contact(S: T, x: vec_arr, v: vec_arr, dx: vec_arr, rem: vec_arr, lam: real2_arr, pinned: mask_arr,
                          inv_mass: real_arr, ends: int_arr, k: real_arr, rest: real_arr, damp: real_arr,
                          coll: real2_arr, W: vec_arr, nbr: i32_3, count: i32_2, excl_off: int_arr, excl_idx: int_arr,
                          xb: vec_arr, P: real_arr, I: int_arr, cs: i32_2, cell: i32_2, start: i32_2, order: i32_2,
@@ -70,6 +76,7 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
         rho, h, thick, g_norm_c = P[P_RHO], P[P_H], P[P_THICK], P[P_GNORM]
         margin, vcap = P[P_MARGIN], P[P_VCAP]
         nx, n_springs, iters, k_excl = I[I_NX], I[I_NSPRINGS], I[I_ITERS], I[I_KEXCL]
+        H = I[I_NY] // ti.static(max(L, 1))  # band rows of the lanes layout
         inv_h = 1 / h
         n = x.shape[1]
         ti.loop_config(serialize=serial)  # one copy: no thread wake-up
@@ -78,8 +85,13 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
             done = nsub  # substeps run; below nsub once the copy stopped
             for sub in range(nsub):
                 if done == nsub:
-                    copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h, nx,
-                                 n_springs, iters, g_norm)
+                    if ti.static(not L):
+                        copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h,
+                                     nx, n_springs, iters, g_norm)
+                    else:
+                        pack_copy(S, b, x, v, pinned, inv_mass, nx, H)
+                        lane_substep(S, b, k, rest, damp, coll, g, rho, h, nx, H, iters, g_norm)
+                        unpack_copy(S, b, x, v, nx, H)
                     hi = ti.Vector([-1e30] * dim, dt=real)
                     lo = ti.Vector([1e30] * dim, dt=real)
                     for i in range(n):
@@ -117,7 +129,7 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
 
 
 def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, self_collision, buffer,
-                     compensated: bool = False) -> None:
+                     compensated: bool = False, lanes=0) -> None:
     """XPBD with self-collision (and no other pass): every substep of the call in one launch per copy
     group, per copy serially (:func:`_contact_kernel`), bit-identical to the split path (one XPBD launch and
     the passes' ``post`` launch per substep, ``SelfCollision(path="split")``). A copy whose neighbour lists
@@ -126,7 +138,8 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
     only), its contacts and colliders run in the passes' ``fix`` launch, and it goes on in the next launch,
     each copy counting its own substeps.
 
-    Parameters as :func:`run_xpbd` (per-copy layout), with ``self_collision`` the
+    Parameters as :func:`run_xpbd` (per-copy layout; ``lanes``: each substep's XPBD part on SIMD lanes where
+    :func:`tianim.physics.xpbd_lanes.lanes_for` gives some, bit-identical), with ``self_collision`` the
     :class:`tianim.physics.SelfCollision` option. ``state.x``/``state.v`` are updated in place."""
     from tianim.physics import selfcollision as scm
 
@@ -134,8 +147,10 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
     dtype = state.dtype
     data = model.kernel_data(dtype)
     grid = model.grid is not None
+    L = xpbd_lanes.lanes_for(model, dtype, lanes) if not compensated else 0
     kernels = _kernels(dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
-                       len(model.colliders) > 0, bool(compensated), sc_iters, False, state.batch == 1)
+                       len(model.colliders) > 0, bool(compensated), sc_iters, False, state.batch == 1, L)
+    S = xpbd_lanes.pool(dtype.name, L, state.batch * model.grid.nx * (model.grid.ny // L)) if L else 0
     edges = not grid and model.n_springs > 0
     n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
     lam = buffer("lambda", (state.batch, n_lam), dtype)
@@ -164,7 +179,7 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
         np.minimum(left, np.iinfo(np.int32).max, out=cs[:, scm.C_LIM], casting="unsafe")
         cs[:, scm.C_RUN] = 1
         cs[:, scm.C_REBUILT] = 0
-        kernel(state.x, state.v, dx, rem, lam, pinned, data["inv_mass"], ends, data["k"], data["rest"], data["damp"],
+        kernel(S, state.x, state.v, dx, rem, lam, pinned, data["inv_mass"], ends, data["k"], data["rest"], data["damp"],
                data["coll"], W, contacts.nbr, contacts.count, contacts.excl_off, contacts.excl_idx, contacts.x_build,
                P, I, cs, *contacts.kernel_grid())
         contacts.rebuilt_in_launch(cs[:, scm.C_REBUILT])

@@ -191,7 +191,7 @@ class XPBD(Solver):
             from tianim.physics.xpbd_contact import run_xpbd_contact
 
             run_xpbd_contact(model, state, dt, substeps, self.iterations, self.self_collision, self._buffer,
-                             compensated=self.compensated)
+                             compensated=self.compensated, lanes=self.lanes)
             return
         if self.compensated:
             self._buffer("rem", state.x.shape, state.dtype).fill(0)  # one remainder per call (xpbd.run_xpbd)
