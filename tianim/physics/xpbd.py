@@ -83,6 +83,7 @@ import numpy as np
 from tianim.kernels.contact import contact_response
 from tianim.physics.model import GRID_COLOURS as N_COLOURS, GRID_FORWARD as FORWARD
 from tianim.physics.model import grid_colour_geometry as colour_geometry
+from tianim.physics.grid_colours import colour_funcs
 from tianim.physics.xpbd_lanes import lane_funcs
 from tianim.physics import xpbd_lanes
 from tianim.kernels import cached_variants, kernel_types
@@ -102,6 +103,7 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
     T = ti.template()
     nf = len(FORWARD)
     respond = contact_response(real_name, dim)
+    geometry, extent, along = colour_funcs()
 
     @ti.func
     def project(b, i, j, s, li, x: T, dx: T, rem: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T, damp: T, h):
@@ -199,17 +201,6 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
             project(b, i, rr * nx + cc, o, i * nf + c // 2, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h)
 
     @ti.func
-    def geometry(c):
-        """:func:`~tianim.physics.model.grid_colour_geometry` of a runtime colour c: (o, dc, dr, a - 1,
-        vertical, parity), a - 1 as a shift (a is 1 or 2)."""
-        o, dc, dr, sh, vertical = 0, 0, 0, 0, 0
-        for f in ti.static(range(nf)):
-            if c // 2 == f:
-                go, gdc, gdr, ga, gv, _p = ti.static(colour_geometry(2 * f))
-                o, dc, dr, sh, vertical = go, gdc, gdr, ga - 1, int(gv)
-        return o, dc, dr, sh, vertical, c % 2
-
-    @ti.func
     def grid_colour_rows(b, c, x: T, dx: T, rem: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T, damp: T, h, nx):
         """Every spring of colour c of copy b, row by row and column by column (the per-copy layout).
 
@@ -219,25 +210,20 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
         colour does not change a bit. c is a runtime value: one copy of this code serves the 24 colour
         visits of a substep (a compile-time c inlined 24 copies of ``project`` per substep)."""
         o, dc, dr, sh, vertical, parity = geometry(c)
-        a = 1 << sh
         n = x.shape[1]
         ny = n // nx
-        n_outer = ny  # horizontal colours: every row, the colour's columns
-        n_inner = ((nx + 2 * a - 1) >> (sh + 1)) << sh
-        if vertical:  # vertical colours: the colour's rows, every column
-            n_outer = ((ny + 2 * a - 1) >> (sh + 1)) << sh
-            n_inner = nx
+        n_outer, n_inner = extent(vertical, sh, ny, nx)
         lo = c // 2
         for t in range(n_outer):
             row = t
             if vertical:
-                row = ((t >> sh) << (sh + 1)) + (parity << sh) + (t & (a - 1))
+                row = along(t, sh, parity)
             rr = row + dr
             if row < ny and 0 <= rr < ny:
                 for u in range(n_inner):
                     col = u
                     if not vertical:
-                        col = ((u >> sh) << (sh + 1)) + (parity << sh) + (u & (a - 1))
+                        col = along(u, sh, parity)
                     cc = col + dc
                     if col < nx and 0 <= cc < nx:
                         i = row * nx + col

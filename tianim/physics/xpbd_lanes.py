@@ -25,8 +25,8 @@ per-copy layout, for any thread count and batch (tested). ``pinned`` and ``inv_m
 packed ``W = select(pinned == 0, inv_mass, 0)`` (the scalar code's value) and a free mask; the
 multipliers live with the start particle of their spring, one row per forward stencil direction.
 
-Compile size. The colour is a runtime value (its geometry read from a 6-way branch, ``a`` as a shift), so
-one copy of the sweep code serves the 12 colours of both sweep directions: with the colour a compile-time
+Compile size. The colour is a runtime value (:mod:`tianim.physics.grid_colours`, shared with the scalar
+sweep), so one copy of the sweep code serves the 12 colours of both sweep directions: with the colour a compile-time
 constant, each of the 24 colour visits of a substep was its own inlined copy of the vector and lane-edge
 spring code, and the kernels of one env took minutes to compile (a 32x32 cloth's run, 8 lanes: 278 s cold;
 now 11.5 s, 4 lanes 71 -> 3.6 s; same bits).
@@ -38,7 +38,7 @@ from tianim import _ti
 from tianim.kernels import cached_variants, kernel_types
 from tianim.kernels.contact import contact_response
 from tianim.physics.model import GRID_COLOURS as N_COLOURS, GRID_FORWARD as FORWARD
-from tianim.physics.model import grid_colour_geometry as colour_geometry
+from tianim.physics.grid_colours import colour_funcs
 
 #: Rows of the pool per pack (named offsets; dim = 3): positions, velocities, substep displacements
 #: (3 rows each), W (inverse mass, 0 where pinned), inverse mass, free (1) / pinned (0), then one
@@ -132,6 +132,7 @@ def lane_funcs(real_name, L, spring_damping, medium_damping, colliders):
     T = ti.template()
     nf = len(FORWARD)
     respond = contact_response(real_name, dim)
+    geometry, extent, along = colour_funcs()
 
     @ti.func
     def spring(xi0, xi1, xi2, xj0, xj1, xj2, ei0, ei1, ei2, ej0, ej1, ej2, wi, wj, lam, kh2, r, ch):
@@ -210,41 +211,25 @@ def lane_funcs(real_name, L, spring_damping, medium_damping, colliders):
                 lspring(S, p, l, base + (rr + H) * nx + cc, l - 1, lrow, kh2, rl, ch)
 
     @ti.func
-    def geometry(c):
-        """:func:`~tianim.physics.model.grid_colour_geometry` of a runtime colour c: (o, dc, dr, a - 1,
-        vertical, parity), a - 1 as a shift (a is 1 or 2)."""
-        o, dc, dr, sh, vertical = 0, 0, 0, 0, 0
-        for f in ti.static(range(nf)):
-            if c // 2 == f:
-                go, gdc, gdr, ga, gv, _p = ti.static(colour_geometry(2 * f))
-                o, dc, dr, sh, vertical = go, gdc, gdr, ga - 1, int(gv)
-        return o, dc, dr, sh, vertical, c % 2
-
-    @ti.func
     def colour(S: T, base, c, k: T, rest: T, damp: T, h, nx, H):
         """Every spring of colour c (a runtime value: one copy of this code serves the 12 colours) of the copy
         at packs base.. (``grid_colour_rows``' springs). A colour's springs share no particle, so the visiting
         order inside it does not change a bit; the geometry's a (1 or 2) enters as the shift sh = a - 1."""
         o, dc, dr, sh, vertical, parity = geometry(c)
-        a = 1 << sh
         kh2 = k[o] * h * h
         rl = rest[o]
         ch = damp[o] * h
         lrow = ROW_LAM + c // 2
-        n_outer = H  # horizontal colours: every band row, the colour's columns
-        n_inner = (((nx + 2 * a - 1) >> (sh + 1)) << sh)
-        if vertical:  # vertical colours: the colour's band rows, every column
-            n_outer = (((H + 2 * a - 1) >> (sh + 1)) << sh)
-            n_inner = nx
+        n_outer, n_inner = extent(vertical, sh, H, nx)  # over band rows
         for t in range(n_outer):
             r = t
             if vertical:
-                r = ((t >> sh) << (sh + 1)) + (parity << sh) + (t & (a - 1))
+                r = along(t, sh, parity)
             if r < H:
                 for u in range(n_inner):
                     col = u
                     if not vertical:
-                        col = ((u >> sh) << (sh + 1)) + (parity << sh) + (u & (a - 1))
+                        col = along(u, sh, parity)
                     cc = col + dc
                     if col < nx and 0 <= cc < nx:
                         pair(S, base, r, col, r + dr, cc, dr, lrow, kh2, rl, ch, nx, H)
