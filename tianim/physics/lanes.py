@@ -71,7 +71,7 @@ size compiles nothing new.
 import numpy as np
 
 from tianim import _ti
-from tianim.kernels.contact import contact_response
+from tianim.kernels.contact import lane_contact_response
 from tianim.kernels import cached_variants, kernel_types
 from tianim.physics.model import GRID_STENCIL
 
@@ -204,7 +204,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
     t = kernel_types(real_name, dim)
     ti, real = t.ti, t.real
     lane_vec = ti.types.vector(L, real)
-    respond = contact_response(real_name, dim)
+    lane_respond = lane_contact_response(real_name, dim, L)
     h = dim + 1  # prm: gravity[dim], rho, k[12], rest[12], damp[12] (the P layout of kernels.py)
 
     @ti.kernel
@@ -361,19 +361,12 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
             vn = S[xs + dim + a, kp] + dt * ti.select(free, F[a, kp] * im, zero)
             S[xd + dim + a, kp] = vn
             S[xd + a, kp] = S[xs + a, kp] + dt * vn
-        if ti.static(colliders):  # per lane, on the stored values (exact: a float32 store and load)
+        if ti.static(colliders):  # the L lanes at once, on the stored values (exact: a float32 store and load)
             g2 = prm[0] * prm[0]
             for a in ti.static(range(1, dim)):
                 g2 += prm[a] * prm[a]
             g_norm = ti.sqrt(g2)
-            for lane in range(L):  # a runtime loop: unrolled, the contact code would be copied L x nsub times
-                if M[2, kp][lane] > 0:
-                    xl = ti.Vector([S[xd + a, kp][lane] for a in range(dim)])
-                    vl = ti.Vector([S[xd + dim + a, kp][lane] for a in range(dim)])
-                    xl, vl = respond(xl, vl, coll, g_norm, dt)
-                    for a in ti.static(range(dim)):
-                        S[xd + a, kp][lane] = xl[a]
-                        S[xd + dim + a, kp][lane] = vl[a]
+            lane_respond(S, xd, xd + dim, kp, free, coll, g_norm, dt)
         write_ghosts(S, xd, kp, r, nx, H)  # after the contacts: the ghosts copy the stored values
 
     def make_run(nsub):

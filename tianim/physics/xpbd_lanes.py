@@ -36,7 +36,7 @@ import numpy as np
 
 from tianim import _ti
 from tianim.kernels import cached_variants, kernel_types
-from tianim.kernels.contact import contact_response
+from tianim.kernels.contact import lane_contact_response
 from tianim.physics.model import GRID_COLOURS as N_COLOURS, GRID_FORWARD as FORWARD
 from tianim.physics.grid_colours import colour_funcs
 
@@ -131,8 +131,8 @@ def lane_funcs(real_name, L, spring_damping, medium_damping, colliders):
     ti, real = t.ti, t.real
     T = ti.template()
     nf = len(FORWARD)
-    respond = contact_response(real_name, dim)
     geometry, extent, along = colour_funcs()
+    lane_respond = lane_contact_response(real_name, dim, L)
 
     @ti.func
     def spring(xi0, xi1, xi2, xj0, xj1, xj2, ei0, ei1, ei2, ej0, ej1, ej2, wi, wj, lam, kh2, r, ch):
@@ -262,14 +262,7 @@ def lane_funcs(real_name, L, spring_damping, medium_damping, colliders):
             for a in ti.static(range(dim)):
                 S[ROW_V + a, p] = ti.select(free, S[ROW_DX + a, p] / h, S[ROW_V + a, p])
             if ti.static(colliders):
-                for l in ti.static(range(L)):
-                    if S[ROW_FREE, p][l] != 0:
-                        xl = ti.Vector([S[ROW_X + a, p][l] for a in ti.static(range(dim))])
-                        vl = ti.Vector([S[ROW_V + a, p][l] for a in ti.static(range(dim))])
-                        xl, vl = respond(xl, vl, coll, g_norm, h)
-                        for a in ti.static(range(dim)):
-                            S[ROW_X + a, p][l] = xl[a]
-                            S[ROW_V + a, p][l] = vl[a]
+                lane_respond(S, ROW_X, ROW_V, p, free, coll, g_norm, h)
 
     @ti.func
     def pack_copy(S: T, b, x: T, v: T, pinned: T, inv_mass: T, nx, H):
