@@ -16,7 +16,8 @@ global row's: every lane of a pack then belongs to the same colour. A spring ``(
 ``(r + dr, c + dc)``: one vector update of L springs (the column bound is the same for every lane: a
 branch, outside the vector code). A spring that crosses a band edge goes to lane ``l +- 1`` of the pack
 ``(r + dr -+ H, c + dc)``: those (one or two band rows of the vertical and diagonal colours, about 9 %
-of the springs at H = 8) are updated lane by lane, by the same function on scalars. The skip of the
+of the springs at H = 8) are vector updates too: pack ``q``'s lanes shifted by one into place, the last
+(or first) lane masked out, the results shifted back. The skip of the
 scalar code (``|d| = 0`` or both ends pinned) is a select, so a skipped lane keeps its exact bits.
 
 Every operation is that of ``project``, ``predict`` and ``finish`` in :mod:`tianim.physics.xpbd` in
@@ -29,7 +30,9 @@ Compile size. The colour is a runtime value (:mod:`tianim.physics.grid_colours`,
 sweep), so one copy of the sweep code serves the 12 colours of both sweep directions: with the colour a compile-time
 constant, each of the 24 colour visits of a substep was its own inlined copy of the vector and lane-edge
 spring code, and the kernels of one env took minutes to compile (a 32x32 cloth's run, 8 lanes: 278 s cold;
-now 11.5 s, 4 lanes 71 -> 3.6 s; same bits).
+now 11.5 s, 4 lanes 71 -> 3.6 s; same bits). The band-edge springs (14 scalar copies at 8 lanes) and the
+contact response (8 scalar copies) are vector code too (:func:`tianim.kernels.contact.lane_contact_response`):
+with a ground, 8 lanes, 13-14 -> 4.8 s.
 """
 
 import numpy as np
@@ -157,58 +160,63 @@ def lane_funcs(real_name, L, spring_damping, medium_damping, colliders):
         bb = wj * dl
         return ok, dl, a * n0, a * n1, a * n2, bb * n0, bb * n1, bb * n2
 
+    lane_ids = ti.Vector(list(range(L)), dt=ti.i32)
+
     @ti.func
-    def vspring(S: T, p, q, lrow, kh2, r, ch):
-        """Lanes of pack p against the same lanes of pack q (springs of one colour)."""
+    def shift(u, s: ti.template()):
+        """Lanes of ``u`` moved down by s: lane l of the result is lane l + s of u (s in -1, 0, 1); the lane
+        that falls off the end repeats its neighbour (its spring is masked out)."""
+        r = u
+        if ti.static(s != 0):
+            r = ti.Vector([u[min(max(l + s, 0), L - 1)] for l in ti.static(range(L))])
+        return r
+
+    @ti.func
+    def vspring(S: T, p, q, s: ti.template(), lrow, kh2, r, ch):
+        """The springs from lane l of pack p to lane l + s of pack q, L at once: s = 0 inside a band (a
+        colour's springs), s = +-1 across a band edge (the L - 1 lanes that have a neighbour band; a select
+        keeps the last lane's bits). The far ends are shifted into place, updated as vectors and shifted
+        back: lane for lane the operations of ``project`` (springs of one colour share no particle, so
+        updating them at once changes no bit)."""
         xi = [S[ROW_X + a, p] for a in ti.static(range(dim))]
-        xj = [S[ROW_X + a, q] for a in ti.static(range(dim))]
+        xq = [S[ROW_X + a, q] for a in ti.static(range(dim))]
         ei = [S[ROW_DX + a, p] for a in ti.static(range(dim))]
-        ej = [S[ROW_DX + a, q] for a in ti.static(range(dim))]
+        eq = [S[ROW_DX + a, q] for a in ti.static(range(dim))]
+        xj = [shift(xq[a], s) for a in ti.static(range(dim))]
+        ej = [shift(eq[a], s) for a in ti.static(range(dim))]
         lam = S[lrow, p]
         ok, dl, ci0, ci1, ci2, cj0, cj1, cj2 = spring(xi[0], xi[1], xi[2], xj[0], xj[1], xj[2], ei[0], ei[1], ei[2],
-                                                     ej[0], ej[1], ej[2], S[ROW_W, p], S[ROW_W, q], lam, kh2, r, ch)
+                                                     ej[0], ej[1], ej[2], S[ROW_W, p], shift(S[ROW_W, q], s), lam,
+                                                     kh2, r, ch)
+        if ti.static(s > 0):
+            ok = ok & (lane_ids < L - 1)
+        if ti.static(s < 0):
+            ok = ok & (lane_ids > 0)
         ci = [ci0, ci1, ci2]
         cj = [cj0, cj1, cj2]
         S[lrow, p] = ti.select(ok, lam + dl, lam)
         for a in ti.static(range(dim)):
             S[ROW_DX + a, p] = ti.select(ok, ei[a] + ci[a], ei[a])
-            S[ROW_DX + a, q] = ti.select(ok, ej[a] - cj[a], ej[a])
             S[ROW_X + a, p] = ti.select(ok, xi[a] + ci[a], xi[a])
-            S[ROW_X + a, q] = ti.select(ok, xj[a] - cj[a], xj[a])
-
-    @ti.func
-    def lspring(S: T, p, li: ti.template(), q, lj: ti.template(), lrow, kh2, r, ch):
-        """Lane li of pack p against lane lj of pack q (a spring across a band edge)."""
-        xi = [S[ROW_X + a, p][li] for a in ti.static(range(dim))]
-        xj = [S[ROW_X + a, q][lj] for a in ti.static(range(dim))]
-        ei = [S[ROW_DX + a, p][li] for a in ti.static(range(dim))]
-        ej = [S[ROW_DX + a, q][lj] for a in ti.static(range(dim))]
-        lam = S[lrow, p][li]
-        ok, dl, ci0, ci1, ci2, cj0, cj1, cj2 = spring(xi[0], xi[1], xi[2], xj[0], xj[1], xj[2], ei[0], ei[1], ei[2],
-                                                     ej[0], ej[1], ej[2], S[ROW_W, p][li], S[ROW_W, q][lj], lam,
-                                                     kh2, r, ch)
-        ci = [ci0, ci1, ci2]
-        cj = [cj0, cj1, cj2]
-        if ok:
-            S[lrow, p][li] = lam + dl
-            for a in ti.static(range(dim)):
-                S[ROW_DX + a, p][li] = ei[a] + ci[a]
-                S[ROW_DX + a, q][lj] = ej[a] - cj[a]
-                S[ROW_X + a, p][li] = xi[a] + ci[a]
-                S[ROW_X + a, q][lj] = xj[a] - cj[a]
+            if ti.static(s == 0):
+                S[ROW_DX + a, q] = ti.select(ok, ej[a] - cj[a], ej[a])
+                S[ROW_X + a, q] = ti.select(ok, xj[a] - cj[a], xj[a])
+            else:  # back to q's lanes: lane m of q is lane m - s of the shifted values (where it exists)
+                okq = shift(ok, -s)
+                okq = okq & (lane_ids - s >= 0) & (lane_ids - s < L)
+                S[ROW_DX + a, q] = ti.select(okq, shift(ej[a] - cj[a], -s), eq[a])
+                S[ROW_X + a, q] = ti.select(okq, shift(xj[a] - cj[a], -s), xq[a])
 
     @ti.func
     def pair(S: T, base, r, col, rr, cc, dr, lrow, kh2, rl, ch, nx, H):
         """The springs from pack (r, col) to (rr, cc) = (r + dr, col + dc), col and cc inside the grid."""
         p = base + r * nx + col
         if 0 <= rr < H:
-            vspring(S, p, base + rr * nx + cc, lrow, kh2, rl, ch)
+            vspring(S, p, base + rr * nx + cc, 0, lrow, kh2, rl, ch)
         elif dr > 0:  # rr >= H: lane l + 1 of band row rr - H (none beyond the last lane)
-            for l in ti.static(range(L - 1)):
-                lspring(S, p, l, base + (rr - H) * nx + cc, l + 1, lrow, kh2, rl, ch)
+            vspring(S, p, base + (rr - H) * nx + cc, 1, lrow, kh2, rl, ch)
         else:  # rr < 0: lane l - 1 of band row rr + H
-            for l in ti.static(range(1, L)):
-                lspring(S, p, l, base + (rr + H) * nx + cc, l - 1, lrow, kh2, rl, ch)
+            vspring(S, p, base + (rr + H) * nx + cc, -1, lrow, kh2, rl, ch)
 
     @ti.func
     def colour(S: T, base, c, k: T, rest: T, damp: T, h, nx, H):
