@@ -292,7 +292,7 @@ class Boids(CrowdModel):
         s["over"].fill(0)
         left = steps
         while left > 0:
-            chunk = STEPS_PER_LAUNCH if left >= STEPS_PER_LAUNCH else 1  # two compiled variants at most
+            chunk = STEPS_PER_LAUNCH if left >= STEPS_PER_LAUNCH else 1  # (two compiled variants where it is > 1)
             if self._prm["wander_w"] > 0:
                 for b in range(state.batch):
                     with draw(state.rng, b) as rng:
@@ -319,9 +319,11 @@ class Boids(CrowdModel):
 #: Grid cells per neighbour radius: the 5 x 5 cells of r / 2 scan about 25 r^2 / 4 of area, 3 x 3 cells of r scan 9 r^2.
 CELLS_PER_RADIUS = 2
 
-#: Steps run in one kernel launch (unrolled; the grid is rebuilt before every step; each variant compiles
-#: once: 2 steps compile in ~4 s, 4 in ~9 s, and ran no faster at 10 k agents).
-STEPS_PER_LAUNCH = 2
+#: Steps run in one kernel launch (unrolled; the grid is rebuilt before every step). One: since the lanes scan,
+#: a 2-step variant compiled in 11-14 s cold against 4-5 s for one step (a call of an odd number of steps
+#: compiled both), and in one interleaved run at 10 k / 100 k agents ran 2.69 / 20.9 ms a step against 2.57 /
+#: 20.2 for one step a launch (medians of 15; same bits).
+STEPS_PER_LAUNCH = 1
 
 
 #: The neighbour scans (``Boids(scan=)``), all giving the same bits: ``"lanes"`` (groups of agents scan their
