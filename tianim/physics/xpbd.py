@@ -269,29 +269,11 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
                              n_springs, iters, g_norm)
 
     kernels = {"per_copy": per_copy}
-    lane = None
-    if lanes:
-        lane = lane_funcs(real_name, lanes, spring_damping, medium_damping, colliders)
-        pack_copy, lane_substep, unpack_copy = lane
-
-        @ti.kernel
-        def per_copy_lanes(S: T, x: vec_arr, v: vec_arr, pinned: mask_arr, inv_mass: real_arr, k: real_arr,
-                           rest: real_arr, damp: real_arr, coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32,
-                           H: ti.i32, nsub: ti.i32, iters: ti.i32):
-            """``per_copy`` on SIMD lanes (:mod:`tianim.physics.xpbd_lanes`): pack, substeps, unpack per copy."""
-            g_norm = g.norm()
-            ti.loop_config(serialize=serial)  # one copy: no thread wake-up
-            for b in range(x.shape[0]):
-                pack_copy(S, b, x, v, pinned, inv_mass, nx, H)
-                for _sub in range(nsub):
-                    lane_substep(S, b, k, rest, damp, coll, g, rho, h, nx, H, iters, g_norm)
-                unpack_copy(S, b, x, v, nx, H)
-
-        kernels["per_copy_lanes"] = per_copy_lanes
+    lane = lane_funcs(real_name, lanes, spring_damping, medium_damping, colliders) if lanes else None
     if pickers:
         from tianim.physics.xpbd_picker import _picker_kernel
 
-        kernels["picker_frames"] = _picker_kernel(real_name, dim, copy_substep, serial, lane)
+        kernels["picker_frames"] = _picker_kernel(real_name, dim, copy_substep, serial)
     if sc_iters:
         from tianim.physics.xpbd_contact import _contact_kernel
 
@@ -381,16 +363,10 @@ def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: st
     data = model.kernel_data(state.dtype)
     grid = model.grid is not None
     L = xpbd_lanes.lanes_for(model, state.dtype, lanes) if layout == "per_copy" and not compensated else 0
-    if L:
-        real = state.dtype.type
-        nx, H = model.grid.nx, model.grid.ny // L
-        kernels = _kernels(state.dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
-                           len(model.colliders) > 0, False, 0, False, state.batch == 1, L)
-        S = xpbd_lanes.pool(state.dtype.name, L, state.batch * H * nx)
-        kernels["per_copy_lanes"](S, state.x, state.v, state.pinned.view(np.uint8), data["inv_mass"], data["k"],
-                                  data["rest"], data["damp"], data["coll"], model.gravity.astype(state.dtype),
-                                  float(real(model.medium_damping)), float(real(dt)), nx, H, int(substeps),
-                                  int(iterations))
+    if L:  # the lanes kernel of the pickers (xpbd_picker), one frame without them
+        from tianim.physics.xpbd_picker import run_lanes
+
+        run_lanes(model, state, dt, substeps, iterations, L)
         return
     kernels = _kernels(state.dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
                        len(model.colliders) > 0, bool(compensated), 0, False, state.batch == 1)

@@ -1,8 +1,9 @@
 """XPBD with SoftGym pickers in one launch: ``frames`` frames of picker moves and XPBD substeps per copy
 (:func:`run_xpbd_picker_frames`).
 
-The kernel is one variant of :func:`tianim.physics.xpbd._kernels` (``pickers=True``), built from its
-per-copy substep (scalar) or from the SIMD-lane substep of :mod:`tianim.physics.xpbd_lanes`.
+The scalar kernel is one variant of :func:`tianim.physics.xpbd._kernels` (``pickers=True``), built from
+its per-copy substep; on SIMD lanes (:mod:`tianim.physics.xpbd_lanes`) one kernel per model variant,
+:func:`lanes_frames_kernel`, serves the pickers and the plain steps of :func:`tianim.physics.xpbd.run_xpbd`.
 """
 
 import numpy as np
@@ -10,18 +11,22 @@ import numpy as np
 from tianim.physics.model import GRID_FORWARD as FORWARD
 from tianim.physics import xpbd_lanes
 from tianim.physics.xpbd import _kernels
-from tianim.kernels import kernel_types
+from tianim.kernels import cached_variants, kernel_types
 
 
-def _picker_kernel(real_name, dim, copy_substep, serial, lane=None):
-    """``frames`` frames of picker moves and XPBD substeps per copy in one launch (:func:`run_xpbd_picker_frames`);
-    ``lane``: the SIMD-lane funcs (:func:`tianim.physics.xpbd_lanes.lane_funcs`) or None (scalar substeps)."""
+def _arg_types(real_name, dim):
     t = kernel_types(real_name, dim)
-    ti, real, vec, vec_arr, work_arr = t.ti, t.real, t.vec, t.vec_arr, t.work_arr
-    real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
-    i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
-    u8_3 = ti.types.ndarray(dtype=ti.u8, ndim=3)
-    vec_1 = ti.types.ndarray(dtype=vec, ndim=1)
+    ti = t.ti
+    return t, ti.types.ndarray(dtype=ti.i32, ndim=2), ti.types.ndarray(dtype=ti.u8, ndim=3), \
+        ti.types.ndarray(dtype=t.vec, ndim=1)
+
+
+@cached_variants
+def picker_funcs(real_name, dim):
+    """``(picker_move, record)``: Taichi funcs of one frame of copy b (the picker move and its state
+    recorded in xa, va, pa; the state after the frame's physics recorded in xp, vp)."""
+    t = kernel_types(real_name, dim)
+    ti, real = t.ti, t.real
     T = ti.template()
 
     @ti.func
@@ -76,27 +81,54 @@ def _picker_kernel(real_name, dim, copy_substep, serial, lane=None):
             xp[f, b, i] = x[b, i]
             vp[f, b, i] = v[b, i]
 
-    if lane is not None:
-        pack_copy, lane_substep, unpack_copy = lane
+    return picker_move, record
 
-        @ti.kernel
-        def picker_frames_lanes(S: T, x: vec_arr, v: vec_arr, pinned: mask_arr, inv_mass: real_arr, k: real_arr,
-                                rest: real_arr, damp: real_arr, coll: real2_arr, g: vec, rho: real, h: real,
-                                nx: ti.i32, H: ti.i32, nsub: ti.i32, iters: ti.i32, act: real2_arr, pos: vec_arr,
-                                new: vec_arr, held: i32_2, low: vec_1, high: vec_1, reach: ti.f64, move: real,
-                                frames: ti.i32, xa: work_arr, va: work_arr, pa: u8_3, xp: work_arr, vp: work_arr):
-            g_norm = g.norm()
-            ti.loop_config(serialize=serial)  # one copy: no thread wake-up
-            for b in range(x.shape[0]):
-                for f in range(frames):
+
+@cached_variants
+def lanes_frames_kernel(real_name, spring_damping, medium_damping, colliders, serial, L):
+    """The one XPBD kernel of the SIMD-lane layout (:mod:`tianim.physics.xpbd_lanes`) for a model variant:
+    ``frames`` frames per copy of [the picker move], pack, ``nsub`` substeps, unpack, [the record], the
+    bracketed parts where the runtime flag ``pick`` is 1. A plain call (:func:`tianim.physics.xpbd.run_xpbd`)
+    is one frame with ``pick = 0``: with one kernel for both, an env's pickers and its plain steps compile
+    the lane substep once (each kernel inlines it: about 5 s cold at 8 lanes)."""
+    dim = 3
+    t, i32_2, u8_3, vec_1 = _arg_types(real_name, dim)
+    ti, real, vec, vec_arr, work_arr = t.ti, t.real, t.vec, t.vec_arr, t.work_arr
+    real_arr, mask_arr, real2_arr = t.real_arr, t.mask_arr, t.real2_arr
+    T = ti.template()
+    picker_move, record = picker_funcs(real_name, dim)
+    pack_copy, lane_substep, unpack_copy = xpbd_lanes.lane_funcs(real_name, L, spring_damping, medium_damping,
+                                                                 colliders)
+
+    @ti.kernel
+    def frames_lanes(S: T, x: vec_arr, v: vec_arr, pinned: mask_arr, inv_mass: real_arr, k: real_arr,
+                     rest: real_arr, damp: real_arr, coll: real2_arr, g: vec, rho: real, h: real,
+                     nx: ti.i32, H: ti.i32, nsub: ti.i32, iters: ti.i32, pick: ti.i32, act: real2_arr, pos: vec_arr,
+                     new: vec_arr, held: i32_2, low: vec_1, high: vec_1, reach: ti.f64, move: real,
+                     frames: ti.i32, xa: work_arr, va: work_arr, pa: u8_3, xp: work_arr, vp: work_arr):
+        g_norm = g.norm()
+        ti.loop_config(serialize=serial)  # one copy: no thread wake-up
+        for b in range(x.shape[0]):
+            for f in range(frames):
+                if pick:
                     picker_move(b, f, x, v, pinned, act, pos, new, held, low, high, reach, move, xa, va, pa)
-                    pack_copy(S, b, x, v, pinned, inv_mass, nx, H)
-                    for _sub in range(nsub):
-                        lane_substep(S, b, k, rest, damp, coll, g, rho, h, nx, H, iters, g_norm)
-                    unpack_copy(S, b, x, v, nx, H)
+                pack_copy(S, b, x, v, pinned, inv_mass, nx, H)
+                for _sub in range(nsub):
+                    lane_substep(S, b, k, rest, damp, coll, g, rho, h, nx, H, iters, g_norm)
+                unpack_copy(S, b, x, v, nx, H)
+                if pick:
                     record(b, f, x, v, xp, vp)
 
-        return picker_frames_lanes
+    return frames_lanes
+
+
+def _picker_kernel(real_name, dim, copy_substep, serial):
+    """``frames`` frames of picker moves and XPBD substeps per copy in one launch (:func:`run_xpbd_picker_frames`),
+    the scalar per-copy substeps ``copy_substep`` of :func:`tianim.physics.xpbd._kernels`."""
+    t, i32_2, u8_3, vec_1 = _arg_types(real_name, dim)
+    ti, real, vec, vec_arr, work_arr = t.ti, t.real, t.vec, t.vec_arr, t.work_arr
+    real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
+    picker_move, record = picker_funcs(real_name, dim)
 
     @ti.kernel
     def picker_frames(x: vec_arr, v: vec_arr, dx: vec_arr, rem: vec_arr, lam: real2_arr, pinned: mask_arr,
@@ -146,8 +178,6 @@ def run_xpbd_picker_frames(model, state, dt: float, substeps: int, iterations: i
     data = model.kernel_data(dtype)
     grid = model.grid is not None
     L = xpbd_lanes.lanes_for(model, dtype, lanes)
-    kernels = _kernels(dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
-                       len(model.colliders) > 0, False, 0, True, state.batch == 1, L)
     edges = not grid and model.n_springs > 0
     n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
     lam = buffer("lambda", (state.batch, n_lam), dtype)
@@ -165,13 +195,16 @@ def run_xpbd_picker_frames(model, state, dt: float, substeps: int, iterations: i
     if L:
         H = model.grid.ny // L
         S = xpbd_lanes.pool(dtype.name, L, state.batch * H * nx)
-        kernels["picker_frames"](S, state.x, state.v, state.pinned.view(np.uint8), data["inv_mass"], data["k"],
-                                 data["rest"], data["damp"], data["coll"], g, rho, h, nx, H, int(substeps),
-                                 int(iterations), act, pos, new, held32, np.ascontiguousarray(low, dtype=dtype),
-                                 np.ascontiguousarray(high, dtype=dtype), float(reach), float(real(move)), int(frames),
-                                 xa, va, pa, xp, vp)
+        kernel = lanes_frames_kernel(dtype.name, model.has_spring_damping, model.medium_damping > 0,
+                                     len(model.colliders) > 0, state.batch == 1, L)
+        kernel(S, state.x, state.v, state.pinned.view(np.uint8), data["inv_mass"], data["k"], data["rest"],
+               data["damp"], data["coll"], g, rho, h, nx, H, int(substeps), int(iterations), 1, act, pos, new, held32,
+               np.ascontiguousarray(low, dtype=dtype), np.ascontiguousarray(high, dtype=dtype), float(reach),
+               float(real(move)), int(frames), xa, va, pa, xp, vp)
         held[...] = held32
         return xa, va, pa.view(bool), xp, vp
+    kernels = _kernels(dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
+                       len(model.colliders) > 0, False, 0, True, state.batch == 1)
     kernels["picker_frames"](state.x, state.v, dx, rem, lam, state.pinned.view(np.uint8), data["inv_mass"], ends,
                              data["k"], data["rest"], data["damp"], data["coll"], g, rho, h, nx,
                              model.n_springs if edges else 0, int(substeps), int(iterations), act, pos, new, held32,
@@ -179,3 +212,21 @@ def run_xpbd_picker_frames(model, state, dt: float, substeps: int, iterations: i
                              float(reach), float(real(move)), int(frames), xa, va, pa, xp, vp)
     held[...] = held32
     return xa, va, pa.view(bool), xp, vp
+
+
+def run_lanes(model, state, dt: float, substeps: int, iterations: int, L: int) -> None:
+    """``substeps`` XPBD substeps of ``dt`` [s] on every copy, on ``L`` SIMD lanes (checked by the caller,
+    :func:`tianim.physics.xpbd.run_xpbd`): one frame of :func:`lanes_frames_kernel` without pickers (its
+    picker arrays are placeholders it does not touch)."""
+    dtype = state.dtype
+    real = dtype.type
+    data = model.kernel_data(dtype)
+    nx, H = model.grid.nx, model.grid.ny // L
+    S = xpbd_lanes.pool(dtype.name, L, state.batch * H * nx)
+    kernel = lanes_frames_kernel(dtype.name, model.has_spring_damping, model.medium_damping > 0,
+                                 len(model.colliders) > 0, state.batch == 1, L)
+    v1, w1 = np.zeros((1, 1, 3), dtype), np.zeros((1, 1, 1, 3), dtype)
+    kernel(S, state.x, state.v, state.pinned.view(np.uint8), data["inv_mass"], data["k"], data["rest"], data["damp"],
+           data["coll"], model.gravity.astype(dtype), float(real(model.medium_damping)), float(real(dt)), nx, H,
+           int(substeps), int(iterations), 0, np.zeros((1, 4), dtype), v1, v1, np.zeros((1, 1), np.int32),
+           v1[0], v1[0], 0.0, 0.0, 1, w1, w1, np.zeros((1, 1, 1), np.uint8), w1, w1)
