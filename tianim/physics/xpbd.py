@@ -366,7 +366,7 @@ def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: st
     if L:  # the lanes kernel of the pickers (xpbd_picker), one frame without them
         from tianim.physics.xpbd_picker import run_lanes
 
-        run_lanes(model, state, dt, substeps, iterations, L)
+        run_lanes(model, state, dt, substeps, iterations, L, buffer)
         return
     kernels = _kernels(state.dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
                        len(model.colliders) > 0, bool(compensated), 0, False, state.batch == 1)

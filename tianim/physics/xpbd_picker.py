@@ -32,7 +32,8 @@ def picker_funcs(real_name, dim):
     @ti.func
     def picker_move(b, f, x: T, v: T, pinned: T, act: T, pos: T, new: T, held: T, low: T, high: T, reach, move,
                     xa: T, va: T, pa: T):
-        """Frame f's picker move of copy b, then its state recorded in xa, va, pa."""
+        """Frame f's picker move of copy b, then its state recorded in xa, va, pa (their first
+        ``xa.shape[2]`` particles: all of them, or a placeholder's one)."""
         n = x.shape[1]
         count = pos.shape[1]
         # the picker move (the NumPy form: envs._softgym.Pickers.act): every release first
@@ -70,14 +71,14 @@ def picker_funcs(real_name, dim):
                 v[b, i] = ti.Vector.zero(real, dim)
                 pinned[b, i] = ti.u8(1)
             pos[b, p] = new[b, p]
-        for i in range(n):
+        for i in range(xa.shape[2]):
             xa[f, b, i] = x[b, i]
             va[f, b, i] = v[b, i]
             pa[f, b, i] = pinned[b, i]
 
     @ti.func
     def record(b, f, x: T, v: T, xp: T, vp: T):
-        for i in range(x.shape[1]):
+        for i in range(xp.shape[2]):
             xp[f, b, i] = x[b, i]
             vp[f, b, i] = v[b, i]
 
@@ -85,12 +86,15 @@ def picker_funcs(real_name, dim):
 
 
 @cached_variants
-def lanes_frames_kernel(real_name, spring_damping, medium_damping, colliders, serial, L):
+def lanes_frames_kernel(real_name, spring_damping, medium_damping, colliders, L):
     """The one XPBD kernel of the SIMD-lane layout (:mod:`tianim.physics.xpbd_lanes`) for a model variant:
-    ``frames`` frames per copy of [the picker move], pack, ``nsub`` substeps, unpack, [the record], the
-    bracketed parts where the runtime flag ``pick`` is 1. A plain call (:func:`tianim.physics.xpbd.run_xpbd`)
-    is one frame with ``pick = 0``: with one kernel for both, an env's pickers and its plain steps compile
-    the lane substep once (each kernel inlines it: about 5 s cold at 8 lanes)."""
+    ``frames`` frames per copy of the picker move, pack, ``nsub`` substeps, unpack and the record. A plain
+    call (:func:`tianim.physics.xpbd.run_xpbd`, :func:`run_lanes`) is one frame with placeholder pickers
+    that pick nothing and a one-particle record: with one kernel for both (and the copies always a parallel
+    loop, where the scalar kernels serialise one copy), an env's pickers and its plain steps compile the lane
+    substep once (each kernel inlines it: about 5 s cold at 8 lanes). The plain path is data, not a flag: a
+    runtime flag let LLVM unswitch the frame loop into two copies of the body (as slow to compile as two
+    kernels)."""
     dim = 3
     t, i32_2, u8_3, vec_1 = _arg_types(real_name, dim)
     ti, real, vec, vec_arr, work_arr = t.ti, t.real, t.vec, t.vec_arr, t.work_arr
@@ -103,21 +107,18 @@ def lanes_frames_kernel(real_name, spring_damping, medium_damping, colliders, se
     @ti.kernel
     def frames_lanes(S: T, x: vec_arr, v: vec_arr, pinned: mask_arr, inv_mass: real_arr, k: real_arr,
                      rest: real_arr, damp: real_arr, coll: real2_arr, g: vec, rho: real, h: real,
-                     nx: ti.i32, H: ti.i32, nsub: ti.i32, iters: ti.i32, pick: ti.i32, act: real2_arr, pos: vec_arr,
+                     nx: ti.i32, H: ti.i32, nsub: ti.i32, iters: ti.i32, act: real2_arr, pos: vec_arr,
                      new: vec_arr, held: i32_2, low: vec_1, high: vec_1, reach: ti.f64, move: real,
                      frames: ti.i32, xa: work_arr, va: work_arr, pa: u8_3, xp: work_arr, vp: work_arr):
         g_norm = g.norm()
-        ti.loop_config(serialize=serial)  # one copy: no thread wake-up
         for b in range(x.shape[0]):
             for f in range(frames):
-                if pick:
-                    picker_move(b, f, x, v, pinned, act, pos, new, held, low, high, reach, move, xa, va, pa)
+                picker_move(b, f, x, v, pinned, act, pos, new, held, low, high, reach, move, xa, va, pa)
                 pack_copy(S, b, x, v, pinned, inv_mass, nx, H)
                 for _sub in range(nsub):
                     lane_substep(S, b, k, rest, damp, coll, g, rho, h, nx, H, iters, g_norm)
                 unpack_copy(S, b, x, v, nx, H)
-                if pick:
-                    record(b, f, x, v, xp, vp)
+                record(b, f, x, v, xp, vp)
 
     return frames_lanes
 
@@ -196,9 +197,9 @@ def run_xpbd_picker_frames(model, state, dt: float, substeps: int, iterations: i
         H = model.grid.ny // L
         S = xpbd_lanes.pool(dtype.name, L, state.batch * H * nx)
         kernel = lanes_frames_kernel(dtype.name, model.has_spring_damping, model.medium_damping > 0,
-                                     len(model.colliders) > 0, state.batch == 1, L)
+                                     len(model.colliders) > 0, L)
         kernel(S, state.x, state.v, state.pinned.view(np.uint8), data["inv_mass"], data["k"], data["rest"],
-               data["damp"], data["coll"], g, rho, h, nx, H, int(substeps), int(iterations), 1, act, pos, new, held32,
+               data["damp"], data["coll"], g, rho, h, nx, H, int(substeps), int(iterations), act, pos, new, held32,
                np.ascontiguousarray(low, dtype=dtype), np.ascontiguousarray(high, dtype=dtype), float(reach),
                float(real(move)), int(frames), xa, va, pa, xp, vp)
         held[...] = held32
@@ -214,19 +215,29 @@ def run_xpbd_picker_frames(model, state, dt: float, substeps: int, iterations: i
     return xa, va, pa.view(bool), xp, vp
 
 
-def run_lanes(model, state, dt: float, substeps: int, iterations: int, L: int) -> None:
+def run_lanes(model, state, dt: float, substeps: int, iterations: int, L: int, buffer) -> None:
     """``substeps`` XPBD substeps of ``dt`` [s] on every copy, on ``L`` SIMD lanes (checked by the caller,
-    :func:`tianim.physics.xpbd.run_xpbd`): one frame of :func:`lanes_frames_kernel` without pickers (its
-    picker arrays are placeholders it does not touch)."""
+    :func:`tianim.physics.xpbd.run_xpbd`; ``buffer`` its work arrays): one frame of
+    :func:`lanes_frames_kernel` with one placeholder picker per copy that holds nothing and does not pick
+    (action 0), and a one-particle record; the state's x, v and pins are those of the substeps alone."""
     dtype = state.dtype
     real = dtype.type
     data = model.kernel_data(dtype)
+    B = state.batch
     nx, H = model.grid.nx, model.grid.ny // L
-    S = xpbd_lanes.pool(dtype.name, L, state.batch * H * nx)
+    S = xpbd_lanes.pool(dtype.name, L, B * H * nx)
     kernel = lanes_frames_kernel(dtype.name, model.has_spring_damping, model.medium_damping > 0,
-                                 len(model.colliders) > 0, state.batch == 1, L)
-    v1, w1 = np.zeros((1, 1, 3), dtype), np.zeros((1, 1, 1, 3), dtype)
+                                 len(model.colliders) > 0, L)
+    act = buffer("noop_picker_act", (B, 4), dtype)
+    act.fill(0)
+    held = buffer("noop_picker_held", (B, 1), np.int32)
+    held.fill(-1)
+    pos, new = (buffer(name, (B, 1, 3), dtype) for name in ("noop_picker_pos", "noop_picker_new"))
+    box = buffer("noop_picker_box", (B, 3), dtype)
+    pos.fill(0)
+    box.fill(0)
+    rec = [buffer(name, (1, B, 1, 3), dtype) for name in ("noop_rec_xa", "noop_rec_va", "noop_rec_xp", "noop_rec_vp")]
     kernel(S, state.x, state.v, state.pinned.view(np.uint8), data["inv_mass"], data["k"], data["rest"], data["damp"],
            data["coll"], model.gravity.astype(dtype), float(real(model.medium_damping)), float(real(dt)), nx, H,
-           int(substeps), int(iterations), 0, np.zeros((1, 4), dtype), v1, v1, np.zeros((1, 1), np.int32),
-           v1[0], v1[0], 0.0, 0.0, 1, w1, w1, np.zeros((1, 1, 1), np.uint8), w1, w1)
+           int(substeps), int(iterations), act, pos, new, held, box, box, 0.0, 0.0, 1, rec[0], rec[1],
+           buffer("noop_rec_pa", (1, B, 1), np.uint8), rec[2], rec[3])
