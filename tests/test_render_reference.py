@@ -190,7 +190,7 @@ X, Z = np.meshgrid(u, u)
 g = np.stack([X, 0.5 + 0.2 * np.exp(-4 * (X**2 + Z**2)) + 0.03 * np.sin(17 * X + 5 * Z), Z], -1)
 rng = np.random.default_rng(3)
 h = hashlib.sha256()
-for (w, hh, ss, per) in ((96, 72, 2, False), (160, 120, 3, False), (97, 61, 1, False), (96, 72, 2, True)):
+for (w, hh, ss, per) in ((96, 72, 2, False), (97, 61, 1, False), (96, 72, 2, True)):  # (each ssaa compiles its own)
     s = Scene3D(w, hh, ssaa=ss, per_sample=per)
     s.ground(0.0).sphere((0.1, 0.3, 0.0), 0.2).surface(g, color="blue")
     s.mesh(rng.uniform(-0.7, 0.7, (30, 3)) + [0, 0.6, 0], rng.integers(0, 30, (20, 3)), color="red")
