@@ -233,6 +233,27 @@ def _module_digest(module_name: str) -> str:
     return digest
 
 
+def _package_digest() -> str:
+    """A digest of every source file of the tianim package: a kernel inlines funcs from other modules than
+    its factory's (the kernel layer, the lane funcs), and an edit to any of them makes Taichi's cache miss."""
+    digest = _source_digests.get("<package>")
+    if digest is None:
+        root = os.path.dirname(os.path.abspath(__file__))
+        h = hashlib.sha1()
+        for folder, dirs, files in os.walk(root):
+            dirs[:] = sorted(d for d in dirs if d != "__pycache__")
+            for name in sorted(f for f in files if f.endswith(".py")):
+                path = os.path.join(folder, name)
+                h.update(os.path.relpath(path, root).encode())
+                try:
+                    with open(path, "rb") as fh:
+                        h.update(fh.read())
+                except OSError:
+                    h.update(b"?")
+        digest = _source_digests["<package>"] = h.hexdigest()[:16]
+    return digest
+
+
 def _stamp_folder():
     """``<Taichi's offline cache>/tianim-warm`` (None when the cache is off or Taichi is not live)."""
     if _stamp_state["folder"] is None:
@@ -251,16 +272,19 @@ def _stamp(build, key) -> str | None:
     """File name standing for "kernel variant ``build(*key)`` is in Taichi's offline cache".
 
     Taichi's own cache key hashes the kernel's code and the compile settings; this hashes what
-    stands for them on tianim's side: the factory, its key, its module's source, the Taichi package
-    and version, the arch and the settings that change code (fast_math, default_fp, debug, opt_level).
+    stands for them on tianim's side: the factory, its key, its module's source and the tianim package's
+    (a kernel inlines funcs of other modules), the Taichi package and version, the arch and the settings
+    in Taichi's key (fast_math, default_fp, debug, opt_level, and the CPU thread count: a program with
+    another thread count compiles again).
     """
     ti = _module
     if ti is None or ti.lang.impl.get_runtime().prog is None:
         return None  # the factory built nothing of Taichi's
     cfg = ti.lang.impl.current_cfg()
-    parts = [build.__module__, build.__qualname__, repr(key), _module_digest(build.__module__),
+    parts = [build.__module__, build.__qualname__, repr(key), _module_digest(build.__module__), _package_digest(),
              getattr(ti, "__version__", "?") and str(ti.__version__), ti.__name__]
-    parts += [str(getattr(cfg, name, "?")) for name in ("arch", "fast_math", "default_fp", "debug", "opt_level")]
+    parts += [str(getattr(cfg, name, "?")) for name in ("arch", "fast_math", "default_fp", "debug", "opt_level",
+                                                        "cpu_max_num_threads")]
     return hashlib.sha1("|".join(parts).encode()).hexdigest()[:24]
 
 
