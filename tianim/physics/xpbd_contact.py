@@ -148,8 +148,10 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
     data = model.kernel_data(dtype)
     grid = model.grid is not None
     L = xpbd_lanes.lanes_for(model, dtype, lanes) if not compensated else 0
+    # one copy runs serially (no thread wake-up), except on lanes: that kernel takes seconds to compile, and
+    # one variant then serves a single env and its vector env (a wake-up costs microseconds a launch)
     kernels = _kernels(dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
-                       len(model.colliders) > 0, bool(compensated), sc_iters, False, state.batch == 1, L)
+                       len(model.colliders) > 0, bool(compensated), sc_iters, False, state.batch == 1 and not L, L)
     S = xpbd_lanes.pool(dtype.name, L, state.batch * model.grid.nx * (model.grid.ny // L)) if L else 0
     edges = not grid and model.n_springs > 0
     n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
