@@ -129,58 +129,97 @@ def contact_response(real_name: str, dim: int):
 
 
 @cached_variants
-def lane_contact_response(real_name: str, dim: int, lanes: int):
-    """A ``ti.func lane_respond(S, xrow, vrow, p, free, coll, g_norm, dt)``: :func:`contact_response`'s
-    ``respond`` on ``lanes`` particles at once, in the SIMD-lane layouts (:mod:`tianim.physics.lanes`,
-    :mod:`tianim.physics.xpbd_lanes`).
+def lane_contact_funcs(real_name: str, dim: int, lanes: int):
+    """``(ldot, lane_surface, lane_bounce)``: :func:`branchless_contact_funcs`' ``surface_of`` and ``bounce``
+    on ``lanes`` particles at once, for the SIMD-lane kernels (the cloth layouts through
+    :func:`lane_contact_response`, the particle lanes). A position, velocity or normal is a list of ``dim``
+    L-lane vectors, one per axis, passed as template arguments (the caller's variables); the operations are
+    the scalar forms', in the same order, on L-lane values (a dot product summed left to right, a norm with
+    eps 0), so each lane gets the bits the scalar form gives its particle.
 
-    ``S`` is a field of L-lane vectors; the particle positions are rows ``xrow .. xrow + dim - 1`` of column
-    ``p``, the velocities rows ``vrow ..``; ``free`` (an L-lane mask) selects the lanes that respond (the
-    others keep every bit). The operations are ``respond``'s, in the same order, on L-lane values (a dot
-    product summed left to right, a norm with eps 0), its branch on ``phi < 0`` a select, so each lane gets
-    the bits the scalar response gives its particle; a collider's kind is the same for every lane (a branch
-    outside the vector code). One vector copy of the response, where a response per lane inlines L scalar
-    copies (half the XPBD lanes kernel's compile time at 8 lanes, and its warm time in contact)."""
+    * ``ldot(a, b)``: the lane-wise dot product;
+    * ``lane_surface(X, coll, c, kind, n) -> phi``: signed distances [m] of the lanes' positions ``X`` to
+      collider row ``c`` of compile-time ``kind`` (PLANE or SPHERE), the outward normals written into ``n``;
+    * ``lane_bounce(V, n, e, mu, v_rest, vb)``: the velocities after an impact written into ``vb``
+      (``V`` itself where a lane does not move inward).
+    """
     t = kernel_types(real_name, dim)
     ti, real = t.ti, t.real
     L = lanes
+    T = ti.template()
 
     @ti.func
-    def dot(a: ti.template(), b: ti.template()):
+    def ldot(a: T, b: T):
         s = a[0] * b[0]
         for k in ti.static(range(1, dim)):
             s = s + a[k] * b[k]
         return s
 
     @ti.func
+    def lane_surface(X: T, coll: T, c, kind: T, n: T):
+        zero = ti.Vector.zero(real, L)
+        for a in ti.static(range(dim)):
+            n[a] = zero + coll[c, 4 + a]  # plane normal, or sphere centre
+        phi = zero
+        if ti.static(kind == PLANE):
+            phi = ldot(X, n) - coll[c, 3]
+        else:  # the normal from the centre (+e_{dim-1} at the centre itself)
+            d = [X[a] - n[a] for a in ti.static(range(dim))]
+            dist = ti.sqrt(ldot(d, d) + 0.0)
+            phi = dist - coll[c, 3]
+            for a in ti.static(range(dim)):
+                n[a] = ti.select(dist > 0, d[a] / dist, zero + (1 if a == dim - 1 else 0))
+        return phi
+
+    @ti.func
+    def lane_bounce(V: T, n: T, e_in, mu, v_rest, vb: T):
+        zero = ti.Vector.zero(real, L)
+        vn = ldot(V, n)
+        e = ti.select(-vn <= v_rest, zero, zero + e_in)
+        dvn = -(1 + e) * vn
+        vt = [V[a] - vn * n[a] for a in ti.static(range(dim))]
+        vt_norm = ti.sqrt(ldot(vt, vt) + 0.0)
+        scale = ti.select(vt_norm > mu * dvn, 1 - mu * dvn / vt_norm, zero)
+        en = e * vn
+        for a in ti.static(range(dim)):
+            vb[a] = ti.select(vn < 0, scale * vt[a] - en * n[a], V[a])
+
+    return ldot, lane_surface, lane_bounce
+
+
+@cached_variants
+def lane_contact_response(real_name: str, dim: int, lanes: int):
+    """A ``ti.func lane_respond(S, xrow, vrow, p, free, coll, g_norm, dt)``: :func:`contact_response`'s
+    ``respond`` on ``lanes`` particles at once, in the SIMD-lane layouts (:mod:`tianim.physics.lanes`,
+    :mod:`tianim.physics.xpbd_lanes`), from :func:`lane_contact_funcs`.
+
+    ``S`` is a field of L-lane vectors; the particle positions are rows ``xrow .. xrow + dim - 1`` of column
+    ``p``, the velocities rows ``vrow ..``; ``free`` (an L-lane mask) selects the lanes that respond (the
+    others keep every bit). ``respond``'s branch on ``phi < 0`` is a select; a collider's kind is the same
+    for every lane (a branch outside the vector code). One vector copy of the response, where a response per
+    lane inlines L scalar copies (half the XPBD lanes kernel's compile time at 8 lanes)."""
+    t = kernel_types(real_name, dim)
+    ti, real = t.ti, t.real
+    _, lane_surface, lane_bounce = lane_contact_funcs(real_name, dim, lanes)
+
+    @ti.func
     def lane_respond(S: ti.template(), xrow, vrow, p, free, coll: ti.template(), g_norm, dt):
         v_rest = 2 * g_norm * dt
-        zero = ti.Vector.zero(real, L)
+        zero = ti.Vector.zero(real, lanes)
         x = [S[xrow + a, p] for a in ti.static(range(dim))]
         v = [S[vrow + a, p] for a in ti.static(range(dim))]
+        n = [zero for _ in ti.static(range(dim))]
+        vb = [zero for _ in ti.static(range(dim))]
         for c in range(coll.shape[0]):
-            n = [zero + coll[c, 4 + a] for a in ti.static(range(dim))]  # plane normal, or sphere centre
-            phi = dot(x, n) - coll[c, 3]
-            if coll[c, 0] != PLANE:  # a sphere: the normal from its centre (+e_{dim-1} at the centre)
-                d = [x[a] - n[a] for a in ti.static(range(dim))]
-                dist = ti.sqrt(dot(d, d) + 0.0)
-                phi = dist - coll[c, 3]
-                for a in ti.static(range(dim)):
-                    n[a] = ti.select(dist > 0, d[a] / dist, zero + (1 if a == dim - 1 else 0))
+            phi = lane_surface(x, coll, c, PLANE, n)
+            if coll[c, 0] != PLANE:
+                phi = lane_surface(x, coll, c, SPHERE, n)
             inside = (phi < 0) & free
             for a in ti.static(range(dim)):
                 x[a] = ti.select(inside, x[a] - phi * n[a], x[a])
-            vn = dot(v, n)  # bounce(v, n, e, mu, v_rest)
-            e = ti.select(-vn <= v_rest, zero, zero + coll[c, 1])
-            mu = coll[c, 2]
-            dvn = -(1 + e) * vn
-            vt = [v[a] - vn * n[a] for a in ti.static(range(dim))]
-            vt_norm = ti.sqrt(dot(vt, vt) + 0.0)
-            scale = ti.select(vt_norm > mu * dvn, 1 - mu * dvn / vt_norm, zero)
-            hit = inside & (vn < 0)
-            en = e * vn
+            lane_bounce(v, n, coll[c, 1], coll[c, 2], v_rest, vb)
             for a in ti.static(range(dim)):
-                v[a] = ti.select(hit, scale * vt[a] - en * n[a], v[a])
+                v[a] = ti.select(inside, vb[a], v[a])
         for a in ti.static(range(dim)):
             S[xrow + a, p] = x[a]
             S[vrow + a, p] = v[a]

@@ -38,8 +38,7 @@ import math
 import numpy as np
 
 from tianim.kernels import cached_variants, kernel_types
-from tianim.kernels.colliders import PLANE
-from tianim.kernels.contact import branchless_contact_funcs
+from tianim.kernels.contact import branchless_contact_funcs, lane_contact_funcs
 from tianim.particles.forces import ATTRACTOR, CURL, DRAG, FORCE_ROW, VORTEX
 
 BOUNCE, STICK, KILL = 0, 1, 2
@@ -206,6 +205,7 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
     sincos = trig_kernels(real_name)[0]
     surface, bounce, vsel = branchless_contact_funcs(real_name, dim)  # the one branch-free contact form
     RF, RC, RN = param_rows(len(kinds), len(colliders))
+    lane_fs = {w: lane_contact_funcs(real_name, dim, w) for w in {1, L}}  # the W of advance's two callers
 
     @ti.func
     def row_of(m: ti.template(), u: ti.template()):
@@ -340,38 +340,25 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
         return xi, vi, event, hit
 
     @ti.func
-    def ldot(a: ti.template(), b: ti.template()):
-        r = a[0] * b[0]
-        for k in ti.static(range(1, dim)):
-            r = r + a[k] * b[k]  # Vector.dot: products summed left to right
-        return r
-
-    @ti.func
     def collide_lanes(nx: ti.template(), nv: ti.template(), P: ti.template(), g_norm, h, prad, W: ti.template()):
         """:func:`collide_one` for every collider in turn on the W lanes of (W, dim) positions ``nx`` and
-        velocities ``nv`` at once (updated in place): the same operations in the same order on W-lane values,
-        one vector copy per collider where a call per lane inlined W scalar copies (a large pool's kernel
-        compiled 3x longer with one ground collider). A collider's response runs only when some lane is inside
-        it (elsewhere the selects keep every value). Returns (events, hits) (W,)."""
+        velocities ``nv`` at once (updated in place), from :func:`tianim.kernels.contact.lane_contact_funcs`:
+        the same operations in the same order on W-lane values, one vector copy per collider where a call per
+        lane inlined W scalar copies (a large pool's kernel compiled 3x longer with one ground collider). A
+        collider's response runs only when some lane is inside it (elsewhere the selects keep every value).
+        Returns (events, hits) (W,)."""
+        ldot, lane_surface, lane_bounce = ti.static(lane_fs[W])
         zero = ti.Vector.zero(real, W)
         X = [ti.Vector([nx[u, a] for u in ti.static(range(W))]) for a in ti.static(range(dim))]
         V = [ti.Vector([nv[u, a] for u in ti.static(range(W))]) for a in ti.static(range(dim))]
+        n = [zero for _ in ti.static(range(dim))]
+        vb = [zero for _ in ti.static(range(dim))]
         evl = ti.Vector.zero(ti.i32, W)
         hitl = ti.Vector.zero(ti.i32, W)
         v_rest = 2 * g_norm * h
         for c in ti.static(range(len(colliders))):
             row = RC + c
-            n = [zero + P[row, 4 + a] for a in ti.static(range(dim))]  # plane normal, or sphere centre
-            phi = zero
-            if ti.static(colliders[c][0] == PLANE):
-                phi = ldot(X, n) - P[row, 3]
-            else:
-                d = [X[a] - n[a] for a in ti.static(range(dim))]
-                dist = ti.sqrt(ldot(d, d) + 0.0)
-                phi = dist - P[row, 3]
-                for a in ti.static(range(dim)):
-                    n[a] = ti.select(dist > 0, d[a] / dist, zero + (1 if a == dim - 1 else 0))
-            phi = phi - prad
+            phi = lane_surface(X, P, row, colliders[c][0], n) - prad
             touch = 0
             for u in ti.static(range(W)):
                 touch |= ti.cast(phi[u] < 0, ti.i32)
@@ -387,20 +374,12 @@ def particle_kernels(real_name: str, dim: int, kinds: tuple = (), colliders: tup
                             V[a] = ti.select(inside, zero, V[a])
                         evl = ti.select(inside, 3, evl)
                     else:
-                        vn = ldot(V, n)
-                        hit = ti.select(inside & (vn < -v_rest), 1, 0)  # an impact, not resting contact
-                        e = ti.select(-vn <= v_rest, zero, zero + P[row, 1])  # bounce(v, n, e, mu, v_rest)
-                        mu = P[row, 2]
-                        dvn = -(1 + e) * vn
-                        vt = [V[a] - vn * n[a] for a in ti.static(range(dim))]
-                        vt_norm = ti.sqrt(ldot(vt, vt) + 0.0)
-                        scale = ti.select(vt_norm > mu * dvn, 1 - mu * dvn / vt_norm, zero)
-                        en = e * vn
-                        vb = [ti.select(vn < 0, scale * vt[a] - en * n[a], V[a]) for a in ti.static(range(dim))]
+                        hit = ti.select(inside & (ldot(V, n) < -v_rest), 1, 0)  # an impact, not resting contact
+                        lane_bounce(V, n, P[row, 1], P[row, 2], v_rest, vb)
                         dv = [vb[a] - V[a] for a in ti.static(range(dim))]
                         dvdn = ldot(dv, n)
                         for a in ti.static(range(dim)):
-                            X[a] = ti.select(inside & (mu > 0), X[a] + h * (dv[a] - dvdn * n[a]), X[a])
+                            X[a] = ti.select(inside & (P[row, 2] > 0), X[a] + h * (dv[a] - dvdn * n[a]), X[a])
                             V[a] = ti.select(inside, vb[a], V[a])
                         hitl = ti.max(hitl, hit)
         for u in ti.static(range(W)):
