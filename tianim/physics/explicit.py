@@ -153,7 +153,6 @@ def launch(model, state, dt, substeps, method, layout, buffer, lane_count="auto"
     args = (
         state.x, state.v, work, state.pinned.view(np.uint8), data["params"], data["topo"],
         data["coll"], float(real(dt)),  # a Python float of the state dtype's value (quadrants caches on primitives)
-        model.grid.nx if model.grid is not None else 1,
     )
     if pre is not None:
         pre(*args, 1)

@@ -34,7 +34,7 @@ import numpy as np
 
 from tianim.kernels.contact import contact_response
 from tianim.kernels import cached_variants, kernel_types
-from tianim.physics.model import GRID_STENCIL
+from tianim.physics.model import GRID_STENCIL, TOPO_NX
 
 #: Phases of each integrator: (``pre`` run once per call, ``step`` per substep).
 #: ``acc_X_V`` computes accelerations from positions X and velocities V.
@@ -80,7 +80,8 @@ def substeps_per_launch(method: str) -> int:
 def frame_kernel(real_np, dim: int, method: str, layout: str, grid: bool, colliders: bool, spring_damping: bool, medium_damping: bool):
     """Return ``(pre_kernel, step_kernel, multi_step_kernel)`` for the given compile-time choices (cached).
 
-    All kernels share one signature ``(x, v, W, pinned, P, T, coll, dt, nx, nsub)``.
+    All kernels share one signature ``(x, v, W, pinned, P, T, coll, dt, nsub)`` (a grid's width is read
+    from ``T`` at :data:`tianim.physics.model.TOPO_NX`).
     ``pre_kernel`` is None when the integrator has no pre-phase; ``multi_step_kernel``
     (substep layout only, else None) advances :func:`substeps_per_launch` substeps per launch.
     """
@@ -112,7 +113,8 @@ def substep_funcs(real_name, dim, grid, colliders, spring_damping, medium_dampin
     # Packed arguments (fewer arguments = cheaper launches from Python):
     #   P (params, real): gravity[D], rho, mass[N], inv_mass[N], k[S], rest[S], damp[S]
     #   T (topology, i32): CSR offsets[N+1], spring ids[E], other ends[E]; for grids the
-    #     stencil offsets (d_col, d_row) of GRID_STENCIL, with S = 12 per-offset parameters
+    #     stencil offsets (d_col, d_row) of GRID_STENCIL, then nx, ny (TOPO_NX, TOPO_NY), with S = 12
+    #     per-offset parameters
     #   W (work, vec): acc, xs, vs, kx, kv = W[0..4]
     @ti.func
     def load(sel: ti.template(), x: ti.template(), v: ti.template(), W: ti.template(), b, j):
@@ -269,8 +271,11 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
 
             @ti.kernel
             def kernel(x: vec_arr, v: vec_arr, W: work_arr, pinned: mask_arr, P: real_arr, T: int_arr,
-                       coll: coll_arr, dt: real, nx: ti.i32, nsub: ti.i32):
+                       coll: coll_arr, dt: real, nsub: ti.i32):
                 n = x.shape[1]
+                nx = 1
+                if ti.static(grid):
+                    nx = T[TOPO_NX]
                 # One loop over copies (parallel, or serial for the "serial" layout);
                 # substeps and particles run serially inside it.
                 ti.loop_config(serialize=ti.static(layout == "serial"))
@@ -284,7 +289,10 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
 
         @ti.kernel
         def kernel(x: vec_arr, v: vec_arr, W: work_arr, pinned: mask_arr, P: real_arr, T: int_arr,
-                   coll: coll_arr, dt: real, nx: ti.i32, nsub: ti.i32):
+                   coll: coll_arr, dt: real, nsub: ti.i32):
+            nx = 1
+            if ti.static(grid):
+                nx = T[TOPO_NX]
             # One parallel loop over (copy, particle) per phase. The phase list may hold
             # several substeps: each top-level loop ends with a barrier, so one launch
             # advances them all in order.

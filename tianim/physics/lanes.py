@@ -74,6 +74,7 @@ from tianim import _ti
 from tianim.kernels.contact import lane_contact_response
 from tianim.kernels import cached_variants, kernel_types
 from tianim.physics.model import GRID_STENCIL
+from tianim.physics.packed import I_BAND, I_NX, I_NY, I_ROWS, I_SRC, pack_params
 
 #: Vector register width [bytes] of the host's widest float SIMD, by CPU flag (``/proc/cpuinfo``); SSE2 (16)
 #: is the x86-64 baseline. Taichi compiles kernel bodies for the host CPU, so a vector of that many bytes
@@ -209,7 +210,8 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     @ti.kernel
     def pack(S: ti.template(), M: ti.template(), prm: ti.template(), x: t.vec_arr, v: t.vec_arr,
-             pinned: t.mask_arr, P: t.real_arr, nx: ti.i32, H: ti.i32):
+             pinned: t.mask_arr, P: t.real_arr, I: t.int_arr):
+        nx, H = I[I_NX], I[I_BAND]
         n = x.shape[1]
         ny = n // nx
         npk = H * nx
@@ -242,7 +244,8 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
             write_ghosts(S, 0, kp, r, nx, H)
 
     @ti.kernel
-    def unpack(S: ti.template(), src: ti.template(), x: t.vec_arr, v: t.vec_arr, nx: ti.i32, H: ti.i32):
+    def unpack(S: ti.template(), x: t.vec_arr, v: t.vec_arr, I: t.int_arr):
+        nx, H, src = I[I_NX], I[I_BAND], I[I_SRC]
         n = x.shape[1]
         ny = n // nx
         npk = H * nx
@@ -372,7 +375,8 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
     def make_run(nsub):
         @ti.kernel
         def run(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: t.real2_arr,
-                F: ti.template(), rows: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real):
+                F: ti.template(), I: t.int_arr, dt: real):
+            rows, nx, ny, H = I[I_ROWS], I[I_NX], I[I_NY], I[I_BAND]
             for s in ti.static(range(nsub)):  # each top-level loop ends in a barrier
                 for q in range(rows):
                     substep_row(S, M, prm, off, coll, F, s % 2, q, nx, ny, H, dt)
@@ -383,9 +387,10 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     @ti.kernel
     def run_serial(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: t.real2_arr,
-                   F: ti.template(), rows: ti.i32, nx: ti.i32, ny: ti.i32, H: ti.i32, dt: real, nsub: ti.i32):
+                   F: ti.template(), I: t.int_arr, dt: real, nsub: ti.i32):
         # One thread, every substep of the call in one launch: no barriers, no worker wake-ups; the substep
         # loop is a runtime loop and the source buffer a runtime value (one substep body to compile).
+        rows, nx, ny, H = I[I_ROWS], I[I_NX], I[I_NY], I[I_BAND]
         ti.loop_config(serialize=True)
         for s in range(nsub):
             for q in range(rows):
@@ -416,12 +421,14 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     pack, runs, unpack = lane_kernels(real_name, model.dim, L, len(model.colliders) > 0,
                                       model.has_spring_damping, model.medium_damping > 0)
     S, M, prm, off = pool.state, pool.mass, pool.prm, pool.off
-    pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], g.nx, H)
+    _, I = pack_params(state.dtype, model.dim, nx=g.nx, ny=g.ny, band=H, rows=state.batch * H,
+                       src=substeps % 2)  # src: the buffer the last substep writes
+    pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], I)
     dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
-    args = (S, M, prm, off, data["coll"], pool.force, state.batch * H, g.nx, g.ny, H, dt)
+    args = (S, M, prm, off, data["coll"], pool.force, I, dt)
     if path == "serial" or (path == "auto" and packs * L <= SERIAL_MAX_PARTICLES):
         runs["serial"](*args, substeps)
-        unpack(S, substeps % 2, state.x, state.v, g.nx, H)
+        unpack(S, state.x, state.v, I)
         return
     for _ in range(substeps // SUBSTEPS_PER_LAUNCH):
         runs[SUBSTEPS_PER_LAUNCH](*args)
@@ -430,4 +437,4 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
         runs[2](*args)
     if rest % 2:
         runs[1](*args)
-    unpack(S, rest % 2, state.x, state.v, g.nx, H)
+    unpack(S, state.x, state.v, I)  # rest % 2 == substeps % 2: the parity of the substeps run

@@ -45,6 +45,10 @@ GRID_STENCIL = (
 GRID_FORWARD = tuple(o for o, (dc, dr, _) in enumerate(GRID_STENCIL) if dc > 0 or (dc == 0 and dr > 0))
 #: Colours of the grid springs, springs of one colour sharing no particle: (forward direction index, parity).
 GRID_COLOURS = 2 * len(GRID_FORWARD)
+#: Offsets in a grid model's topology array (``kernel_data()["topo"]``, int32): the stencil's (d_col, d_row)
+#: pairs from 0, then the grid's columns and rows (the explicit kernels read the width there).
+TOPO_NX = 2 * len(GRID_STENCIL)
+TOPO_NY = TOPO_NX + 1
 
 
 def grid_colour_geometry(c: int):
@@ -330,7 +334,10 @@ class Model:
                 k = rest = damp = np.zeros(1, dtype=dtype)
             inv_mass = (1.0 / self.mass).astype(dtype)
             coll = self.collider_table.astype(dtype) if len(self.colliders) else np.zeros((1, COLLIDER_ROW), dtype=dtype)
-            topo = off if self.grid is not None else np.concatenate([off, spr, oth]).astype(np.int32)
+            if self.grid is not None:
+                topo = np.concatenate([off, [self.grid.nx, self.grid.ny]]).astype(np.int32)  # TOPO_NX, TOPO_NY
+            else:
+                topo = np.concatenate([off, spr, oth]).astype(np.int32)
             self._kernel_data[dtype] = dict(
                 params=np.concatenate([self.gravity.astype(dtype), np.array([self.medium_damping], dtype=dtype),
                                        self.mass.astype(dtype), inv_mass, k, rest, damp]),

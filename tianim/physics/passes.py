@@ -33,12 +33,11 @@ import numpy as np
 from tianim.physics.bending import bending_funcs
 from tianim.kernels.contact import contact_response
 from tianim.kernels import cached_variants, kernel_types
-from tianim.physics import selfcollision as scm
+from tianim.physics import packed
+from tianim.physics.packed import I_KEXCL, I_NX, I_NY, P_EPS, P_GNORM, P_H, P_MARGIN, P_THICK, P_VCAP
 from tianim.physics.selfcollision import contact_update_funcs, contacts_for
 from tianim.physics.strain import SOR, strain_funcs
 
-P_H, P_THICK, P_GNORM, P_MARGIN, P_VCAP, P_EPS = scm.P_H, scm.P_THICK, scm.P_GNORM, scm.P_MARGIN, scm.P_VCAP, scm.P_EPS
-I_NX, I_NY, I_KEXCL = scm.I_NX, scm.I_NY, scm.I_KEXCL
 
 #: Scenes with at most this many particles x copies run the passes' loops serially (no thread wake-up).
 SERIAL_MAX = 4096
@@ -382,15 +381,15 @@ def run_with_passes(model, state, dt, substeps, advance_one, explicit, self_coll
         excl_off, excl_idx, k_excl = contacts.excl_off, contacts.excl_idx, contacts.k_excl
     else:
         excl_off, excl_idx, k_excl = _empty((2,)), _empty((1,)), 0
-    # the scalars, packed (selfcollision.pack_params; rounded to the dtype as scalar arguments were)
-    SP, SI = scm.pack_params(dtype, model.dim, h=dt, thick=thick, g_norm=float(np.linalg.norm(model.gravity)),
+    # the scalars, packed (tianim.physics.packed; rounded to the dtype as scalar arguments were)
+    SP, SI = packed.pack_params(dtype, model.dim, h=dt, thick=thick, g_norm=float(np.linalg.norm(model.gravity)),
                              vcap=vcap, eps=eps, nx=nx, ny=ny, k_excl=k_excl)
     if contacts is not None:
         contacts.ensure(state.x)
         nch = -(-model.n_particles // CHUNK)
         spread = buffer("passes_spread", (state.batch, 2 * model.dim * nch), dtype)
         run = buffer("passes_run", (state.batch,), np.int32)
-        SP[scm.P_MARGIN] = self_collision.query_margin * (1 - 1e-5)
+        SP[P_MARGIN] = self_collision.query_margin * (1 - 1e-5)
         _pre2, fix = _kernels(dtype.name, model.dim, grid, None, 0, sc_iters, len(model.colliders) > 0, serial,
                               False)
     else:

@@ -53,6 +53,7 @@ import numpy as np
 
 from tianim._checks import check_choice, check_finite_scalar, check_int, check_positive_int, fmt
 from tianim.kernels import cached_variants, kernel_types
+from tianim.physics.packed import I_KEXCL, I_NX, pack_params
 
 #: Fixed-point steps per thickness of the correction sums (2^40: resolution 1e-12 t; sums up to 8e6 t).
 FIXED_POINT = float(2 ** 40)
@@ -196,6 +197,8 @@ class Contacts:
         self.k_excl = exclusion_steps(sc, model)
         self.grid_model = model.grid is not None
         self.nx = model.grid.nx if model.grid is not None else 1
+        #: the drop kernel's packed ints (tianim.physics.packed): exclusion steps, grid columns
+        self.drop_ints = pack_params(np.float32, model.dim, nx=self.nx, k_excl=self.k_excl)[1]
         if model.grid is None and model.n_springs:
             self.excl_off, self.excl_idx = exclusion_lists(model, self.k_excl)
         else:
@@ -317,7 +320,7 @@ class Contacts:
         # rows here, once per build, instead of in every sweep. On a flat cloth every candidate within the
         # radius is a neighbour. The sums are fixed point (module docstring): the same bits either way.
         _drop_excluded_kernel(self.grid_model, x.shape[0] * x.shape[1] <= DROP_SERIAL_MAX)(
-            nb.indices, nb.counts, self.excl_off, self.excl_idx, self.k_excl, self.nx)
+            nb.indices, nb.counts, self.excl_off, self.excl_idx, self.drop_ints)
         if copies is None:  # every row is new: use the grid's output buffers as they are
             self.nbr, self.count = nb.indices, nb.counts
             self._aliased = True
@@ -336,30 +339,7 @@ class Contacts:
         self.rebuilds += 1
 
 
-# Packed parameters of the contact launches (docs/architecture.md, "One argument convention"): the
-# passes' kernels (tianim.physics.passes) and XPBD's contact launch (tianim.physics.xpbd_contact) take their scalars
-# in one real array (the state's dtype) and one int32 array with these offsets, written by pack_params.
-#: Real parameters: substep h [s], thickness [m], |g| [m/s^2], margin^2 test value [m], separation-speed cap
-#: [m/s] (0: none), strain limit eps, medium damping rho [1/s], gravity g (D entries from P_G).
-P_H, P_THICK, P_GNORM, P_MARGIN, P_VCAP, P_EPS, P_RHO, P_G = range(8)
-#: Int parameters: grid columns and rows (1 for other models), exclusion steps k, springs (edge models),
-#: XPBD sweeps.
-I_NX, I_NY, I_KEXCL, I_NSPRINGS, I_ITERS = range(5)
-#: Per-copy int32 state of a multi-substep contact launch (B, 3): substeps to run (the launch lowers it where
-#: the copy stops), 1 while the copy's lists are valid (0: stopped for a Python rebuild), in-launch rebuilds.
-C_LIM, C_RUN, C_REBUILT = range(3)
-
-
-def pack_params(dtype, dim: int, *, h, thick=0.0, g_norm=0.0, margin=0.0, vcap=0.0, eps=0.0, rho=0.0, g=None,
-                nx=1, ny=1, k_excl=0, n_springs=0, iters=0):
-    """``(P, I)``: the packed real (state dtype) and int32 parameters above. Each real is rounded to the
-    dtype as the scalar kernel arguments were (the same bits)."""
-    P = np.zeros(P_G + dim, dtype)
-    P[[P_H, P_THICK, P_GNORM, P_MARGIN, P_VCAP, P_EPS, P_RHO]] = (h, thick, g_norm, margin, vcap, eps, rho)
-    if g is not None:
-        P[P_G:] = g
-    I = np.array([nx, ny, k_excl, n_springs, iters], np.int32)
-    return P, I
+# The contact launches' packed scalars: tianim.physics.packed (P_*, I_*, C_*, pack_params).
 
 
 _CONTACTS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
@@ -405,8 +385,9 @@ def _excluded_func(grid: bool):
 
 @cached_variants
 def _drop_excluded_kernel(grid: bool, serial: bool):
-    """``drop(nbr (B, N, K), count (B, N), excl_off, excl_idx, k_excl, nx)``: removes the excluded
-    candidates from every row in place, keeping the others in their order (:meth:`Contacts.rebuild`)."""
+    """``drop(nbr (B, N, K), count (B, N), excl_off, excl_idx, I)``: removes the excluded candidates from every
+    row in place, keeping the others in their order (:meth:`Contacts.rebuild`); ``I``: the packed ints of
+    :mod:`tianim.physics.packed` (exclusion steps at I_KEXCL, grid columns at I_NX)."""
     tt = kernel_types("float32", 3)
     ti = tt.ti
     i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
@@ -414,7 +395,8 @@ def _drop_excluded_kernel(grid: bool, serial: bool):
     excluded = _excluded_func(grid)
 
     @ti.kernel
-    def drop(nbr: i32_3, count: i32_2, excl_off: tt.int_arr, excl_idx: tt.int_arr, k_excl: ti.i32, nx: ti.i32):
+    def drop(nbr: i32_3, count: i32_2, excl_off: tt.int_arr, excl_idx: tt.int_arr, I: tt.int_arr):
+        k_excl, nx = I[I_KEXCL], I[I_NX]
         ti.loop_config(serialize=serial)
         for b, i in ti.ndrange(nbr.shape[0], nbr.shape[1]):
             m = ti.min(count[b, i], nbr.shape[2])

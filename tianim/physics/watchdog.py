@@ -38,6 +38,7 @@ import weakref
 import numpy as np
 
 from tianim.physics.model import GRID_FORWARD
+from tianim.physics.packed import I_NSPRINGS, I_NX, P_G, pack_params
 from tianim.kernels import cached_variants, kernel_types
 from tianim.stepping import DivergenceError  # noqa: F401  (the one divergence error, re-exported here)
 
@@ -53,7 +54,7 @@ TERMS = {"kinetic": 0, "spring": 1, "gravity": 2}
 @cached_variants
 def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool, springs: bool = True):
     t = kernel_types(real_name, dim)
-    ti, vec, vec_arr, real_arr, int_arr = t.ti, t.vec, t.vec_arr, t.real_arr, t.int_arr
+    ti, vec_arr, real_arr, int_arr = t.ti, t.vec_arr, t.real_arr, t.int_arr
     out_arr = ti.types.ndarray(dtype=ti.f64, ndim=2)
 
     @ti.func
@@ -63,8 +64,11 @@ def _energy_kernel(real_name: str, dim: int, grid: bool, serial: bool, springs: 
 
     @ti.kernel
     def energies(x: vec_arr, v: vec_arr, pinned: ti.types.ndarray(dtype=ti.u8, ndim=2), mass: real_arr,
-                 off: int_arr, ends: int_arr, k: real_arr, rest: real_arr, g: vec, nx: ti.i32,
-                 n_springs: ti.i32, out: out_arr):
+                 off: int_arr, ends: int_arr, k: real_arr, rest: real_arr, P: real_arr, I: int_arr, out: out_arr):
+        """Per copy b: out[b] = (kinetic, spring, gravitational) energy [J]; P, I: the packed scalars
+        (:mod:`tianim.physics.packed`: gravity, grid columns, springs of an edge model)."""
+        g = ti.Vector([P[P_G + a] for a in ti.static(range(dim))], dt=t.real)
+        nx, n_springs = I[I_NX], I[I_NSPRINGS]
         n = x.shape[1]
         ti.loop_config(serialize=serial)  # one small copy: no thread-pool wake-up
         for b in range(x.shape[0]):
@@ -122,9 +126,10 @@ def _fast_energy(model, state, springs: bool = True) -> np.ndarray:
     ends = _spring_ends(model) if edges else np.zeros(2, np.int32)
     out = np.zeros((state.batch, 3), dtype=np.float64)
     kernel = _energy_kernel(state.dtype.name, model.dim, model.grid is not None, state.batch == 1, springs)
+    P, I = pack_params(state.dtype, model.dim, g=model.gravity, nx=model.grid.nx if model.grid is not None else 1,
+                       n_springs=model.n_springs if edges else 0)
     kernel(state.x, state.v, state.pinned.view(np.uint8), data["mass"], data["off"], ends, data["k"], data["rest"],
-           model.gravity.astype(state.dtype), model.grid.nx if model.grid is not None else 1,
-           model.n_springs if edges else 0, out)
+           P, I, out)
     return out
 
 

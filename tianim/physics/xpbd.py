@@ -84,6 +84,7 @@ from tianim.kernels.contact import contact_response
 from tianim.physics.model import GRID_COLOURS as N_COLOURS, GRID_FORWARD as FORWARD
 from tianim.physics.model import grid_colour_geometry as colour_geometry
 from tianim.physics.grid_colours import colour_funcs
+from tianim.physics.packed import I_ITERS, I_NSPRINGS, I_NX, P_G, P_H, P_RHO, pack_params
 from tianim.physics.xpbd_lanes import lane_funcs
 from tianim.physics import xpbd_lanes
 from tianim.kernels import cached_variants, kernel_types
@@ -95,15 +96,32 @@ PARALLEL_MIN_PARTICLES = 1024
 
 
 @cached_variants
+@cached_variants
+def scalar_funcs(real_name, dim):
+    """``scalars(P, I) -> (g, rho, h, |g|, nx, n_springs, iters)``: the Taichi func that reads XPBD's packed
+    scalars (:func:`xpbd_params`, offsets in :mod:`tianim.physics.packed`) at the top of each of its kernels."""
+    t = kernel_types(real_name, dim)
+    ti, real = t.ti, t.real
+    T = ti.template()
+
+    @ti.func
+    def scalars(P: T, I: T):
+        g = ti.Vector([P[P_G + a] for a in ti.static(range(dim))], dt=real)
+        return g, P[P_RHO], P[P_H], g.norm(), I[I_NX], I[I_NSPRINGS], I[I_ITERS]
+
+    return scalars
+
+
 def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, compensated=False, sc_iters=0,
              pickers=False, serial=False, lanes=0):
     t = kernel_types(real_name, dim)
-    ti, real, vec, vec_arr = t.ti, t.real, t.vec, t.vec_arr
+    ti, vec_arr = t.ti, t.vec_arr
     real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
     T = ti.template()
     nf = len(FORWARD)
     respond = contact_response(real_name, dim)
     geometry, extent, along = colour_funcs()
+    scalars = scalar_funcs(real_name, dim)
 
     @ti.func
     def project(b, i, j, s, li, x: T, dx: T, rem: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T, damp: T, h):
@@ -258,10 +276,9 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
 
     @ti.kernel
     def per_copy(x: vec_arr, v: vec_arr, dx: vec_arr, rem: vec_arr, lam: real2_arr, pinned: mask_arr, inv_mass: real_arr,
-                 ends: int_arr, k: real_arr, rest: real_arr, damp: real_arr,
-                 coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32, n_springs: ti.i32, nsub: ti.i32,
-                 iters: ti.i32):
-        g_norm = g.norm()
+                 ends: int_arr, k: real_arr, rest: real_arr, damp: real_arr, coll: real2_arr, P: real_arr,
+                 I: int_arr, nsub: ti.i32):
+        g, rho, h, g_norm, nx, n_springs, iters = scalars(P, I)
         ti.loop_config(serialize=serial)  # one copy: no thread wake-up
         for b in range(x.shape[0]):
             for _sub in range(nsub):
@@ -286,12 +303,14 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
             @ti.kernel
             def parallel_substep(x: vec_arr, v: vec_arr, dx: vec_arr, rem: vec_arr, lam: real2_arr, pinned: mask_arr,
                                  inv_mass: real_arr, k: real_arr, rest: real_arr,
-                                 damp: real_arr, coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32):
+                                 damp: real_arr, coll: real2_arr, P: real_arr, I: int_arr):
                 """A piece of a substep, parallel over (copy, particle); each top-level loop ends in a barrier.
 
                 phase 0: predict and one symmetric sweep; 1: one more symmetric sweep; 2: a symmetric
-                sweep and the velocity/collider update; 3: the whole substep with one sweep.
+                sweep and the velocity/collider update; 3: the whole substep with one sweep. P, I: the packed
+                scalars (:mod:`tianim.physics.packed`).
                 """
+                g, rho, h, g_norm, nx, _n_springs, _iters = scalars(P, I)
                 if ti.static(phase in (0, 3)):
                     for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                         predict(b, i, x, v, dx, pinned, inv_mass, g, rho, h)
@@ -302,12 +321,23 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
                         grid_colour(b, m, c, x, dx, rem, lam, pinned, inv_mass, k, rest, damp, h, nx)
                 if ti.static(phase in (2, 3)):
                     for b, i in ti.ndrange(x.shape[0], x.shape[1]):
-                        finish(b, i, x, v, dx, rem, pinned, coll, g.norm(), h)
+                        finish(b, i, x, v, dx, rem, pinned, coll, g_norm, h)
 
             return parallel_substep
 
         kernels["parallel"] = tuple(make(p) for p in range(4))
     return kernels
+
+
+def xpbd_params(model, dtype, dt: float, iterations: int, **extra):
+    """``(P, I)``: the packed scalars of XPBD's kernels (:func:`tianim.physics.packed.pack_params`): substep
+    ``dt`` [s], the model's gravity and medium damping, the grid's columns and rows (1 for edge models), the
+    springs of an edge model (0 for grids), ``iterations`` sweeps; ``extra`` more entries (pickers, contacts)."""
+    grid = model.grid
+    edges = grid is None and model.n_springs > 0
+    return pack_params(dtype, model.dim, h=dt, rho=model.medium_damping, g=model.gravity,
+                       nx=grid.nx if grid is not None else 1, ny=grid.ny if grid is not None else 1,
+                       n_springs=model.n_springs if edges else 0, iters=int(iterations), **extra)
 
 
 def choose_xpbd_layout(model, batch: int) -> str:
@@ -373,22 +403,19 @@ def run_xpbd(model, state, dt: float, substeps: int, iterations: int, layout: st
     edges = not grid and model.n_springs > 0
     n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
     lam = buffer("lambda", (state.batch, n_lam), state.dtype)
-    real = state.dtype.type
     rem = buffer("rem", state.x.shape, state.dtype)
     if compensated and not keep_remainder:
         rem.fill(0)
     common_head = (state.x, state.v, buffer("dx", state.x.shape, state.dtype), rem, lam,
                    state.pinned.view(np.uint8), data["inv_mass"])
-    g, rho, h = model.gravity.astype(state.dtype), float(real(model.medium_damping)), float(real(dt))
-    nx = model.grid.nx if grid else 1
+    P, I = xpbd_params(model, state.dtype, dt, iterations)
     if layout == "per_copy":
         ends = model.springs.ravel() if edges else np.zeros(2, np.int32)
         kernels["per_copy"](*common_head, np.ascontiguousarray(ends, dtype=np.int32), data["k"], data["rest"],
-                            data["damp"], data["coll"], g, rho, h, nx, model.n_springs if edges else 0,
-                            int(substeps), int(iterations))
+                            data["damp"], data["coll"], P, I, int(substeps))
         return
     first, middle, last, whole = kernels["parallel"]
-    args = common_head + (data["k"], data["rest"], data["damp"], data["coll"], g, rho, h, nx)
+    args = common_head + (data["k"], data["rest"], data["damp"], data["coll"], P, I)
     for _ in range(int(substeps)):
         if iterations == 1:
             whole(*args)

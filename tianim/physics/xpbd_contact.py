@@ -13,6 +13,9 @@ import numpy as np
 from tianim.kernels.contact import contact_response
 from tianim.physics import passes
 from tianim.physics.model import GRID_FORWARD as FORWARD
+from tianim.physics import packed
+from tianim.physics.packed import (C_LIM, C_REBUILT, C_RUN, I_ITERS, I_KEXCL, I_NSPRINGS, I_NX, I_NY, P_G,
+                                   P_GNORM, P_H, P_MARGIN, P_RHO, P_THICK, P_VCAP)
 from tianim.physics.selfcollision import contact_update_funcs, contacts_for
 from tianim.physics import xpbd_lanes
 from tianim.physics.xpbd import _kernels
@@ -51,11 +54,7 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
     contact_update = contact_update_funcs(real_name, dim, grid)
     respond = contact_response(real_name, dim)
     rebuild = scm.rebuild_funcs(real_name, dim, grid)
-    P_H, P_THICK, P_GNORM, P_MARGIN, P_VCAP, P_RHO, P_G = (scm.P_H, scm.P_THICK, scm.P_GNORM, scm.P_MARGIN,
-                                                         scm.P_VCAP, scm.P_RHO, scm.P_G)
-    I_NX, I_NY, I_KEXCL, I_NSPRINGS, I_ITERS = scm.I_NX, scm.I_NY, scm.I_KEXCL, scm.I_NSPRINGS, scm.I_ITERS
     pack_copy, lane_substep, unpack_copy = lane if lane is not None else (None, None, None)
-    C_LIM, C_RUN, C_REBUILT = scm.C_LIM, scm.C_RUN, scm.C_REBUILT
 
     @ti.func
     def contact_sweep(b, i, src: T, dst: T, v: T, pinned: T, inv_mass: T, nbr: T, count: T, excl_off: T,
@@ -141,8 +140,6 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
     Parameters as :func:`run_xpbd` (per-copy layout; ``lanes``: each substep's XPBD part on SIMD lanes where
     :func:`tianim.physics.xpbd_lanes.lanes_for` gives some, bit-identical), with ``self_collision`` the
     :class:`tianim.physics.SelfCollision` option. ``state.x``/``state.v`` are updated in place."""
-    from tianim.physics import selfcollision as scm
-
     sc_iters = int(self_collision.iterations)
     dtype = state.dtype
     data = model.kernel_data(dtype)
@@ -168,7 +165,7 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
     contacts = contacts_for(self_collision, model, state)
     contacts.ensure(state.x)
     cap = self_collision.max_separation_speed
-    P, I = scm.pack_params(dtype, model.dim, h=dt, thick=self_collision.thickness,
+    P, I = packed.pack_params(dtype, model.dim, h=dt, thick=self_collision.thickness,
                            g_norm=float(np.linalg.norm(model.gravity)),
                            margin=self_collision.query_margin * (1 - 1e-5), vcap=0.0 if cap is None else cap,
                            rho=model.medium_damping, g=model.gravity, nx=nx, ny=ny, k_excl=contacts.k_excl,
@@ -178,14 +175,14 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
     kernel = kernels["per_copy_contact"]
     fix = None
     while left.any():
-        np.minimum(left, np.iinfo(np.int32).max, out=cs[:, scm.C_LIM], casting="unsafe")
-        cs[:, scm.C_RUN] = 1
-        cs[:, scm.C_REBUILT] = 0
+        np.minimum(left, np.iinfo(np.int32).max, out=cs[:, C_LIM], casting="unsafe")
+        cs[:, C_RUN] = 1
+        cs[:, C_REBUILT] = 0
         kernel(S, state.x, state.v, dx, rem, lam, pinned, data["inv_mass"], ends, data["k"], data["rest"], data["damp"],
                data["coll"], W, contacts.nbr, contacts.count, contacts.excl_off, contacts.excl_idx, contacts.x_build,
                P, I, cs, *contacts.kernel_grid())
-        contacts.rebuilt_in_launch(cs[:, scm.C_REBUILT])
-        run = np.ascontiguousarray(cs[:, scm.C_RUN])
+        contacts.rebuilt_in_launch(cs[:, C_REBUILT])
+        run = np.ascontiguousarray(cs[:, C_RUN])
         if not run.all():  # stopped after their XPBD part: rebuild their lists, then their contacts and colliders
             stale = np.flatnonzero(run == 0)
             contacts.rebuild(state.x, stale)
@@ -199,4 +196,4 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
             fix(state.x, state.v, W, pinned, data["inv_mass"], np.zeros(4, dtype), data["topo"], data["rest"],
                 contacts.nbr, contacts.count, contacts.excl_off, contacts.excl_idx, data["coll"], contacts.x_build,
                 spread, run, P, I)
-        left -= cs[:, scm.C_LIM]
+        left -= cs[:, C_LIM]

@@ -10,15 +10,22 @@ import numpy as np
 
 from tianim.physics.model import GRID_FORWARD as FORWARD
 from tianim.physics import xpbd_lanes
-from tianim.physics.xpbd import _kernels
+from tianim.physics.packed import I_BAND, P_MOVE
+from tianim.physics.xpbd import _kernels, scalar_funcs, xpbd_params
 from tianim.kernels import cached_variants, kernel_types
+
+
+#: Offsets of the pickers' float64 parameters (``pick``, one row for all copies): the pick radius [m]
+#: (distances to the picker are compared in float64, SoftGym's NumPy arithmetic).
+PICK_REACH = 0
+PICK_PARAMS = 1
 
 
 def _arg_types(real_name, dim):
     t = kernel_types(real_name, dim)
     ti = t.ti
     return t, ti.types.ndarray(dtype=ti.i32, ndim=2), ti.types.ndarray(dtype=ti.u8, ndim=3), \
-        ti.types.ndarray(dtype=t.vec, ndim=1)
+        ti.types.ndarray(dtype=t.vec, ndim=1), ti.types.ndarray(dtype=ti.f64, ndim=1)
 
 
 @cached_variants
@@ -96,21 +103,22 @@ def lanes_frames_kernel(real_name, spring_damping, medium_damping, colliders, L)
     runtime flag let LLVM unswitch the frame loop into two copies of the body (as slow to compile as two
     kernels)."""
     dim = 3
-    t, i32_2, u8_3, vec_1 = _arg_types(real_name, dim)
-    ti, real, vec, vec_arr, work_arr = t.ti, t.real, t.vec, t.vec_arr, t.work_arr
-    real_arr, mask_arr, real2_arr = t.real_arr, t.mask_arr, t.real2_arr
+    t, i32_2, u8_3, vec_1, f64_1 = _arg_types(real_name, dim)
+    ti, vec_arr, work_arr = t.ti, t.vec_arr, t.work_arr
+    real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
     T = ti.template()
     picker_move, record = picker_funcs(real_name, dim)
+    scalars = scalar_funcs(real_name, dim)
     pack_copy, lane_substep, unpack_copy = xpbd_lanes.lane_funcs(real_name, L, spring_damping, medium_damping,
                                                                  colliders)
 
     @ti.kernel
     def frames_lanes(S: T, x: vec_arr, v: vec_arr, pinned: mask_arr, inv_mass: real_arr, k: real_arr,
-                     rest: real_arr, damp: real_arr, coll: real2_arr, g: vec, rho: real, h: real,
-                     nx: ti.i32, H: ti.i32, nsub: ti.i32, iters: ti.i32, act: real2_arr, pos: vec_arr,
-                     new: vec_arr, held: i32_2, low: vec_1, high: vec_1, reach: ti.f64, move: real,
+                     rest: real_arr, damp: real_arr, coll: real2_arr, P: real_arr, I: int_arr, nsub: ti.i32,
+                     act: real2_arr, pos: vec_arr, new: vec_arr, held: i32_2, low: vec_1, high: vec_1, pick: f64_1,
                      frames: ti.i32, xa: work_arr, va: work_arr, pa: u8_3, xp: work_arr, vp: work_arr):
-        g_norm = g.norm()
+        g, rho, h, g_norm, nx, _n_springs, iters = scalars(P, I)
+        H, reach, move = I[I_BAND], pick[PICK_REACH], P[P_MOVE]
         for b in range(x.shape[0]):
             for f in range(frames):
                 picker_move(b, f, x, v, pinned, act, pos, new, held, low, high, reach, move, xa, va, pa)
@@ -126,19 +134,20 @@ def lanes_frames_kernel(real_name, spring_damping, medium_damping, colliders, L)
 def _picker_kernel(real_name, dim, copy_substep, serial):
     """``frames`` frames of picker moves and XPBD substeps per copy in one launch (:func:`run_xpbd_picker_frames`),
     the scalar per-copy substeps ``copy_substep`` of :func:`tianim.physics.xpbd._kernels`."""
-    t, i32_2, u8_3, vec_1 = _arg_types(real_name, dim)
-    ti, real, vec, vec_arr, work_arr = t.ti, t.real, t.vec, t.vec_arr, t.work_arr
+    t, i32_2, u8_3, vec_1, f64_1 = _arg_types(real_name, dim)
+    ti, vec_arr, work_arr = t.ti, t.vec_arr, t.work_arr
     real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
     picker_move, record = picker_funcs(real_name, dim)
+    scalars = scalar_funcs(real_name, dim)
 
     @ti.kernel
     def picker_frames(x: vec_arr, v: vec_arr, dx: vec_arr, rem: vec_arr, lam: real2_arr, pinned: mask_arr,
                       inv_mass: real_arr, ends: int_arr, k: real_arr, rest: real_arr, damp: real_arr,
-                      coll: real2_arr, g: vec, rho: real, h: real, nx: ti.i32, n_springs: ti.i32, nsub: ti.i32,
-                      iters: ti.i32, act: real2_arr, pos: vec_arr, new: vec_arr, held: i32_2, low: vec_1, high: vec_1,
-                      reach: ti.f64, move: real, frames: ti.i32, xa: work_arr, va: work_arr, pa: u8_3, xp: work_arr,
-                      vp: work_arr):
-        g_norm = g.norm()
+                      coll: real2_arr, P: real_arr, I: int_arr, nsub: ti.i32, act: real2_arr, pos: vec_arr,
+                      new: vec_arr, held: i32_2, low: vec_1, high: vec_1, pick: f64_1, frames: ti.i32,
+                      xa: work_arr, va: work_arr, pa: u8_3, xp: work_arr, vp: work_arr):
+        g, rho, h, g_norm, nx, n_springs, iters = scalars(P, I)
+        reach, move = pick[PICK_REACH], P[P_MOVE]
         ti.loop_config(serialize=serial)  # one copy: no thread wake-up
         for b in range(x.shape[0]):
             for f in range(frames):
@@ -175,7 +184,6 @@ def run_xpbd_picker_frames(model, state, dt: float, substeps: int, iterations: i
     "auto", 0 for the scalar sweep, 4 or 8); every choice is bit-identical.
     """
     dtype = state.dtype
-    real = dtype.type
     data = model.kernel_data(dtype)
     grid = model.grid is not None
     L = xpbd_lanes.lanes_for(model, dtype, lanes)
@@ -190,27 +198,26 @@ def run_xpbd_picker_frames(model, state, dt: float, substeps: int, iterations: i
     new = buffer("frames_new", pos.shape, dtype)
     held32 = np.ascontiguousarray(held, dtype=np.int32)
     act = np.ascontiguousarray(actions, dtype=dtype).reshape(state.batch, -1)
-    g, rho, h = model.gravity.astype(dtype), float(real(model.medium_damping)), float(real(dt))
-    nx = model.grid.nx if grid else 1
     ends = np.ascontiguousarray(model.springs.ravel() if edges else np.zeros(2), dtype=np.int32)
+    H = model.grid.ny // L if L else 0
+    P, I = xpbd_params(model, dtype, dt, iterations, move=move, band=H)
+    pick = np.zeros(PICK_PARAMS, np.float64)
+    pick[PICK_REACH] = reach
+    box = np.ascontiguousarray(low, dtype=dtype), np.ascontiguousarray(high, dtype=dtype)
     if L:
-        H = model.grid.ny // L
-        S = xpbd_lanes.pool(dtype.name, L, state.batch * H * nx)
+        S = xpbd_lanes.pool(dtype.name, L, state.batch * H * model.grid.nx)
         kernel = lanes_frames_kernel(dtype.name, model.has_spring_damping, model.medium_damping > 0,
                                      len(model.colliders) > 0, L)
         kernel(S, state.x, state.v, state.pinned.view(np.uint8), data["inv_mass"], data["k"], data["rest"],
-               data["damp"], data["coll"], g, rho, h, nx, H, int(substeps), int(iterations), act, pos, new, held32,
-               np.ascontiguousarray(low, dtype=dtype), np.ascontiguousarray(high, dtype=dtype), float(reach),
-               float(real(move)), int(frames), xa, va, pa, xp, vp)
+               data["damp"], data["coll"], P, I, int(substeps), act, pos, new, held32, *box, pick, int(frames),
+               xa, va, pa, xp, vp)
         held[...] = held32
         return xa, va, pa.view(bool), xp, vp
     kernels = _kernels(dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
                        len(model.colliders) > 0, False, 0, True, state.batch == 1)
     kernels["picker_frames"](state.x, state.v, dx, rem, lam, state.pinned.view(np.uint8), data["inv_mass"], ends,
-                             data["k"], data["rest"], data["damp"], data["coll"], g, rho, h, nx,
-                             model.n_springs if edges else 0, int(substeps), int(iterations), act, pos, new, held32,
-                             np.ascontiguousarray(low, dtype=dtype), np.ascontiguousarray(high, dtype=dtype),
-                             float(reach), float(real(move)), int(frames), xa, va, pa, xp, vp)
+                             data["k"], data["rest"], data["damp"], data["coll"], P, I, int(substeps), act, pos, new,
+                             held32, *box, pick, int(frames), xa, va, pa, xp, vp)
     held[...] = held32
     return xa, va, pa.view(bool), xp, vp
 
@@ -221,10 +228,10 @@ def run_lanes(model, state, dt: float, substeps: int, iterations: int, L: int, b
     :func:`lanes_frames_kernel` with one placeholder picker per copy that holds nothing and does not pick
     (action 0), and a one-particle record; the state's x, v and pins are those of the substeps alone."""
     dtype = state.dtype
-    real = dtype.type
     data = model.kernel_data(dtype)
     B = state.batch
     nx, H = model.grid.nx, model.grid.ny // L
+    P, I = xpbd_params(model, dtype, dt, iterations, band=H)
     S = xpbd_lanes.pool(dtype.name, L, B * H * nx)
     kernel = lanes_frames_kernel(dtype.name, model.has_spring_damping, model.medium_damping > 0,
                                  len(model.colliders) > 0, L)
@@ -238,6 +245,5 @@ def run_lanes(model, state, dt: float, substeps: int, iterations: int, L: int, b
     box.fill(0)
     rec = [buffer(name, (1, B, 1, 3), dtype) for name in ("noop_rec_xa", "noop_rec_va", "noop_rec_xp", "noop_rec_vp")]
     kernel(S, state.x, state.v, state.pinned.view(np.uint8), data["inv_mass"], data["k"], data["rest"], data["damp"],
-           data["coll"], model.gravity.astype(dtype), float(real(model.medium_damping)), float(real(dt)), nx, H,
-           int(substeps), int(iterations), act, pos, new, held, box, box, 0.0, 0.0, 1, rec[0], rec[1],
-           buffer("noop_rec_pa", (1, B, 1), np.uint8), rec[2], rec[3])
+           data["coll"], P, I, int(substeps), act, pos, new, held, box, box, np.zeros(PICK_PARAMS), 1, rec[0],
+           rec[1], buffer("noop_rec_pa", (1, B, 1), np.uint8), rec[2], rec[3])
