@@ -21,11 +21,12 @@ def test_grid_normals_match_the_analytic_normal_of_a_paraboloid():
     v = g.reshape(-1, 3)
     # the vertices pass packs the unit normal of each grid vertex into attr columns ATTR_NORMAL..+2
     prm = np.zeros(K.VERTEX_PARAMS, np.float32)
-    prm[[0, 4, 8]] = 1.0                      # camera rows right, up, forward: the identity
-    prm[[12, 16, 20]] = 1.0                   # the same for the light
-    prm[24:29] = 100.0, 64.0, 48.0, 1.0, 16.0  # focal, sample grid, shadow-map focal and size
-    prm[29:32] = 0.0, 1.0, 0.0
-    prm[11] = -3.0                            # eye at z = -3
+    prm[K.VP_CAMERA:K.VP_CAMERA + 9] = np.eye(3).ravel()            # camera rows right, up, forward: the identity
+    prm[K.VP_LIGHT_FRAME:K.VP_LIGHT_FRAME + 9] = np.eye(3).ravel()  # the same for the light
+    prm[[K.VP_FOCAL, K.VP_WIDTH, K.VP_HEIGHT]] = 100.0, 64.0, 48.0  # focal, sample grid
+    prm[[K.VP_LFOCAL, K.VP_SMAP_SIZE]] = 1.0, 16.0                  # shadow-map focal and size
+    prm[K.VP_LIGHT_DIR:K.VP_LIGHT_DIR + 3] = 0.0, 1.0, 0.0
+    prm[K.VP_CAMERA + 11] = -3.0                                    # eye at z = -3
     attr = np.zeros((len(v), K.ATTR_COLS), np.float32)
     K.kernels().vertices(v, np.zeros((1, 3), np.float32), np.zeros_like(v), np.array([[0, n, n]], np.int32),
                          prm, attr)

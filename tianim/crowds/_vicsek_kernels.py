@@ -7,14 +7,16 @@ grid's order: bit-identical for any thread count.
 
 from tianim.kernels import cached_variants, kernel_types
 
-#: Named offsets of ``update``'s packed parameter array ``prm`` (positions' dtype): speed [m/s], dt [s],
-#: box side [m], then the noise amplitude eta of copy b at ``ETA + b``.
-SPEED, DT, BOX, ETA = 0, 1, 2, 3
+#: Named offsets of the kernels' packed parameter array ``prm`` (positions' dtype): speed [m/s], dt [s],
+#: box side [m], ``accumulate``'s first-list flag (1: start the sums from zero, 0: add to them; exact as a
+#: float), then the noise amplitude eta of copy b at ``ETA + b``.
+SPEED, DT, BOX, FIRST, ETA = 0, 1, 2, 3, 4
 
 
 def pack_update(prm, speed, dt, box, eta) -> None:
-    """Write ``update``'s parameters into ``prm`` (ETA + B,) at the offsets above (eta: (B,))."""
-    prm[SPEED], prm[DT], prm[BOX] = speed, dt, box
+    """Write ``update``'s parameters into ``prm`` (ETA + B,) at the offsets above (eta: (B,)); ``FIRST`` is
+    set to 1 (the caller writes ``prm[FIRST]`` before each ``accumulate``)."""
+    prm[SPEED], prm[DT], prm[BOX], prm[FIRST] = speed, dt, box, 1
     prm[ETA:] = eta
 
 
@@ -28,8 +30,12 @@ def vicsek_kernels(real_name: str):
     real2d = ti.types.ndarray(dtype=real, ndim=2)
 
     @ti.kernel
-    def accumulate(nbr: i32_3, count: i32_2, hd: t.vec_arr, acc: t.vec_arr, first: ti.i32):
-        """acc[b, i] (= 0 if first) += sum of the headings of i's neighbours in this list."""
+    def accumulate(nbr: i32_3, count: i32_2, hd: t.vec_arr, acc: t.vec_arr, prm: t.real_arr):
+        """acc[b, i] (= 0 if prm[FIRST] is 1) += sum of the headings of i's neighbours in this list.
+
+        nbr (B, N, K), count (B, N) int32: a neighbour list (``NeighbourGrid.query``); hd, acc (B, N, 2)
+        headings and sums; prm: the packed parameters (:func:`pack_update`), of which only ``FIRST`` is read."""
+        first = ti.cast(prm[FIRST], ti.i32)
         for b, i in ti.ndrange(hd.shape[0], hd.shape[1]):
             s = ti.Vector.zero(real, 2)
             if first == 0:

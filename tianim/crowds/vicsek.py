@@ -105,7 +105,7 @@ class Vicsek(CrowdModel):
         return dict(grid=grid, acc=np.zeros_like(state.x), u=np.zeros((B, N), f), shifted=np.zeros_like(state.x))
 
     def _advance(self, state: CrowdState, dt, steps, s) -> dict:
-        from tianim.crowds._vicsek_kernels import ETA, pack_update, vicsek_kernels
+        from tianim.crowds._vicsek_kernels import ETA, FIRST, pack_update, vicsek_kernels
 
         accumulate, update = vicsek_kernels(np.dtype(state.x.dtype).name)
         f = state.x.dtype
@@ -117,7 +117,8 @@ class Vicsek(CrowdModel):
             for k, (sx, sy) in enumerate(IMAGES):
                 np.add(state.x, np.array([sx * self.box, sy * self.box], f.type), out=sh)
                 nb = grid.query(self.radius, points=sh)
-                accumulate(nb.indices, nb.counts, state.heading, s["acc"], int(k == 0))
+                prm[FIRST] = k == 0  # the first image starts the sums
+                accumulate(nb.indices, nb.counts, state.heading, s["acc"], prm)
             for b in range(state.batch):
                 with draw(state.rng, b) as rng:
                     s["u"][b] = rng.random(state.n)

@@ -22,6 +22,9 @@ AA_HALF_WIDTH = 0.5
 AA_PAD = 1.0
 #: Smallest combined alpha a colour is divided by (keeps a fully transparent mix finite).
 MIN_ALPHA = 1e-6
+#: Horizontal bands the image is cut into, one parallel task each (more than the cores of a desktop; the
+#: result does not depend on it); an image of fewer rows gets one band per row.
+RASTER_BANDS = 16
 
 
 @cached_variants
@@ -32,10 +35,11 @@ def kernels():
     f32a3 = ti.types.ndarray(dtype=ti.f32, ndim=3)
 
     @ti.kernel
-    def draw_capsules(img: f32a3, geom: f32a2, col: f32a2, bands: ti.i32):
+    def draw_capsules(img: f32a3, geom: f32a2, col: f32a2):
         """img: (H, W, 3) RGB in [0, 1]; geom: (P, 6) ax, ay, bx, by, r, outline width [px];
-        col: (P, 8) fill rgba, outline rgba."""
+        col: (P, 8) fill rgba, outline rgba. Bands: min(H, RASTER_BANDS) (at least 1), from img's shape."""
         H, W = img.shape[0], img.shape[1]
+        bands = ti.max(1, ti.min(H, RASTER_BANDS))
         for band in range(bands):
             y_lo = band * H // bands
             y_hi = (band + 1) * H // bands

@@ -44,8 +44,13 @@ EMPTY_DEPTH = 0x7F800000
 MAX_PRIMITIVES = (1 << 24) - 1
 _ID_MASK = 0xFFFFFF
 
-#: Length of the parameter vector of :func:`vertices` (layout in its docstring).
-VERTEX_PARAMS = 32
+#: Named offsets of the packed float32 parameter vector of :func:`vertices` and ``raster`` (layout in
+#: ``vertices``' docstring): the camera rows right, up, forward, eye (12), the same of the light (origin last,
+#: 12), the sample grid's focal [px], width and height [px], the shadow map's focal [texels/m] and size
+#: [texels], the unit vector towards the light (3) and ``raster``'s near distance [m]; VERTEX_PARAMS in all.
+VP_CAMERA, VP_LIGHT_FRAME, VP_FOCAL, VP_WIDTH, VP_HEIGHT, VP_LFOCAL, VP_SMAP_SIZE, VP_LIGHT_DIR, VP_NEAR = (
+    0, 12, 24, 25, 26, 27, 28, 29, 32)
+VERTEX_PARAMS = 33
 #: Columns of the packed sphere rows (read by ``raster`` and ``resolve``): view-space centre [m],
 #: light-space centre [m], radius [m], sRGB colour.
 SPH_VIEW, SPH_LIGHT, SPH_RADIUS, SPH_COLOR, SPH_COLS = 0, 3, 6, 7, 10
@@ -140,18 +145,23 @@ def kernels():
         verts, colors: (V, 3) world positions [m], sRGB in [0, 1]; normals: (V, 3) (any length) of the
         vertices of non-grid meshes; grids: (G, 3) rows (first vertex, ny, nx) of the grid surfaces,
         whose normals come from :func:`_grid_normal` instead (ny = 0: no grid);
-        prm (VERTEX_PARAMS,): [0:12] camera rows right, up, forward, eye; [12:24] the same of the light
-        (origin last); [24] focal [px], [25] width, [26] height [px] of the sample grid,
-        [27] shadow-map focal [px/m], [28] shadow-map size [texels], [29:32] unit vector towards the light.
+        prm (VERTEX_PARAMS,) float32 at the named offsets: [VP_CAMERA : + 12] camera rows right, up, forward,
+        eye [m]; [VP_LIGHT_FRAME : + 12] the same of the light (origin last); [VP_FOCAL] focal [px],
+        [VP_WIDTH] width, [VP_HEIGHT] height [px] of the sample grid, [VP_LFOCAL] shadow-map focal [texels/m],
+        [VP_SMAP_SIZE] shadow-map size [texels], [VP_LIGHT_DIR : + 3] unit vector towards the light
+        ([VP_NEAR] is ``raster``'s, not read here).
         attr columns: 0-2 sample-grid x, y [px] and 1/depth [1/m] (Hartley & Zisserman eq. 6.1; -1 behind the eye),
         3-5 unit normal, 6-8 linear colour (gamma 2), 9-11 shadow-map x, y [texels] and light depth [m],
         12-14 the unit Blinn half vector (L + V)/|L + V| at the vertex (interpolated, it stands in for the
         per-pixel one: Phong shading with per-vertex view vectors).
         """
-        f, hw, hh, lf, hs = prm[24], 0.5 * prm[25], 0.5 * prm[26], prm[27], 0.5 * prm[28]
-        R, U, Fw, eye = _vec3(prm, 0), _vec3(prm, 3), _vec3(prm, 6), _vec3(prm, 9)
-        LR, LU, LF, lo = _vec3(prm, 12), _vec3(prm, 15), _vec3(prm, 18), _vec3(prm, 21)
-        Ld = _vec3(prm, 29)
+        f, hw, hh = prm[VP_FOCAL], 0.5 * prm[VP_WIDTH], 0.5 * prm[VP_HEIGHT]
+        lf, hs = prm[VP_LFOCAL], 0.5 * prm[VP_SMAP_SIZE]
+        R, U = _vec3(prm, VP_CAMERA), _vec3(prm, VP_CAMERA + 3)
+        Fw, eye = _vec3(prm, VP_CAMERA + 6), _vec3(prm, VP_CAMERA + 9)
+        LR, LU = _vec3(prm, VP_LIGHT_FRAME), _vec3(prm, VP_LIGHT_FRAME + 3)
+        LF, lo = _vec3(prm, VP_LIGHT_FRAME + 6), _vec3(prm, VP_LIGHT_FRAME + 9)
+        Ld = _vec3(prm, VP_LIGHT_DIR)
         for i in range(verts.shape[0]):
             p = _row3(verts, i, 0)
             d = p - eye
@@ -312,18 +322,20 @@ def kernels():
                                 _write(buf, dmap, ortho, py, px, t, p + id_offset, 0)
 
     @ti.kernel
-    def raster(attr: f32a2, faces: i32a2, fmat: i32a1, sph: f32a2, focal: ti.f32, near: ti.f32, lfocal: ti.f32,
-               shadow: ti.i32, ss: ti.template(), buf: i64a2, spans: i32a2, smap: i32a2):
-        """Pass 1 in one launch: the camera's visibility buffer, then (``shadow`` = 1) the shadow map.
+    def raster(attr: f32a2, faces: i32a2, fmat: i32a1, sph: f32a2, prm: f32a1, ss: ti.template(), buf: i64a2,
+               spans: i32a2, smap: i32a2):
+        """Pass 1 in one launch: the camera's visibility buffer, then (smap larger than (1, 1)) the shadow map.
 
         attr: (V, ATTR_COLS) rows of :func:`vertices`; faces: (F, 3); fmat: (F,) mesh index of each face
         (for the tag of the key); sph: (P, SPH_COLS) spheres (view-space centre, light-space centre, radius);
-        focal: of the sample grid [px]; near [m]: a triangle with a vertex nearer is skipped, a sphere
-        whose near point is; lfocal: of the shadow map [texels/m].
+        prm: (VERTEX_PARAMS,) the parameters of :func:`vertices`, of which raster reads [VP_FOCAL] the focal
+        of the sample grid [px], [VP_NEAR] near [m]: a triangle with a vertex nearer is skipped, a sphere
+        whose near point is, and [VP_LFOCAL] the focal of the shadow map [texels/m].
         buf: (H, W) keys, which must be EMPTY on entry (``resolve`` leaves them so); spans: (H / ssaa, 2)
         per output pixel row the first and last pixel any primitive may cover (widened here, from
         (SPAN_EMPTY, -1)); smap: (S, S) shadow map, all EMPTY_DEPTH on entry (a NumPy fill is a memset,
-        ~8x faster than a loop here), filled with depth bits; ss: samples per pixel per axis.
+        ~8x faster than a loop here), filled with depth bits, or (1, 1) for none (then nothing is drawn
+        into it, as ``resolve`` reads no shadow from it); ss: samples per pixel per axis.
 
         Triangles: the camera pass interpolates the inverse depth 1/z linearly (perspective-correct
         depth); the light pass (orthographic) the depth itself. A sample at (px + 0.5, py + 0.5) is
@@ -334,6 +346,8 @@ def kernels():
         measured no faster here on 1-2 threads, and a static split stalls when a thread is preempted.
         """
         n_tri, n_sph = faces.shape[0], sph.shape[0]
+        focal, near, lfocal = prm[VP_FOCAL], prm[VP_NEAR], prm[VP_LFOCAL]
+        shadow = ti.cast(smap.shape[0] > 1, ti.i32)  # a shadow map to draw (not the (1, 1) stand-in)
         inear = 1.0 / near
         for f in range(n_tri):
             _triangle(attr, ATTR_SCREEN, faces, fmat, f, False, inear, buf, smap, spans, ss)

@@ -29,8 +29,11 @@ MAX_FOOTPRINT, MIN_FOOTPRINT = 1.0e3, 1e-3
 #: Length below which a shading normal is left unnormalised (avoids 0/0).
 SHADE_NORMALIZE_EPS = 1e-12
 #: Offsets in the parameter vector of :func:`resolve` (layout in its docstring): the ground's shadow
-#: region on screen (mode, then a quadrilateral), the camera rows, the light-space rows, the light.
-P_SHADOW, P_CAMERA, P_LIGHT_FRAME, P_LIGHT_DIR, RESOLVE_PARAMS = 38, 47, 59, 71, 74
+#: region on screen (mode, then a quadrilateral), the camera rows, the light-space rows, the light,
+#: the per-sample shading flag (0 or 1, exact in float32), and two entries read only by
+#: :func:`ground_cache`: the ray step of one pixel [1/px] and the sample grid's focal [px].
+P_SHADOW, P_CAMERA, P_LIGHT_FRAME, P_LIGHT_DIR, P_PER_SAMPLE, P_STEP, P_FSAMPLE = 38, 47, 59, 71, 74, 75, 76
+RESOLVE_PARAMS = 77
 #: Modes of the shadow region: no pixel's ground can be in shadow, those inside the quadrilateral, all.
 SHADOW_NONE, SHADOW_QUAD, SHADOW_ALL = 0, 1, 2
 #: Margin [px] around the shadow quadrilateral (its corners are rounded float32 projections).
@@ -201,21 +204,24 @@ def kernels():
         return first, last
 
     @ti.kernel
-    def ground_cache(params: f32a1, step: ti.f32, fsample: ti.f32, ssaa: ti.template(), cache: f32a3, lit_rgb: u32a2):
+    def ground_cache(params: f32a1, ssaa: ti.template(), cache: f32a3, lit_rgb: u32a2):
         """The ground's unshadowed shading per pixel, kept while the camera and ground stay the same.
 
         cache: (H, W, 9) for an image of H x W pixels (or samples): ambient rgb A, direct rgb B
         (linear; the pixel's colour is A + lit B with lit the shadow-map visibility) and the world
         point P [m] where the pixel's centre ray meets the ground. The checker is box-filtered over
-        the pixel's footprint on the plane (Quilez, "filtered checkerboard"); ``step`` is the ray
-        step of one pixel (1 / focal [1/px], times ssaa for a multisampled pixel). The ground fades
-        into the sky with distance from its centre (smoothstep). params as in :func:`resolve`, with
-        [0] the focal length of this grid [px]. Rays that miss the plane get A = sky, B = 0.
+        the pixel's footprint on the plane (Quilez, "filtered checkerboard"); ``step`` = params[P_STEP]
+        is the ray step of one pixel (1 / focal [1/px], times ssaa for a multisampled pixel). The ground
+        fades into the sky with distance from its centre (smoothstep). params (RESOLVE_PARAMS,) float32 as
+        in :func:`resolve`, with [0] the focal length of this grid [px], [P_STEP] that step and
+        [P_FSAMPLE] the sample grid's focal [px] (P_PER_SAMPLE is not read). Rays that miss the plane get
+        A = sky, B = 0.
         lit_rgb: (H, W) packed bytes (as :func:`resolve` writes them) of each pixel of a multisampled
-        image (``ssaa`` samples per axis, sample-grid focal ``fsample`` [px]) without primitives, fully
-        lit: what ``resolve`` copies outside the shadow's screen box; (1, 1) to skip it.
+        image (``ssaa`` samples per axis, sample-grid focal ``fsample`` = params[P_FSAMPLE] [px]) without
+        primitives, fully lit: what ``resolve`` copies outside the shadow's screen box; (1, 1) to skip it.
         """
         H, W = cache.shape[0], cache.shape[1]
+        step, fsample = params[P_STEP], params[P_FSAMPLE]
         ifocal = 1.0 / params[0]
         ambient = params[1]
         gh, cell, fade = params[13], params[20], params[24]
@@ -279,7 +285,6 @@ def kernels():
         buf: i64a2,
         spans: i32a2,
         ssaa: ti.template(),
-        per_sample: ti.i32,
         attr: f32a2,
         faces: i32a2,
         fmat: i32a1,
@@ -308,7 +313,8 @@ def kernels():
         its corners in order): the output pixels whose ground may be in shadow (:func:`_shadow_span`;
         elsewhere a pixel without primitives copies ``lit_rgb``), [P_CAMERA : + 12] camera rows right,
         up, forward, eye, [P_LIGHT_FRAME : + 12] light-space rows right, up, forward, origin,
-        [P_LIGHT_DIR : + 3] unit vector towards the light;
+        [P_LIGHT_DIR : + 3] unit vector towards the light, [P_PER_SAMPLE] ``per_sample`` (0: shade each
+        group of samples once, 1: every sample), [P_STEP] and [P_FSAMPLE] read only by :func:`ground_cache`;
         mats: (M, 3) back-side rgb per material; smap: the shadow map (depth bits per texel,
         (1, 1) for none); sph: (P, SPH_COLS) spheres (view-space centres [m], colours);
         gcache: the ground per pixel (per sample if ``per_sample``), see :func:`ground_cache`, and
@@ -323,6 +329,7 @@ def kernels():
         Ho, Wo = Hs // ssaa, Ws // ssaa
         n_tri = faces.shape[0]
         words = out_words.shape[0] > 1
+        per_sample = ti.cast(params[P_PER_SAMPLE], ti.i32)
         ifocal = 1.0 / params[0]
         ambient, spec, bias, tol = params[1], params[2], params[3], params[4]
         lfocal = params[11]

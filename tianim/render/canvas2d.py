@@ -26,9 +26,8 @@ from tianim.render.colors import rgb, rgb_array, strain_colors
 from tianim._checks import check_size, points_array
 from tianim.runtime import ensure_taichi
 
-#: Horizontal bands the image is cut into, one parallel task each (more than the cores of a
-#: desktop; the result does not depend on it).
-RASTER_BANDS = 16
+#: Horizontal bands the image is cut into (the kernel's constant, :data:`tianim.render._kernels2d.RASTER_BANDS`).
+RASTER_BANDS = K.RASTER_BANDS
 
 
 def label_font(size: int):
@@ -257,7 +256,7 @@ class Canvas2D:
             ensure_taichi()
             geom = np.concatenate(self._geom)
             col = np.concatenate(self._col)
-            K.kernels().draw_capsules(img, geom, col, max(1, min(self.height, RASTER_BANDS)))
+            K.kernels().draw_capsules(img, geom, col)  # min(height, RASTER_BANDS) bands
         out = (np.clip(img, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
         if self._texts:
             from PIL import Image, ImageDraw

@@ -438,11 +438,16 @@ class Scene3D:
         attr = np.empty((len(V), K.ATTR_COLS), np.float32)
         if smap.shape[0] > 1:
             smap.fill(K.EMPTY_DEPTH)
+        prm = np.empty(K.VERTEX_PARAMS, np.float32)  # of vertices and raster, at the named offsets
+        prm[K.VP_CAMERA:K.VP_CAMERA + 12] = cam.ravel()
+        prm[K.VP_LIGHT_FRAME:K.VP_LIGHT_FRAME + 12] = lcam.ravel()
+        prm[K.VP_FOCAL], prm[K.VP_WIDTH], prm[K.VP_HEIGHT] = focal, W, H
+        prm[K.VP_LFOCAL], prm[K.VP_SMAP_SIZE] = lfocal, smap.shape[0]
+        prm[K.VP_LIGHT_DIR:K.VP_LIGHT_DIR + 3] = self.light
+        prm[K.VP_NEAR] = near
         if len(V):
-            prm = np.concatenate([cam.ravel(), lcam.ravel(), [focal, W, H, lfocal, smap.shape[0]], self.light])
-            K.kernels().vertices(V, N, C, G, prm.astype(np.float32), attr)
-        K.kernels().raster(attr, F, FM, sph, focal, near, lfocal, int(smap.shape[0] > 1), self.ssaa, buf, spans,
-                           smap)
+            K.kernels().vertices(V, N, C, G, prm, attr)
+        K.kernels().raster(attr, F, FM, sph, prm, self.ssaa, buf, spans, smap)  # shadows when smap is not (1, 1)
         bbox = [0.0] * 4
         if smap.shape[0] > 1:
             # texels that can hold a depth: the scene's bounding box seen from the light
@@ -453,8 +458,8 @@ class Scene3D:
 
         params = self._params(focal, bias, lfocal, lo, hi, bbox, camera, cam, lcam, smap.shape[0])
         gcache, lit_rgb = self._ground_pixels(camera, params)
-        S.kernels().resolve(buf, spans, self.ssaa, int(self.per_sample), attr, F, FM, BK, sph, params, smap,
-                            gcache, lit_rgb, *self._out_views(out))
+        S.kernels().resolve(buf, spans, self.ssaa, attr, F, FM, BK, sph, params, smap, gcache, lit_rgb,
+                            *self._out_views(out))
         self._buf_empty = True
         return out.copy()
 
@@ -502,8 +507,11 @@ class Scene3D:
         else:
             ground = [0.0] * 13
         axes = np.eye(3)[[self.up_axis, (self.up_axis + 1) % 3, (self.up_axis + 2) % 3]].ravel()
-        return np.array([focal, self.ambient, self.specular, bias, _GROUP_DEPTH_TOL, *bg0, *bg1, lfocal, *ground,
-                         *axes, *bbox, *sbox, *cam.ravel(), *lcam.ravel(), *self.light], dtype=np.float32)
+        params = np.zeros(S.RESOLVE_PARAMS, np.float32)  # P_STEP, P_FSAMPLE: set by _ground_pixels' copy
+        params[:S.P_PER_SAMPLE] = [focal, self.ambient, self.specular, bias, _GROUP_DEPTH_TOL, *bg0, *bg1, lfocal,
+                                   *ground, *axes, *bbox, *sbox, *cam.ravel(), *lcam.ravel(), *self.light]
+        params[S.P_PER_SAMPLE] = self.per_sample
+        return params
 
     def _shadow_region(self, camera, lcam, lfocal, bbox, smap_size, height):
         """[mode, x0, y0, ..., x3, y3]: the output pixels whose ground point may be in shadow (the rest
@@ -549,8 +557,9 @@ class Scene3D:
             lit = self._dummy_u32 if self.per_sample else np.empty((self.height, self.width), np.uint32)
             p = params.copy()
             p[0] = camera.focal(self.height * grid)
-            step = float(np.float32(self.ssaa // grid) / p[0])  # one pixel of this grid in ray units
-            S.kernels().ground_cache(p, step, float(params[0]), self.ssaa, cache, lit)
+            p[S.P_STEP] = np.float32(self.ssaa // grid) / p[0]  # one pixel of this grid in ray units
+            p[S.P_FSAMPLE] = params[0]  # the sample grid's focal
+            S.kernels().ground_cache(p, self.ssaa, cache, lit)
             self._gcache = (key, cache, lit)
         return self._gcache[1], self._gcache[2]
 

@@ -15,6 +15,12 @@ corners clamped the same way) contain every point within ``r`` of ``p``, inside 
 from tianim.kernels import cached_variants, kernel_types
 from tianim.kernels.grid import BOX_PAD, grid_funcs
 
+#: Named offsets past the grid's own entries (D + 1 in ``geom``, D in ``dims``) of the queries' packed grid
+#: arguments (:func:`tianim.kernels.grid.pack_grid`, written by ``NeighbourGrid``): the query radius r [m]
+#: (float64, ``query`` and ``query_nearest``) and the exclude-self flag (int32, 0 or 1, ``query_nearest``;
+#: ``query`` takes it as a compile-time flag).
+RADIUS, EXCLUDE_SELF = 0, 0
+
 
 @cached_variants
 def grid_kernels(real_name: str, dim: int):
@@ -54,10 +60,13 @@ def grid_kernels(real_name: str, dim: int):
 
     @ti.kernel
     def query(q: t.vec_arr, xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1,
-              r: ti.f64, exclude_self: ti.template(), half: ti.template(), sorted_rows: ti.template(), nbr: i32_3,
+              exclude_self: ti.template(), half: ti.template(), sorted_rows: ti.template(), nbr: i32_3,
               count: i32_2):
         """For each query point q[b, i]: the indices j with |x_j - q_i|^2 <= r^2 (in ``real``).
 
+        geom (D + 2,) float64 = [lower_0 .. lower_{D-1}, cell_size, r] (r [m] at ``D + 1 + RADIUS``), dims (D,)
+        int32 cells per axis (or longer: only the first D are read); q (B, Q, D) query points, xs (B, N, D),
+        order (B, N), start (B, M + 2) the built grid; nbr (B, Q, K), count (B, Q) int32 outputs.
         Cells are visited in fixed order (z, then y ascending; a row of cells along x is one
         contiguous span of the sorted arrays; rows farther than r across y and z are skipped, ``grid_funcs.span``,
         which drops only rows without neighbours), within a cell by
@@ -74,6 +83,7 @@ def grid_kernels(real_name: str, dim: int):
         own row of cells, and the rows after it in (z, y) order), so each pair is found once, by the
         point that comes first in the grid's (cell, index) order: about half the work of a full query.
         """
+        r = geom[dim + 1 + RADIUS]  # the packed grid arguments (kernels.grid.pack_grid)
         r2 = ti.cast(r, real) * ti.cast(r, real)
         last = start.shape[1] - 2  # the extra cell of inactive points
         cap = nbr.shape[2]
@@ -216,10 +226,14 @@ def nearest_kernels(real_name: str, dim: int):
 
     @ti.kernel
     def query_nearest(q: t.vec_arr, xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1,
-                      r: ti.f64, exclude_self: ti.i32, dist: real3, nbr: i32_3, count: i32_2):
+                      dist: real3, nbr: i32_3, count: i32_2):
         """Row (b, i): the K = nbr.shape[2] nearest points j with |x_j - q_i|^2 <= r^2, nearest first, ties
-        by index, their squared distances in dist; count[b, i] how many (<= K). With ``exclude_self`` the
-        queries are the built points (``q`` ignored) and i is not its own neighbour."""
+        by index, their squared distances in dist (B, Q, K); count[b, i] how many (<= K). geom (D + 2,) float64
+        = [lower, cell_size, r] (r [m] at ``D + 1 + RADIUS``), dims (D + 1,) int32 = [cells per axis,
+        exclude_self] (at ``D + EXCLUDE_SELF``): with ``exclude_self`` = 1 the queries are the built points
+        (``q`` ignored) and i is not its own neighbour."""
+        r = geom[dim + 1 + RADIUS]  # the packed grid arguments (kernels.grid.pack_grid)
+        exclude_self = dims[dim + EXCLUDE_SELF]
         last = start.shape[1] - 2  # the extra cell of inactive points
         for b, s in ti.ndrange(q.shape[0], q.shape[1]):
             i = s

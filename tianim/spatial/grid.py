@@ -183,6 +183,13 @@ class NeighbourGrid:
         self.dims = dims.astype(np.int32)
         self.n_cells = n_cells
         self._geom = np.concatenate([lo, [h]]).astype(np.float64)
+        # the queries' packed grid arguments (kernels.grid.pack_grid): geom then the radius, dims then the
+        # exclude-self flag, at the named offsets of tianim.spatial._kernels (written per query, not reallocated)
+        from tianim.kernels.grid import pack_grid
+
+        self._qgeom = np.zeros(lo.size + 2, np.float64)
+        self._qdims = np.zeros(lo.size + 1, np.int32)
+        pack_grid(self._qgeom, self._qdims, self._geom, self.dims, (0.0,), (0,))
         B, N, D = self.batch, self.n_points, self.dim
         self.cell = np.zeros((B, N), np.int32)
         self.start = np.zeros((B, n_cells + 2), np.int32)  # + the cell of inactive points
@@ -211,6 +218,15 @@ class NeighbourGrid:
         dims (D,) int32 cells per axis, cell (B, N), start (B, M + 2), order (B, N) int32, sorted_x
         (B, N, D)); such a kernel sorts the points into them itself (``grid_funcs().sort_copy``)."""
         return self._geom, self.dims, self.cell, self.start, self.order, self.sorted_x
+
+    def _query_args(self, r: float, exclude: int = 0) -> tuple:
+        """``(geom, dims)`` of the query kernels: the grid's with the radius ``r`` [m] and the exclude-self flag
+        (0 or 1) written at their named offsets (``tianim.spatial._kernels.RADIUS``, ``EXCLUDE_SELF``)."""
+        from tianim.spatial._kernels import EXCLUDE_SELF, RADIUS
+
+        self._qgeom[self.dim + 1 + RADIUS] = r
+        self._qdims[self.dim + EXCLUDE_SELF] = exclude
+        return self._qgeom, self._qdims
 
     def _kernels(self):
         from tianim.spatial._kernels import grid_kernels
@@ -311,7 +327,8 @@ class NeighbourGrid:
             q, exclude = self._points("points", points, None), 0
         nbr, count = self._buffers(q.shape[1])
         _, _, query = self._kernels()
-        query(q, self.sorted_x, self.order, self.start, self._geom, self.dims, r, exclude, 0, 0, nbr, count)
+        geom, dims = self._query_args(r)
+        query(q, self.sorted_x, self.order, self.start, geom, dims, exclude, 0, 0, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
 
     def query_half(self, radius, on_overflow: str = "raise") -> NeighbourList:
@@ -326,7 +343,8 @@ class NeighbourGrid:
             raise RuntimeError("query_half before build: call grid.build(x) first")
         nbr, count = self._buffers(self.n_points)
         _, _, query = self._kernels()
-        query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, 0, nbr, count)
+        geom, dims = self._query_args(r)
+        query(self._built, self.sorted_x, self.order, self.start, geom, dims, 1, 1, 0, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
 
     def pairs(self, radius, b: int = 0) -> np.ndarray:
@@ -344,7 +362,8 @@ class NeighbourGrid:
             raise RuntimeError("pairs before build: call grid.build(x) first")
         nbr, count = self._buffers(self.n_points)
         _, _, query = self._kernels()
-        query(self._built, self.sorted_x, self.order, self.start, self._geom, self.dims, r, 1, 1, 1, nbr, count)
+        geom, dims = self._query_args(r)
+        query(self._built, self.sorted_x, self.order, self.start, geom, dims, 1, 1, 1, nbr, count)
         rows = NeighbourList(nbr, count, self.max_neighbours)
         if rows.overflow:
             b0, s0 = np.argwhere(count > self.max_neighbours)[0]
@@ -380,8 +399,9 @@ class NeighbourGrid:
         counts = np.zeros((B, Q), np.int32)
         from tianim.spatial._kernels import nearest_kernels
 
-        nearest_kernels(np.dtype(self.dtype).name, self.dim)(q, self.sorted_x, self.order, self.start, self._geom,
-                                                             self.dims, r, exclude, dist2, idx, counts)
+        geom, dims = self._query_args(r, exclude)
+        nearest_kernels(np.dtype(self.dtype).name, self.dim)(q, self.sorted_x, self.order, self.start, geom, dims,
+                                                             dist2, idx, counts)
         return idx, dist2, counts
 
     def _checked(self, out, on_overflow):
