@@ -299,3 +299,42 @@ def test_lower_layers_load_no_physics_after_their_first_kernels():
     """, TIANIM_NUM_THREADS="1")
     assert out.returncode == 0, out.stderr[-3000:]
     assert out.stdout.strip().splitlines()[-1] == "[]", out.stdout
+
+
+#: The scalars a kernel may take beside its arrays (docs/architecture.md, "One argument convention"): the
+#: call's step size and loop counts. Everything else is an entry of a packed array with named offsets.
+_KERNEL_SCALARS_ALLOWED = {"dt", "h", "substeps", "nsub", "frames", "steps"}
+#: Annotations of scalar kernel arguments (Taichi's primitive types and the factories' aliases for them).
+_SCALAR_ANNOTATIONS = {"real", "vec", "f32", "f64", "int", "float", "t.real", "t.vec"}
+
+
+def _is_scalar_annotation(text: str) -> bool:
+    import re
+
+    return text in _SCALAR_ANNOTATIONS or re.fullmatch(r"(ti\.)?(i|u|f)(8|16|32|64)", text) is not None
+
+
+def test_kernels_take_packed_scalars_only():
+    """Every Taichi kernel of tianim (the Warp peer of the cloth bench excepted) takes arrays and templates,
+    and as scalars only the call's step size and loop counts: sizes, parameters and flags are packed."""
+    bad = []
+    for p in sorted(PKG.rglob("*.py")):
+        if p.name == "_warp_cloth.py":
+            continue
+        for node in ast.walk(ast.parse(p.read_text())):
+            if not isinstance(node, ast.FunctionDef):
+                continue
+            if not any(ast.unparse(d) in ("ti.kernel", "kernel") for d in node.decorator_list):
+                continue
+            for a in node.args.args:
+                text = ast.unparse(a.annotation) if a.annotation is not None else ""
+                if _is_scalar_annotation(text) and a.arg not in _KERNEL_SCALARS_ALLOWED:
+                    bad.append(f"{p.relative_to(ROOT)}:{node.lineno} {node.name}({a.arg}: {text})")
+    assert not bad, "scalar kernel arguments to pack (physics/packed.py, kernels.grid.pack_grid):\n" + "\n".join(bad)
+
+
+def test_kernel_scalar_check_sees_scalars():
+    """The check above finds the scalar forms it is meant to refuse (so that it cannot pass vacuously)."""
+    assert all(_is_scalar_annotation(s) for s in ("ti.i32", "ti.f64", "real", "vec", "f64", "ti.u8"))
+    assert not any(_is_scalar_annotation(s) for s in ("t.vec_arr", "real2d", "f64_1", "ti.template()", "T",
+                                                      "ti.types.ndarray(dtype=ti.f64, ndim=1)"))
