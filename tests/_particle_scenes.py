@@ -1,13 +1,14 @@
-"""Four small particle scenes shared by the particle contract tests and the batch-equals-separate test:
+"""Small particle scenes shared by the particle contract tests and the batch-equals-separate test:
 a fountain (emitter with bursts, drag, curl noise, a bouncing ground), fireworks (death sub-emitters, a
-killing ground), a granular pile (DEM contact in a domain) and a planar float64 system (vortex, a sticking
-ground)."""
+killing ground), a granular pile (DEM contact in a domain), a planar float64 system (vortex, a sticking
+ground) and flashes (a moving mesh and a box emitting births that mostly die within their step, whose
+on-death children are born and die within it too: the births' cascades, per copy)."""
 
 import numpy as np
 
 import tianim.physics as tp
-from tianim.particles import (BoxEmitter, CurlNoise, Drag, Granular, ParticleModel, PointEmitter, SphereEmitter,
-                              SubEmitter, Vortex)
+from tianim.particles import (BoxEmitter, CurlNoise, Drag, Granular, MeshEmitter, ParticleModel, PointEmitter,
+                              SphereEmitter, SubEmitter, Vortex)
 
 
 def _plain():
@@ -37,3 +38,13 @@ def _planar():
                                                       speed=(0, 1), cone=3.0, bursts=((0.04, 15),))],
                          forces=[Vortex(center=(0, 0.5), strength=0.5)], colliders=[(tp.Ground(), "stick")],
                          dim=2, dtype=np.float64)
+
+
+def _flashes():
+    v = np.array([[0, 0.5, 0], [1, 0.5, 0], [0, 0.5, 1], [1, 0.7, 1]], float)
+    sheet = MeshEmitter(vertices=v, faces=[[0, 1, 2], [1, 3, 2]], vertex_velocities=np.full((4, 3), 0.3),
+                        inherit_velocity=0.7, rate=300, speed=(0, 0.5), cone=0.2, lifetime=0.006, lifetime_variance=0.5)
+    box = BoxEmitter(lower=(-0.1, 0.2, -0.1), upper=(0.1, 0.3, 0.1), rate=200, lifetime=0.2, bursts=((0.01, 7),))
+    glints = SubEmitter(PointEmitter(speed=(0.5, 1), cone=3.0, lifetime=0.002), parent=0, on="death", count=2)
+    return ParticleModel(300, emitters=[sheet, box], sub_emitters=[glints], forces=[Drag(linear=0.1)])
+

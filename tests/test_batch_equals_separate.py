@@ -22,7 +22,7 @@ import tianim.kinematics.arm as tka
 import tianim.physics as tp
 from tianim.crowds import (ORCA, Agents, Alignment, Avoid, Boids, Cohesion, CrowdSolver, Seek, Separation, SocialForce,
                            Vicsek, Wander)
-from _particle_scenes import _granular, _planar, _plain, _sub
+from _particle_scenes import _flashes, _granular, _planar, _plain, _sub
 from tianim.particles import ParticleSolver, ParticleState
 
 SEEDS = (5, 8, 13)
@@ -125,6 +125,7 @@ CASES = {
     "particles-sub_emitters": _particles(_sub, 1 / 200, 2),
     "particles-granular": _particles(_granular, 1 / 2000, 2),
     "particles-planar_f64": _particles(_planar, 1 / 100, 3),
+    "particles-flashes": _particles(_flashes, 1 / 200, 2),
     **{f"crowds-{k}": _crowd(k) for k in ("boids", "vicsek", "orca", "social_force")},
     **{f"arm-{m}-{p}-{'soft' if s else 'hard'}": _arm(m, p, s)
        for m in ("semi_implicit_euler", "rk4") for p in ("scalar", "kernel") for s in (False, True)},

@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from tianim.particles import MeshEmitter, ParticleSystem, PointEmitter, SphereEmitter, SubEmitter
+from tianim.particles import (BoxEmitter, DiscEmitter, MeshEmitter, ParticleSystem, PointEmitter, SphereEmitter,
+                              SubEmitter)
 from tianim.physics import Ground
 from tianim.physics.builders import cloth
 
@@ -253,3 +254,41 @@ def test_mesh_emitter_bad_input(make, exc, match):
 def test_sub_emitter_bad_input(make, exc, match):
     with pytest.raises(exc, match=match):  # checked when built, or by the system (parent, dimension)
         ParticleSystem(10, emitters=[PointEmitter()], sub_emitters=[make()])
+
+
+_SHAPES = {
+    "point-2d": lambda: PointEmitter(position=(0, 0), direction=(1, 2), cone=0.7, speed=(1, 2), lifetime=0.5,
+                                     lifetime_variance=0.4),
+    "box": lambda: BoxEmitter(lower=(-1, 0, -1), upper=(1, 0.5, 1), cone=0.3, speed=(0, 1), velocity=(0, 1, 0)),
+    "sphere": lambda: SphereEmitter(radius=0.4, cone=math.pi, speed=(1, 3), lifetime_variance=0.9),
+    "sphere-surface-2d": lambda: SphereEmitter(center=(0, 1), radius=0.4, surface=True, speed=(1, 1)),
+    "disc": lambda: DiscEmitter(radius=0.3, normal=(1, 1, 0), cone=0.2, speed=(1, 2)),
+    "mesh-moving": lambda: MeshEmitter(vertices=np.array([[0, 0, 0], [1, 0, 0], [0, 0, 1], [1, 0.3, 1.0]]),
+                                       faces=[[0, 1, 2], [1, 3, 2]], vertex_velocities=np.full((4, 3), 0.2),
+                                       inherit_velocity=0.5, cone=0.1, speed=(0, 1)),
+}
+
+
+@pytest.mark.parametrize("shape", list(_SHAPES))
+def test_births_of_several_streams_drawn_together_are_each_streams_births(shape):
+    """The solver draws each copy's numbers from its own generator and turns the concatenated draws of all
+    copies into births at once (Emitter.draws / from_draws): each copy's births must be the bits of
+    ``draw`` from its generator alone, for any mix of sizes (0 included), and ``draw`` must consume from a
+    generator exactly what ``draws`` does."""
+    em = _SHAPES[shape]()
+    sizes = (5, 0, 1, 17)
+    gens = [np.random.default_rng(100 + k) for k in range(len(sizes))]
+    times = [np.linspace(0.0, 0.1, n) for n in sizes]
+    draws = [em.draws(g, n) for g, n in zip(gens, sizes)]
+    together = em.from_draws(np.concatenate(times), tuple(np.concatenate(c) for c in zip(*[d for d in draws if d])))
+    at = np.cumsum((0,) + sizes)
+    for k, n in enumerate(sizes):
+        alone = em.draw(times[k], np.random.default_rng(100 + k))
+        for name in ("x", "v", "t", "life"):
+            assert np.array_equal(getattr(together, name)[at[k]:at[k + 1]], getattr(alone, name)), (shape, k, name)
+        assert getattr(alone, "x").shape == (n, em.dim)
+    # draw() leaves a generator where draws() does: the next number agrees
+    for k, n in enumerate(sizes):
+        g = np.random.default_rng(100 + k)
+        em.draw(times[k], g)
+        assert g.random() == gens[k].random()

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["StepStats", "StateArrays", "DivergenceError", "rng_states", "copy_rng", "draw"]
+__all__ = ["StepStats", "StateArrays", "DivergenceError", "rng_states", "copy_rng", "draw", "draw_each"]
 
 
 @dataclass
@@ -179,3 +179,17 @@ def draw(states: np.ndarray, b: int):
     g = copy_rng(states[b])
     yield g
     _store(states[b], g.bit_generator.state)
+
+
+def draw_each(states: np.ndarray, copies):
+    """``for b, rng in draw_each(state.rng, copies): ...``: copy b's ``Generator`` for each b of ``copies``
+    in turn, its advanced state written back into ``states[b]`` when the loop moves on (or ends); a body
+    that raises leaves that copy's row as it was, as :func:`draw`. One bit generator serves every copy (its
+    state set per copy), so a loop over many copies does not build one generator each."""
+    bg = np.random.PCG64(0)
+    g = np.random.Generator(bg)
+    for b in copies:
+        bg.state = _load(states[b])
+        yield b, g
+        _store(states[b], bg.state)
+

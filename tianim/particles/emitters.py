@@ -71,13 +71,20 @@ class Emitter:
     def dim(self) -> int:  # pragma: no cover - overridden
         raise NotImplementedError
 
-    def _positions(self, rng, n) -> np.ndarray:  # pragma: no cover - overridden
+    def _position_draws(self, rng, n) -> tuple:  # pragma: no cover - overridden
+        """The random draws that place n births (a tuple of arrays whose first axis is n), in draw order."""
+        raise NotImplementedError
+
+    def _place(self, draws, n):  # pragma: no cover - overridden
+        """``(x (n, D) [m], where)``: the positions from :meth:`_position_draws`' arrays (those of several
+        copies concatenated, element for element the same arithmetic), and what
+        :meth:`_surface_velocity` needs of them (None for still shapes)."""
         raise NotImplementedError
 
     def _check_shape(self, name) -> None:  # pragma: no cover - overridden
         raise NotImplementedError
 
-    def _surface_velocity(self, v):
+    def _surface_velocity(self, v, where):
         """Velocities plus the velocity of the shape where each particle was placed (moving shapes)."""
         return v
 
@@ -134,53 +141,116 @@ class Emitter:
     def _birth_times(self, t0: float, t1: float, fired=None, missed=None) -> np.ndarray:
         """Birth times in (t0, t1] [s], sorted. ``fired`` (n_bursts,) bool, optional: the bursts that
         already fired (updated in place); with it, every burst not yet fired with a time <= t1 fires if
-        it is not before t0 (so a burst at t0 fires), and is appended to ``missed`` (a list) if it is."""
-        times = []
-        if self.rate > 0 and t1 > self.start:
+        it is not before t0 (so a burst at t0 fires), and is appended to ``missed`` (a list) if it is.
+        One copy of :meth:`birth_times`."""
+        lost = []
+        f = None if fired is None else np.asarray(fired, bool)  # the caller's array itself where it is bool
+        _, times = self.birth_times(np.array([float(t0)]), np.array([float(t1)]), None if f is None else f[None],
+                                    lost)
+        if fired is not None and f is not fired:
+            fired[:] = f  # a list, or an array of another dtype
+        if missed is not None:
+            missed += [(j, bt) for _, j, bt in lost]
+        return times
+
+    def birth_times(self, t0: np.ndarray, t1: np.ndarray, fired=None, missed=None):
+        """The birth times of B copies, each in its step (t0[b], t1[b]] [s]: ``(counts (B,) int64, times)``,
+        ``times`` the copies' sorted times one copy after another. ``fired`` (B, n_bursts) bool, optional:
+        the bursts each copy already fired (updated in place); with it, every burst not yet fired with a
+        time <= t1 fires if it is not before t0 (so a burst at t0 fires), and ``(copy, burst, time)`` is
+        appended to ``missed`` (a list) if it is. The same floating-point operations, element by element,
+        for every copy, so a copy's times do not depend on the others."""
+        t0, t1 = np.asarray(t0, np.float64), np.asarray(t1, np.float64)
+        B = len(t0)
+        counts = np.zeros(B, np.int64)
+        copies, times = [], []
+        if self.rate > 0:
             # TOL: step ends accumulated in floating point (t += dt) land a few ulps below k / rate
-            k0 = math.floor(self.rate * max(t0 - self.start, 0.0) + TOL)
-            k1 = math.floor(self.rate * (t1 - self.start) + TOL)
-            times.append(self.start + np.arange(k0 + 1, k1 + 1, dtype=np.float64) / self.rate)
+            live = t1 > self.start
+            k0 = np.floor(self.rate * np.maximum(t0 - self.start, 0.0) + TOL).astype(np.int64)
+            k1 = np.floor(self.rate * (t1 - self.start) + TOL).astype(np.int64)
+            n = np.where(live, np.maximum(k1 - k0, 0), 0)
+            if n.any():
+                copy = np.repeat(np.arange(B), n)
+                k = np.arange(len(copy)) - np.repeat(np.cumsum(n) - n, n) + np.repeat(k0 + 1, n)
+                copies.append(copy)
+                times.append(self.start + k.astype(np.float64) / self.rate)
+                counts += n
         for j, (bt, n) in enumerate(self.bursts):
             if fired is None:
-                due = t0 + 1e-9 < bt <= t1 + 1e-9  # the same tolerance for accumulated step ends
-            elif fired[j] or bt > t1 + 1e-9:
-                continue
+                due = (t0 + 1e-9 < bt) & (bt <= t1 + 1e-9)  # the same tolerance for accumulated step ends
             else:
-                fired[j] = True
-                due = bt >= t0 - 1e-9
-                if not due and missed is not None:
-                    missed.append((j, bt))
-            if due:
-                times.append(np.full(int(n), float(bt)))
-        return np.sort(np.concatenate(times), kind="stable") if times else np.zeros(0)
+                fire = ~fired[:, j] & (bt <= t1 + 1e-9)
+                fired[:, j] |= fire
+                due = fire & (bt >= t0 - 1e-9)
+                if missed is not None:
+                    missed += [(int(b), j, bt) for b in np.flatnonzero(fire & ~due)]
+            if due.any() and n:
+                copy = np.repeat(np.flatnonzero(due), int(n))
+                copies.append(copy)
+                times.append(np.full(len(copy), float(bt)))
+                counts += due * int(n)
+        if not times:
+            return counts, np.zeros(0)
+        if len(times) == 1:
+            return counts, times[0]  # rate births alone: already sorted, copy by copy
+        # each copy's rate births, then its bursts in order; a stable sort by (copy, time) keeps that order
+        # among equal times (as np.sort(kind="stable") of one copy's concatenation)
+        copy, t = np.concatenate(copies), np.concatenate(times)
+        return counts, t[np.lexsort((t, copy))]
 
     def emit(self, t0: float, t1: float, rng: np.random.Generator, fired=None, missed=None) -> Births:
         """The particles born in (t0, t1] [s], drawn from ``rng`` (``fired``, ``missed``: see ``_birth_times``)."""
         return self.draw(self._birth_times(t0, t1, fired, missed), rng)
 
     def draw(self, t: np.ndarray, rng: np.random.Generator) -> Births:
-        """Particles born at times ``t`` (n,) [s]: positions on the shape, velocities, lifetimes from ``rng``."""
+        """Particles born at times ``t`` (n,) [s]: positions on the shape, velocities, lifetimes from ``rng``
+        (``from_draws(t, draws(rng, len(t)))``)."""
+        return self.from_draws(t, self.draws(rng, len(t)))
+
+    def draws(self, rng: np.random.Generator, n: int) -> tuple:
+        """Every random number n births take from ``rng``, in draw order: the shape's (positions), the
+        directions', the speeds' and the lifetimes'; a tuple of arrays whose first axis is n (nothing
+        is drawn for n = 0). The draws of several copies, each from its own generator, concatenated
+        array by array, give :meth:`from_draws` of all their births at once."""
+        if not n:
+            return None
+        pos = self._position_draws(rng, n)
+        if self.dim == 2:
+            dirs = (rng.uniform(-float(self.cone), float(self.cone), n),)
+        else:  # uniform in solid angle: cos(theta) uniform in [cos(cone), 1], phi uniform
+            dirs = (rng.uniform(0, 1, n), rng.uniform(0, 2 * math.pi, n))
+        speed = rng.uniform(self.speed[0], self.speed[1], n)
+        life = rng.uniform(-1, 1, n)
+        return pos + dirs + (speed, life)
+
+    def from_draws(self, t: np.ndarray, draws) -> Births:
+        """Particles born at times ``t`` (n,) [s] from :meth:`draws` (n numbers each, or None for n = 0):
+        elementwise arithmetic only, so one copy's births are the same bits alone or among other copies'."""
         n, d = len(t), self.dim
-        x = self._positions(rng, n)
-        dirs = _cone_directions(rng, n, np.asarray(self.direction[:d], dtype=np.float64), float(self.cone))
-        speed = rng.uniform(self.speed[0], self.speed[1], n) if n else np.zeros(0)
-        v = dirs * speed[:, None]
+        if not n:
+            z = np.zeros((0, d))
+            return Births(z, z.copy(), t, np.zeros(0))
+        k = len(draws) - (3 if d == 2 else 4)  # the shape's draws come first
+        x, where = self._place(draws[:k], n)
+        dirs = _cone_directions(draws[k:-2], np.asarray(self.direction[:d], dtype=np.float64), float(self.cone))
+        v = dirs * draws[-2][:, None]
         if self.velocity is not None:
             v = v + np.asarray(self.velocity, dtype=np.float64)
-        v = self._surface_velocity(v)
-        life = self.lifetime * (1 + self.lifetime_variance * rng.uniform(-1, 1, n)) if n else np.zeros(0)
+        v = self._surface_velocity(v, where)
+        life = self.lifetime * (1 + self.lifetime_variance * draws[-1])
         return Births(x, v, t, life)
 
 
-def _cone_directions(rng, n, axis, cone):
-    """n unit vectors uniform on the cap of half-angle ``cone`` around ``axis`` (2D: a sector)."""
+def _cone_directions(draws, axis, cone):
+    """Unit vectors uniform on the cap of half-angle ``cone`` around ``axis`` (2D: a sector), from the
+    draws of :meth:`Emitter.draws`: an angle in [-cone, cone] (2D); u in [0, 1) and phi in [0, 2 pi) (3D)."""
     axis = axis / np.linalg.norm(axis)
     if len(axis) == 2:
-        ang = math.atan2(axis[1], axis[0]) + rng.uniform(-cone, cone, n)
+        ang = math.atan2(axis[1], axis[0]) + draws[0]
         return np.stack([np.cos(ang), np.sin(ang)], axis=1)
-    cos_t = 1 - rng.uniform(0, 1, n) * (1 - math.cos(cone))  # uniform in solid angle
-    phi = rng.uniform(0, 2 * math.pi, n)
+    cos_t = 1 - draws[0] * (1 - math.cos(cone))  # uniform in solid angle
+    phi = draws[1]
     sin_t = np.sqrt(np.maximum(0, 1 - cos_t * cos_t))
     u, w = _basis(axis)
     return (cos_t[:, None] * axis + sin_t[:, None] * (np.cos(phi)[:, None] * u + np.sin(phi)[:, None] * w))
@@ -223,8 +293,11 @@ class PointEmitter(Emitter):
     def _check_shape(self, name):
         _dim_of(f"{name}.position", self.position)
 
-    def _positions(self, rng, n):
-        return np.tile(np.asarray(self.position, dtype=np.float64), (n, 1))
+    def _position_draws(self, rng, n):
+        return ()
+
+    def _place(self, draws, n):
+        return np.tile(np.asarray(self.position, dtype=np.float64), (n, 1)), None
 
 
 @dataclass(frozen=True)
@@ -244,9 +317,12 @@ class BoxEmitter(Emitter):
         if np.any(hi < lo):
             raise ValueError(f"{name}.upper={fmt(self.upper)} must be >= lower={fmt(self.lower)} on every axis")
 
-    def _positions(self, rng, n):
+    def _position_draws(self, rng, n):
+        return (rng.uniform(0, 1, (n, len(self.lower))),)
+
+    def _place(self, draws, n):
         lo, hi = np.asarray(self.lower, dtype=np.float64), np.asarray(self.upper, dtype=np.float64)
-        return lo + (hi - lo) * rng.uniform(0, 1, (n, len(lo)))
+        return lo + (hi - lo) * draws[0], None
 
 
 @dataclass(frozen=True)
@@ -265,12 +341,15 @@ class SphereEmitter(Emitter):
         _dim_of(f"{name}.center", self.center)
         check_finite_scalar(f"{name}.radius", self.radius, lo=0.0)
 
-    def _positions(self, rng, n):
+    def _position_draws(self, rng, n):
+        g = rng.normal(size=(n, self.dim))  # a direction: a normalised Gaussian vector
+        return (g,) if self.surface else (g, rng.uniform(0, 1, n))
+
+    def _place(self, draws, n):
         d = self.dim
-        g = rng.normal(size=(n, d))
-        g /= np.maximum(np.linalg.norm(g, axis=1, keepdims=True), 1e-300)
-        r = np.full(n, float(self.radius)) if self.surface else self.radius * rng.uniform(0, 1, n) ** (1 / d)
-        return np.asarray(self.center, dtype=np.float64) + g * r[:, None]
+        g = draws[0] / np.maximum(np.linalg.norm(draws[0], axis=1, keepdims=True), 1e-300)
+        r = np.full(n, float(self.radius)) if self.surface else self.radius * draws[1] ** (1 / d)
+        return np.asarray(self.center, dtype=np.float64) + g * r[:, None], None
 
 
 @dataclass(frozen=True)
@@ -292,9 +371,13 @@ class DiscEmitter(Emitter):
         if np.linalg.norm(nrm) == 0:
             raise ValueError(f"{name}.normal={fmt(self.normal)} has zero length")
 
-    def _positions(self, rng, n):
+    def _position_draws(self, rng, n):
+        return rng.uniform(0, 1, n), rng.uniform(0, 2 * math.pi, n)
+
+    def _place(self, draws, n):
         nrm = np.asarray(self.normal, dtype=np.float64)
         u, w = _basis(nrm / np.linalg.norm(nrm))
-        r = self.radius * np.sqrt(rng.uniform(0, 1, n))
-        phi = rng.uniform(0, 2 * math.pi, n)
-        return np.asarray(self.center, dtype=np.float64) + (r * np.cos(phi))[:, None] * u + (r * np.sin(phi))[:, None] * w
+        r = self.radius * np.sqrt(draws[0])
+        phi = draws[1]
+        return (np.asarray(self.center, dtype=np.float64) + (r * np.cos(phi))[:, None] * u
+                + (r * np.sin(phi))[:, None] * w), None

@@ -49,7 +49,6 @@ class MeshEmitter(Emitter):
     vertex_velocities: np.ndarray | None = None
     inherit_velocity: float = 1.0
     _cdf: np.ndarray = field(default=None, repr=False, compare=False)
-    _last: list = field(default_factory=list, repr=False, compare=False)
 
     def __post_init__(self):
         if self.vertices is None or self.faces is None:
@@ -108,9 +107,17 @@ class MeshEmitter(Emitter):
 
     def sample(self, rng: np.random.Generator, n: int):
         """``(tri (n,), bary (n, 3))``: triangles (area-weighted) and barycentric weights (uniform on each)."""
-        tri = np.minimum(np.searchsorted(self._cdf, rng.uniform(0, 1, n), side="right"), len(self.faces) - 1)
-        s1 = np.sqrt(rng.uniform(0, 1, n))
-        r2 = rng.uniform(0, 1, n)
+        return self._triangles(self._position_draws(rng, n))
+
+    def _position_draws(self, rng, n):
+        return rng.uniform(0, 1, n), rng.uniform(0, 1, n), rng.uniform(0, 1, n)
+
+    def _triangles(self, draws):
+        """``(tri, bary)`` from three uniform draws per point: the triangle by inverse CDF of the areas, the
+        point on it by Osada et al.'s square-root rule (module docstring)."""
+        tri = np.minimum(np.searchsorted(self._cdf, draws[0], side="right"), len(self.faces) - 1)
+        s1 = np.sqrt(draws[1])
+        r2 = draws[2]
         bary = np.stack([1 - s1, s1 * (1 - r2), s1 * r2], axis=1)
         return tri, bary
 
@@ -118,13 +125,12 @@ class MeshEmitter(Emitter):
         corners = values[self.faces[tri]]  # (n, 3, 3)
         return np.einsum("nk,nkd->nd", bary, corners)
 
-    def _positions(self, rng, n):
-        tri, bary = self.sample(rng, n)
-        self._last[:] = [tri, bary]
-        return self._interp(self.vertices, tri, bary)
+    def _place(self, draws, n):
+        tri, bary = self._triangles(draws)
+        return self._interp(self.vertices, tri, bary), (tri, bary)
 
-    def _surface_velocity(self, v):
+    def _surface_velocity(self, v, where):
         if self.vertex_velocities is None or self.inherit_velocity == 0 or not len(v):
             return v
-        tri, bary = self._last
+        tri, bary = where
         return v + self.inherit_velocity * self._interp(self.vertex_velocities, tri, bary)

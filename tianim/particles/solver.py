@@ -11,7 +11,7 @@ import numpy as np
 from tianim._checks import check_choice, check_finite_scalar, check_int, fmt
 from tianim.particles.model import ParticleModel
 from tianim.particles.state import ParticleState
-from tianim.stepping import StepStats, draw
+from tianim.stepping import StepStats, draw, draw_each
 
 #: Most births one emitter may make in one step (a larger dt * rate is refused before anything changes).
 MAX_BIRTHS = 1 << 26
@@ -115,20 +115,18 @@ class ParticleSolver:
 
     # ---------------------------------------------------------------- births
     @staticmethod
-    def _place(model, state, births, t1):
+    def _place(model, state, n, cat, t1):
         """Put each copy's births into its lowest free slots, advanced ballistically to t1 (B,), all copies
-        at once. ``births[b]``: None or (x (n, D), v (n, D), t (n,) <= t1[b], life (n,), source (n,)) of copy b,
-        in placement order. Returns (placed, dropped) per copy (B,)."""
+        at once. ``n`` (B,): births of each copy; ``cat``: their (x (m, D), v (m, D), t (m,) <= t1[b],
+        life (m,), source (m,)), one copy after another, each in placement order. Returns (placed,
+        dropped) per copy (B,)."""
         B, C = state.batch, model.capacity
-        n = np.array([0 if p is None else len(p[2]) for p in births], np.int64)
         placed = np.zeros(B, np.int64)
         if not n.any():
             return placed, placed.copy()
         free = state.alive == 0
         n_free = np.count_nonzero(free, axis=1)
         placed = np.minimum(n, n_free)
-        parts = [p for p in births if p is not None and len(p[2])]
-        cat = [np.concatenate([p[k] for p in parts]) for k in range(5)]
         copy = np.repeat(np.arange(B), n)
         rank = np.arange(len(copy)) - np.repeat(np.cumsum(n) - n, n)  # index of a birth within its copy
         keep = rank < placed[copy]
@@ -148,6 +146,19 @@ class ParticleSolver:
         return placed, n - placed
 
     @staticmethod
+    def _by_copy(parts, B):
+        """``(n (B,), cat)``: births given as ``parts``, tuples (copy (m,), x, v, t, life, source) each in
+        copy order, merged copy after copy; within a copy, parts in their order (a stable sort by copy)."""
+        parts = [p for p in parts if len(p[0])]
+        if not parts:
+            return np.zeros(B, np.int64), None
+        cols = [np.concatenate([p[i] for p in parts]) if len(parts) > 1 else parts[0][i] for i in range(6)]
+        if len(parts) > 1:
+            order = np.argsort(cols[0], kind="stable")
+            cols = [c[order] for c in cols]
+        return np.bincount(cols[0], minlength=B).astype(np.int64), cols[1:]
+
+    @staticmethod
     def _warn_dropped(model, state, dropped, t1, what="births"):
         if dropped.any():
             state.overflow += dropped
@@ -158,30 +169,63 @@ class ParticleSolver:
     def _emit(self, model, state, t0, t1):
         """The emitters' births of the step (t0, t1] (B,), placed. A birth whose lifetime ends before t1
         (tau = t1 - t_k >= life) dies at t_k + life without taking a slot, and its on-death children
-        are born then (cascades followed). Returns (born, died, spawned, dropped) (B,)."""
-        births, missed = [], []
+        are born then (cascades followed). Returns (born, died, spawned, dropped) (B,).
+
+        All copies at once: birth times, the draws' arithmetic, the short lives and the placement are
+        array operations over every copy's births. What stays per copy is only each copy's own draws from
+        its own stream (``state.rng[b]``: the numbers ``np.random.default_rng(seeds[b])`` gives, which no
+        vector operation across generators reproduces), and the on-death cascades of the copies that have
+        one (sub-emitters' children of births that die within the step)."""
         B = state.batch
         died, split = np.zeros(B, np.int64), np.zeros((B, 3), np.int64)
         offs = model.burst_offsets
-        for b in range(B):  # each copy draws from its own stream, emitters in order
-            lost = []  # birth times need no draws: a copy without births draws nothing and is skipped
-            times = [e._birth_times(float(t0[b]), float(t1[b]), state.fired[b, offs[k]:offs[k + 1]], lost)
-                     for k, e in enumerate(model.emitters)]
-            missed += [(b, bt) for _, bt in lost]
-            if sum(len(tk) for tk in times) == 0:
-                births.append(None)
-                continue
-            with draw(state.rng, b) as rng:  # Emitter.emit = draw(_birth_times(...)), emitter by emitter
-                parts = [e.draw(tk, rng) for e, tk in zip(model.emitters, times)]
-                cat = [np.concatenate([getattr(p, f) for p in parts]) for f in ("x", "v", "t", "life")]
-                cat.append(np.concatenate([np.full(len(p), k, np.int32) for k, p in enumerate(parts)]))
-                cat, died[b], split[b] = self._short_lives(model, cat, float(t1[b]), rng)
-            births.append(cat)
+        missed, counts, times = [], [], []
+        for k, e in enumerate(model.emitters):  # the fired marks are updated in place (a view of state.fired)
+            c, tk = e.birth_times(t0, t1, state.fired[:, offs[k]:offs[k + 1]], missed)
+            counts.append(c)
+            times.append(tk)
         if missed:
-            warnings.warn(f"{len(missed)} burst(s) at t={sorted({bt for _, bt in missed})} s are before the time the "
+            warnings.warn(f"{len(missed)} burst(s) at t={sorted({bt for _, _, bt in missed})} s are before the time the "
                           f"state started stepping (t={fmt(float(np.min(t0)))} s) and will not fire; give burst times at "
                           "or after the state's start", RuntimeWarning, stacklevel=3)
-        placed, dropped = self._place(model, state, births, t1)
+        n = np.sum(counts, axis=0) if counts else np.zeros(B, np.int64)
+        zero = np.zeros(B, np.int64)
+        if not n.any():
+            return zero, zero.copy(), zero.copy(), zero.copy()
+        draws = [[] for _ in model.emitters]
+        for b, rng in draw_each(state.rng, np.flatnonzero(n)):  # each copy from its own stream, emitters in order
+            for k, e in enumerate(model.emitters):
+                d = e.draws(rng, int(counts[k][b]))
+                if d is not None:
+                    draws[k].append(d)
+        parts = []
+        for k, e in enumerate(model.emitters):
+            if draws[k]:
+                cat = draws[k][0] if len(draws[k]) == 1 else tuple(np.concatenate(c) for c in zip(*draws[k]))
+                born = e.from_draws(times[k], cat)
+                copy = np.repeat(np.arange(B), counts[k])
+                parts.append((copy, born.x, born.v, born.t, born.life, np.full(len(copy), k, np.int32)))
+        n, cat = self._by_copy(parts, B)
+        copy = np.repeat(np.arange(B), n)
+        x, v, t, life, src = cat
+        gone = (t1[copy] - t) >= life - 1e-9  # the bursts' tolerance for accumulated step ends (t1 += dt)
+        dead = np.bincount(copy[gone], minlength=B).astype(np.int64)
+        cascade = np.flatnonzero(dead) if model.sub_emitters else np.zeros(0, np.int64)
+        died[:] = dead
+        split[:, 0] = n - dead
+        if gone.any():
+            keep = ~gone
+            if len(cascade):  # the copies whose short lives have on-death children: their own cascade
+                keep &= ~np.isin(copy, cascade)
+            pieces = [(copy[keep], x[keep], v[keep], t[keep], life[keep], src[keep])]
+            starts = np.cumsum(n) - n
+            for b in cascade:
+                seg = slice(starts[b], starts[b] + n[b])
+                with draw(state.rng, b) as rng:
+                    out, died[b], split[b] = self._short_lives(model, [a[seg] for a in cat], float(t1[b]), rng)
+                pieces.append((np.full(len(out[2]), b),) + tuple(out))
+            n, cat = self._by_copy(pieces, B)
+        placed, dropped = self._place(model, state, n, cat, t1)
         self._warn_dropped(model, state, dropped, t1)
         # children of births dead within the step: placed (they follow the emitters' births) or dead
         spawned = np.clip(placed - split[:, 0], 0, split[:, 1]) + split[:, 2]
@@ -226,13 +270,15 @@ class ParticleSolver:
         hit = np.zeros(state.batch, bool)
         for sub in model.sub_emitters:
             hit |= (np.isin(state.event, TRIGGERS[sub.on]) & (state.source == sub.parent)).any(axis=1)
-        births = [None] * state.batch
-        for b in np.flatnonzero(hit):
+        parts = []
+        for b in np.flatnonzero(hit):  # each copy's children from its own stream
             with draw(state.rng, b) as rng:
                 kids = spawn_children(model.sub_emitters, len(model.emitters), state.event[b], state.source[b],
                                       state.x[b], state.v[b], float(t[b]), rng)
-            births[b] = None if kids is None else (kids[0], kids[1], kids[4], kids[2], kids[3])
-        placed, dropped = self._place(model, state, births, t)
+            if kids is not None:
+                parts.append((np.full(len(kids[2]), b), kids[0], kids[1], kids[4], kids[2], kids[3]))
+        n, cat = self._by_copy(parts, state.batch)
+        placed, dropped = self._place(model, state, n, cat, t)
         self._warn_dropped(model, state, dropped, t, "sub-emitter children")
         return placed, dropped
 
