@@ -171,8 +171,11 @@ class Emitter:
             k1 = np.floor(self.rate * (t1 - self.start) + TOL).astype(np.int64)
             n = np.where(live, np.maximum(k1 - k0, 0), 0)
             if n.any():
-                copy = np.repeat(np.arange(B), n)
-                k = np.arange(len(copy)) - np.repeat(np.cumsum(n) - n, n) + np.repeat(k0 + 1, n)
+                if B == 1:  # one copy: its births k0 + 1 .. k1
+                    copy, k = np.zeros(int(n[0]), np.int64), np.arange(k0[0] + 1, k0[0] + 1 + n[0])
+                else:  # copy b's births k0[b] + 1 .. k1[b]: a running index less each copy's offset
+                    copy = np.repeat(np.arange(B), n)
+                    k = np.arange(len(copy)) - np.repeat(np.cumsum(n) - n - (k0 + 1), n)
                 copies.append(copy)
                 times.append(self.start + k.astype(np.float64) / self.rate)
                 counts += n

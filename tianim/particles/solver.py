@@ -153,6 +153,8 @@ class ParticleSolver:
         if not parts:
             return np.zeros(B, np.int64), None
         cols = [np.concatenate([p[i] for p in parts]) if len(parts) > 1 else parts[0][i] for i in range(6)]
+        if B == 1:  # one copy: the parts' order is the placement order
+            return np.array([len(cols[0])], np.int64), cols[1:]
         if len(parts) > 1:
             order = np.argsort(cols[0], kind="stable")
             cols = [c[order] for c in cols]
