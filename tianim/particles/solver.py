@@ -238,7 +238,7 @@ class ParticleSolver:
         """Split births (x, v, t, life, source) of one copy at t1: those alive at t1 (returned, in order)
         and those that die before (counted; their on-death children drawn from ``rng`` and split the
         same way). Returns (alive births, deaths, (emitter births alive, children alive, children dead))."""
-        from tianim.particles.subemitters import death_children
+        from tianim.particles.subemitters import children
 
         keep, deaths, kids_dead = [], 0, 0
         g = model.gravity
@@ -255,30 +255,33 @@ class ParticleSolver:
             if not model.sub_emitters:
                 break
             lg = life[gone][:, None]  # ballistic to the death, as a placed birth would fly
-            cat = death_children(model.sub_emitters, len(model.emitters), src[gone], x[gone] + v[gone] * lg
-                                 + 0.5 * g * lg ** 2, v[gone] + g * lg, t[gone] + life[gone], rng)
-            if cat is not None:
-                cat = [cat[0], cat[1], cat[4], cat[2], cat[3].astype(np.int32)]
+            xd, vd, td, sd = x[gone] + v[gone] * lg + 0.5 * g * lg ** 2, v[gone] + g * lg, t[gone] + life[gone], src[gone]
+            parents = []
+            for sub in model.sub_emitters:  # on-death children of the parents that died
+                slots = np.flatnonzero(sd == sub.parent) if sub.on == "death" else np.zeros(0, np.int64)
+                parents.append((np.zeros(len(slots), np.int64), xd[slots], vd[slots], td[slots]))
+            _, cat = ParticleSolver._by_copy(children(model.sub_emitters, len(model.emitters), parents, 1,
+                                                      lambda copies: ((b, rng) for b in copies)), 1)
         out = keep[0] if len(keep) == 1 else [np.concatenate([k[i] for k in keep]) for i in range(5)]
         first = len(keep[0][2])  # the emitters' own births alive at t1 come first, then children
         return out, deaths, (first, len(out[2]) - first, kids_dead)
 
     def _spawn(self, model, state, t):
         """Sub-emitter children of the events of the launch that ended at ``t`` (B,) [s]: (placed, dropped) (B,)."""
-        from tianim.particles.subemitters import TRIGGERS, spawn_children
+        from tianim.particles.subemitters import TRIGGERS, children
 
-        # the copies with a triggering event, found for all copies at once: only they draw (a copy without
-        # one would draw nothing), so a launch without events costs no per-copy work
-        hit = np.zeros(state.batch, bool)
+        # every copy's triggering events at once (parents in slot order); only the copies with one draw (a
+        # copy without one would draw nothing), so a launch without events costs no per-copy work
+        parents, found = [], False
         for sub in model.sub_emitters:
-            hit |= (np.isin(state.event, TRIGGERS[sub.on]) & (state.source == sub.parent)).any(axis=1)
-        parts = []
-        for b in np.flatnonzero(hit):  # each copy's children from its own stream
-            with draw(state.rng, b) as rng:
-                kids = spawn_children(model.sub_emitters, len(model.emitters), state.event[b], state.source[b],
-                                      state.x[b], state.v[b], float(t[b]), rng)
-            if kids is not None:
-                parts.append((np.full(len(kids[2]), b), kids[0], kids[1], kids[4], kids[2], kids[3]))
+            copy, slot = np.nonzero(np.isin(state.event, TRIGGERS[sub.on]) & (state.source == sub.parent))
+            parents.append((copy, state.x[copy, slot], state.v[copy, slot], np.asarray(t, np.float64)[copy]))
+            found = found or len(copy) > 0
+        if not found:
+            zero = np.zeros(state.batch, np.int64)
+            return zero, zero.copy()
+        parts = children(model.sub_emitters, len(model.emitters), parents, state.batch,
+                         lambda copies: draw_each(state.rng, copies))
         n, cat = self._by_copy(parts, state.batch)
         placed, dropped = self._place(model, state, n, cat, t)
         self._warn_dropped(model, state, dropped, t, "sub-emitter children")

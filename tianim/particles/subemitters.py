@@ -69,35 +69,32 @@ class SubEmitter:
         return self
 
 
-def spawn_children(subs, n_emitters, event, source, x, v, t, rng):
-    """Children of one copy for the events of one substep ending at ``t`` [s].
+def children(subs, n_emitters, parents, batch: int, generators):
+    """The children of B copies' parents, all copies at once: ``parents[k]`` = (copy (m,) ascending,
+    x (m, D) [m], v (m, D) [m/s], t (m,) [s]) of ``subs[k]``'s parents, each copy's in slot order;
+    ``generators(copies)`` yields ``(b, rng)`` for each copy of ``copies`` in turn (as
+    :func:`tianim.stepping.draw_each`). Per copy only its own generator's calls (``Emitter.draws``, the
+    sub-emitters in order); the rest is array arithmetic over every copy (``Emitter.from_draws``).
 
-    ``event``, ``source`` (C,) and ``x``, ``v`` (C, D) are the copy's arrays after the substep.
-    Returns (x, v, life, source, t) of the children in sub-emitter order, then parent-slot order, or None.
-    """
-    return _children(subs, n_emitters, lambda sub: np.flatnonzero(np.isin(event, TRIGGERS[sub.on]) & (source == sub.parent)),
-                     x, v, np.full(len(source), float(t)), rng)
-
-
-def death_children(subs, n_emitters, source, x, v, t, rng):
-    """Children of particles that died between two launches (born and dead within one step): parents
-    of ``source`` (n,) died at times ``t`` (n,) [s] at ``x``, ``v`` (n, D). Returns as :func:`spawn_children`."""
-    return _children(subs, n_emitters, lambda sub: np.flatnonzero(source == sub.parent) if sub.on == "death"
-                     else np.zeros(0, np.int64), x, v, t, rng)
-
-
-def _children(subs, n_emitters, select, x, v, t, rng):
+    Returns one part per sub-emitter with children, ``(copy, x, v, t, life, source)``, each in copy order
+    and, within a copy, parent by parent, ``count`` children each (merge them with
+    ``ParticleSolver._by_copy``)."""
+    per_copy = [np.bincount(p[0], minlength=batch) * sub.count for sub, p in zip(subs, parents)]
+    draws = [[] for _ in subs]
+    for b, rng in generators(np.flatnonzero(np.sum(per_copy, axis=0))):
+        for k, sub in enumerate(subs):
+            d = sub.emitter.draws(rng, int(per_copy[k][b]))
+            if d is not None:
+                draws[k].append(d)
     parts = []
-    for k, sub in enumerate(subs):
-        slots = select(sub)
-        if not len(slots):
+    for k, (sub, (copy, x, v, t)) in enumerate(zip(subs, parents)):
+        if not draws[k]:
             continue
-        n = len(slots) * sub.count
-        tk = np.repeat(t[slots], sub.count)
-        kids = sub.emitter.draw(tk, rng)
-        px = np.repeat(x[slots].astype(np.float64), sub.count, axis=0)
-        pv = np.repeat(v[slots].astype(np.float64), sub.count, axis=0)
-        parts.append((px + kids.x, kids.v + sub.inherit_velocity * pv, kids.life, np.full(n, n_emitters + k), tk))
-    if not parts:
-        return None
-    return tuple(np.concatenate([p[i] for p in parts]) for i in range(5))
+        cat = draws[k][0] if len(draws[k]) == 1 else tuple(np.concatenate(c) for c in zip(*draws[k]))
+        tk = np.repeat(t, sub.count)
+        kids = sub.emitter.from_draws(tk, cat)
+        px = np.repeat(x.astype(np.float64), sub.count, axis=0)
+        pv = np.repeat(v.astype(np.float64), sub.count, axis=0)
+        parts.append((np.repeat(copy, sub.count), px + kids.x, kids.v + sub.inherit_velocity * pv, tk, kids.life,
+                      np.full(len(tk), n_emitters + k, np.int32)))
+    return parts
