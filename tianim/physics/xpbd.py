@@ -96,7 +96,6 @@ PARALLEL_MIN_PARTICLES = 1024
 
 
 @cached_variants
-@cached_variants
 def scalar_funcs(real_name, dim):
     """``scalars(P, I) -> (g, rho, h, |g|, nx, n_springs, iters)``: the Taichi func that reads XPBD's packed
     scalars (:func:`xpbd_params`, offsets in :mod:`tianim.physics.packed`) at the top of each of its kernels."""
@@ -112,6 +111,7 @@ def scalar_funcs(real_name, dim):
     return scalars
 
 
+@cached_variants
 def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, compensated=False, sc_iters=0,
              pickers=False, serial=False, lanes=0):
     t = kernel_types(real_name, dim)
