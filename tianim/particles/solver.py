@@ -21,10 +21,13 @@ MAX_BIRTHS = 1 << 26
 #: launch at most), children placed by sub-emitters.
 COUNTS = ("born", "died", "killed", "stuck", "dropped", "contact_overflow", "bounced", "spawned")
 
-#: Slots (batch x capacity) from which ``ParticleSolver(lanes="auto")`` steps SIMD lanes (measured on
-#: 2 cores: the 8-lane kernel ran 2.4x the one-lane kernel at 1 M particles and 2.2x at 100k, and its
-#: first call compiled in ~20-45 s against 1-2 s, per distinct set of forces and colliders).
-LANES_MIN_PARTICLES = 1 << 18
+#: Slots (batch x capacity) from which ``ParticleSolver(lanes="auto")`` steps SIMD lanes. Measured on 2
+#: cores (the particle bench's gravity + drag + ground, 10 substeps a call): at 100k particles the 8-lane
+#: kernel takes 1.74 ms a call against 11.6 ms for one particle per body (NumPy: 2.4 ms), and its first
+#: call compiles in 4.0 s cold against 0.34 s (with curl noise 6.8 against 0.48 s), once per set of forces
+#: and colliders (then from the disk cache). From 2^16 slots (one lane: ~7.6 ms a call) the lanes win the
+#: compile back within ~600 calls of a first run, and from the second run on at once.
+LANES_MIN_PARTICLES = 1 << 16
 #: ``lanes`` a caller may give (particles per kernel body).
 LANE_CHOICES = (1, 2, 4, 8, 16)
 
@@ -63,8 +66,8 @@ class ParticleSolver:
         """Particles per kernel body for ``batch`` copies of ``model``: ``lanes`` when given; "auto": the
         host's SIMD lanes (:func:`tianim.particles._kernels.step_lanes`) from :data:`LANES_MIN_PARTICLES`
         slots (batch x capacity) on, one below it. Both give the same bits (tested); the lanes kernel runs
-        2-3x faster at 1 M particles but compiles for tens of seconds against one or two, which a small
-        system would never win back."""
+        ~7x faster at 100k particles but compiles for seconds against a fraction of one, which a small
+        system would not win back."""
         if self.lanes != "auto":
             return self.lanes
         from tianim.particles._kernels import step_lanes
