@@ -199,22 +199,21 @@ _CALLS = [(0.25, 1)] * 5 + [(0.1, 3), (0.25, 1)]
 _OUT = ("x", "v", "heading", "t", "ticks", "arrival_time", "closest")
 
 
-def test_orca_one_copy_serial_kernel_equals_the_parallel_copy_kernel_bit_for_bit(monkeypatch):
-    """One copy steps in the serial variant of the copy kernel (no thread-pool dispatch): the same bits as
-    the parallel variant it replaces, with dt and substeps changing between calls."""
+def test_orca_one_copy_serial_kernel_equals_the_parallel_copy_kernel_bit_for_bit():
+    """One copy steps in the serial variant of the copy kernel (threads="auto": no thread-pool dispatch):
+    the same bits as the parallel variant (threads="parallel"), with dt and substeps changing between calls."""
     from tianim.crowds import _orca_kernels
 
-    real = _orca_kernels.orca_copy_kernels
-    used = []
-    monkeypatch.setattr(_orca_kernels, "orca_copy_kernels", lambda name, serial=False: used.append(serial) or
-                        real(name, serial))
-    fast = _one_copy_run(_CALLS)
-    assert used and all(used)  # one copy: the serial variant every call
-    monkeypatch.setattr(_orca_kernels, "orca_copy_kernels", lambda name, serial=False: used.append(serial) or
-                        real(name, False))
-    slow = _one_copy_run(_CALLS)
+    fast = _one_copy_run(_CALLS, model_kw={"path": "copy"})
+    parallel = _one_copy_run(_CALLS, model_kw={"path": "copy", "threads": "parallel"})
+    serial = _one_copy_run(_CALLS, model_kw={"path": "copy", "threads": "serial"})
+    name = fast.x.dtype.name  # two distinct compiled variants were compared
+    assert _orca_kernels.orca_copy_kernels(name, True) is not _orca_kernels.orca_copy_kernels(name, False)
     for name in _OUT:
-        assert np.array_equal(getattr(fast, name), getattr(slow, name), equal_nan=True), name
+        assert np.array_equal(getattr(fast, name), getattr(parallel, name), equal_nan=True), name
+        assert np.array_equal(getattr(serial, name), getattr(parallel, name), equal_nan=True), name
+    with pytest.raises(ValueError, match="threads"):
+        ORCA(goals=np.zeros((1, 3, 2)), threads="gpu")
 
 
 def test_orca_parameter_row_follows_the_model_and_dt_when_a_solver_steps_two_models():

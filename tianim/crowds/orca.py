@@ -70,7 +70,8 @@ class ORCA(PedestrianModel):
     one step; RVO2's Circle example and CrowdNav use 1 s (unit speed beyond 1 m, then the offset itself).
     ``path``: ``"copy"`` (the copy-parallel kernel), ``"agent"`` (agent-parallel, ``steps_per_launch``
     unrolled steps a launch, default :data:`MAX_STEPS_PER_LAUNCH`) or ``"auto"`` (copy up to
-    :data:`COPY_KERNEL_MAX_AGENTS`); bit-identical.
+    :data:`COPY_KERNEL_MAX_AGENTS`); ``threads``: the copy kernel's loop over copies, ``"serial"`` (one
+    thread: no thread-pool dispatch), ``"parallel"`` or ``"auto"`` (serial for one copy); bit-identical.
     """
 
     METHOD = "orca"
@@ -82,9 +83,10 @@ class ORCA(PedestrianModel):
     def __init__(self, goals, pref_speed=1.0, radius=0.5, time_horizon=2.0, neighbour_dist=None,
                  max_neighbors=10, max_speed=2.0, safety=0.25, arrival_radius=1e-3, domain=None,
                  grid_neighbours=256, skin=None, perturbation=0.1, approach_time=None, path="auto",
-                 steps_per_launch=None):
+                 steps_per_launch=None, threads="auto"):
         super().__init__(goals, pref_speed, arrival_radius, domain, grid_neighbours)
         self.path = check_choice("path", path, ("auto", "copy", "agent"))
+        self.threads = check_choice("threads", threads, ("auto", "serial", "parallel"))
         self.steps_per_launch = MAX_STEPS_PER_LAUNCH if steps_per_launch is None else check_int(
             "steps_per_launch", steps_per_launch, lo=1, hi=8)
         self.radius = check_finite_scalar("radius", radius, lo=0.0, lo_open=True)
@@ -156,11 +158,12 @@ class ORCA(PedestrianModel):
                 w["out"], state.arrival_time, state.closest, geom, dims, cell, start, order, xs)
 
         copy = self.path == "copy" or (self.path == "auto" and state.n <= COPY_KERNEL_MAX_AGENTS)
+        serial = self.threads == "serial" or (self.threads == "auto" and state.batch == 1)
         k = self.steps_per_launch  # agent path: k unrolled steps a launch; copy path: all steps in one launch
         chunks = [steps] if copy else [k] * (steps // k) + [1] * (steps % k)
         for chunk in chunks:
             if copy:  # one copy: the serial variant (no thread-pool dispatch; same bits)
-                launch(orca_copy_kernels(name, state.batch == 1), *args, chunk)
+                launch(orca_copy_kernels(name, serial), *args, chunk)
             else:
                 launch(orca_kernels(name, chunk), *args)  # two compiled variants at most
             state.ticks += chunk
