@@ -166,18 +166,19 @@ class Emitter:
         copies, times = [], []
         if self.rate > 0:
             # TOL: step ends accumulated in floating point (t += dt) land a few ulps below k / rate
+            # (birth indices as float64 integers: exact below 2^53, and no int64 overflow for late times)
             live = t1 > self.start
-            k0 = np.floor(self.rate * np.maximum(t0 - self.start, 0.0) + TOL).astype(np.int64)
-            k1 = np.floor(self.rate * (t1 - self.start) + TOL).astype(np.int64)
-            n = np.where(live, np.maximum(k1 - k0, 0), 0)
+            k0 = np.floor(self.rate * np.maximum(t0 - self.start, 0.0) + TOL)
+            k1 = np.floor(self.rate * (t1 - self.start) + TOL)
+            n = np.where(live, np.maximum(k1 - k0, 0), 0).astype(np.int64)  # at most MAX_BIRTHS a step
             if n.any():
                 if B == 1:  # one copy: its births k0 + 1 .. k1
-                    copy, k = np.zeros(int(n[0]), np.int64), np.arange(k0[0] + 1, k0[0] + 1 + n[0])
-                else:  # copy b's births k0[b] + 1 .. k1[b]: a running index less each copy's offset
+                    copy, k = np.zeros(int(n[0]), np.int64), k0[0] + np.arange(1, n[0] + 1, dtype=np.float64)
+                else:  # copy b's births k0[b] + 1 .. k1[b]: each copy's offset plus a running index within it
                     copy = np.repeat(np.arange(B), n)
-                    k = np.arange(len(copy)) - np.repeat(np.cumsum(n) - n - (k0 + 1), n)
+                    k = np.repeat(k0, n) + (np.arange(len(copy)) - np.repeat(np.cumsum(n) - n, n) + 1)
                 copies.append(copy)
-                times.append(self.start + k.astype(np.float64) / self.rate)
+                times.append(self.start + k / self.rate)
                 counts += n
         for j, (bt, n) in enumerate(self.bursts):
             if fired is None:
