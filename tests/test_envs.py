@@ -165,9 +165,8 @@ def test_make_with_module_prefix_and_kwargs():
 
 
 @pytest.mark.parametrize("env_id", IDS)
-def test_make_close_cycles_compile_nothing_and_do_not_grow(env_id, monkeypatch):
+def test_make_close_cycles_compile_nothing_and_do_not_grow(env_id, count_compiles):
     """After a first make/step/close, further cycles compile no kernel and hold no memory."""
-    from taichi.lang import kernel_impl
 
     def cycle():
         for make in (lambda: gym.make(env_id), lambda: gym.make_vec(env_id, num_envs=2)):
@@ -177,15 +176,7 @@ def test_make_close_cycles_compile_nothing_and_do_not_grow(env_id, monkeypatch):
             env.close()
 
     cycle()
-    compiled = []
-    original = kernel_impl.Kernel.materialize
-
-    def counting(self, key=None, args=None, arg_features=None):
-        if key not in self.compiled_kernels:
-            compiled.append(self.func.__name__)
-        return original(self, key, args, arg_features)
-
-    monkeypatch.setattr(kernel_impl.Kernel, "materialize", counting)
+    compiled = count_compiles()
     cycles = 100 if env_id.endswith("ArmReach-v0") else 20
     gc.collect()
     tracemalloc.start()

@@ -339,9 +339,6 @@ class Contacts:
         self.rebuilds += 1
 
 
-# The contact launches' packed scalars: tianim.physics.packed (P_*, I_*, C_*, pack_params).
-
-
 _CONTACTS: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 

@@ -14,11 +14,10 @@ from tianim.kernels.contact import contact_response
 from tianim.physics import passes
 from tianim.physics.model import GRID_FORWARD as FORWARD
 from tianim.physics import packed
-from tianim.physics.packed import (C_LIM, C_REBUILT, C_RUN, I_ITERS, I_KEXCL, I_NSPRINGS, I_NX, I_NY, P_G,
-                                   P_GNORM, P_H, P_MARGIN, P_RHO, P_THICK, P_VCAP)
+from tianim.physics.packed import C_LIM, C_REBUILT, C_RUN, I_KEXCL, I_NY, P_GNORM, P_MARGIN, P_THICK, P_VCAP
 from tianim.physics.selfcollision import contact_update_funcs, contacts_for
 from tianim.physics import xpbd_lanes
-from tianim.physics.xpbd import _kernels
+from tianim.physics.xpbd import _kernels, scalar_funcs
 from tianim.kernels import kernel_types
 
 
@@ -41,7 +40,7 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
     row over the capacity) it stops after the substep's XPBD part (``lim[b] = sub + 1``, ``run[b] = 0``):
     the caller rebuilds its lists and runs its contacts with the passes' ``fix`` launch, as the split path
     does. Scalars in the packed arrays ``P``, ``I`` and the per-copy state ``cs`` (B, 3) of
-    :mod:`tianim.physics.selfcollision` (``P_*``, ``I_*``, ``C_*``)."""
+    :mod:`tianim.physics.packed` (``P_*``, ``I_*``, ``C_*``)."""
     from tianim.physics import selfcollision as scm
 
     t = kernel_types(real_name, dim)
@@ -54,6 +53,7 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
     contact_update = contact_update_funcs(real_name, dim, grid)
     respond = contact_response(real_name, dim)
     rebuild = scm.rebuild_funcs(real_name, dim, grid)
+    scalars = scalar_funcs(real_name, dim)
     pack_copy, lane_substep, unpack_copy = lane if lane is not None else (None, None, None)
 
     @ti.func
@@ -70,11 +70,8 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
                          coll: real2_arr, W: vec_arr, nbr: i32_3, count: i32_2, excl_off: int_arr, excl_idx: int_arr,
                          xb: vec_arr, P: real_arr, I: int_arr, cs: i32_2, cell: i32_2, start: i32_2, order: i32_2,
                          xs: vec_arr, G: f64_1, dims: int_arr):
-        g = ti.Vector([P[P_G + a] for a in ti.static(range(dim))], dt=real)
-        g_norm = g.norm()
-        rho, h, thick, g_norm_c = P[P_RHO], P[P_H], P[P_THICK], P[P_GNORM]
-        margin, vcap = P[P_MARGIN], P[P_VCAP]
-        nx, n_springs, iters, k_excl = I[I_NX], I[I_NSPRINGS], I[I_ITERS], I[I_KEXCL]
+        g, rho, h, g_norm, nx, n_springs, iters = scalars(P, I)
+        thick, g_norm_c, margin, vcap, k_excl = P[P_THICK], P[P_GNORM], P[P_MARGIN], P[P_VCAP], I[I_KEXCL]
         H = I[I_NY] // ti.static(max(L, 1))  # band rows of the lanes layout
         inv_h = 1 / h
         n = x.shape[1]
