@@ -175,8 +175,9 @@ def lane_contact_funcs(real_name: str, dim: int, lanes: int):
     def lane_bounce(V: T, n: T, e_in, mu, v_rest, vb: T):
         zero = ti.Vector.zero(real, L)
         vn = ldot(V, n)
-        e = ti.select(-vn <= v_rest, zero, zero + e_in)
-        dvn = -(1 + e) * vn
+        # -1 * a, not -a: the same bits, and vector code generation (kernels.simd) has no unary minus
+        e = ti.select(-1 * vn <= v_rest, zero, zero + e_in)
+        dvn = (-1 * (1 + e)) * vn
         vt = [V[a] - vn * n[a] for a in ti.static(range(dim))]
         vt_norm = ti.sqrt(ldot(vt, vt) + 0.0)
         scale = ti.select(vt_norm > mu * dvn, 1 - mu * dvn / vt_norm, zero)
@@ -193,7 +194,7 @@ def lane_contact_response(real_name: str, dim: int, lanes: int):
     ``respond`` on ``lanes`` particles at once, in the SIMD-lane layouts (:mod:`tianim.physics.lanes`,
     :mod:`tianim.physics.xpbd_lanes`), from :func:`lane_contact_funcs`.
 
-    ``S`` is a field of L-lane vectors; the particle positions are rows ``xrow .. xrow + dim - 1`` of column
+    ``S`` is a field or ndarray of L-lane vectors; the particle positions are rows ``xrow .. xrow + dim - 1`` of column
     ``p``, the velocities rows ``vrow ..``; ``free`` (an L-lane mask) selects the lanes that respond (the
     others keep every bit). ``respond``'s branch on ``phi < 0`` is a select; a collider's kind is the same
     for every lane (a branch outside the vector code). One vector copy of the response, where a response per

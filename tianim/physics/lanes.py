@@ -73,6 +73,7 @@ import numpy as np
 from tianim import _ti
 from tianim.kernels.contact import lane_contact_response
 from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.simd import vector_codegen
 from tianim.physics.model import GRID_STENCIL
 from tianim.physics.packed import I_BAND, I_NX, I_NY, I_ROWS, I_SRC, pack_params
 
@@ -158,24 +159,18 @@ def supports(model, dtype, lanes="auto") -> bool:
 
 
 class _Pool:
-    """The fields of one (float type, dimension): state (4 D, cap) lanes [x, v, xs, vs components],
+    """The ndarrays of one (float type, dimension): state (4 D, cap) lanes [x, v, xs, vs components],
     mass (3, cap) lanes [mass, inverse mass, 1 free / 0 pinned], force (D, cap) lanes [the force sum of a
-    substep], prm [gravity, rho, k, rest, damp],
-    off [(d_col, d_row) of :data:`GRID_STENCIL`]."""
+    substep], prm [gravity, rho, k, rest, damp], off [(d_col, d_row) of :data:`GRID_STENCIL`]. Ndarrays,
+    not fields: the run kernels compile with vector code generation (:mod:`tianim.kernels.simd`)."""
 
     def __init__(self, ti, real, dim, lanes, capacity):
-        fb = ti.FieldsBuilder()
-        self.state = ti.Vector.field(lanes, real)
-        self.mass = ti.Vector.field(lanes, real)
-        self.force = ti.Vector.field(lanes, real)
-        self.prm = ti.field(real)
-        self.off = ti.field(ti.i32)
-        fb.dense(ti.ij, (4 * dim, capacity)).place(self.state)
-        fb.dense(ti.ij, (3, capacity)).place(self.mass)
-        fb.dense(ti.ij, (dim, capacity)).place(self.force)
-        fb.dense(ti.i, dim + 1 + 3 * _N_OFF).place(self.prm)
-        fb.dense(ti.i, 2 * _N_OFF).place(self.off)
-        self.tree = fb.finalize()
+        lane_vec = ti.types.vector(lanes, real)
+        self.state = ti.ndarray(lane_vec, (4 * dim, capacity))
+        self.mass = ti.ndarray(lane_vec, (3, capacity))
+        self.force = ti.ndarray(lane_vec, (dim, capacity))
+        self.prm = ti.ndarray(real, dim + 1 + 3 * _N_OFF)
+        self.off = ti.ndarray(ti.i32, 2 * _N_OFF)
         self.off.from_numpy(np.array([a for dc, dr, _ in GRID_STENCIL for a in (dc, dr)], dtype=np.int32))
         self.capacity = capacity
 
@@ -192,8 +187,6 @@ def _pool(real_name, dim, L, packs):
         while cap < packs:
             cap *= 2
         t = kernel_types(real_name, dim)
-        if pool is not None:
-            pool.tree.destroy()
         pool = _POOLS[key] = _Pool(t.ti, t.real, dim, L, cap)
     return pool
 
@@ -205,11 +198,12 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
     t = kernel_types(real_name, dim)
     ti, real = t.ti, t.real
     lane_vec = ti.types.vector(L, real)
+    lanes_arr = ti.types.ndarray(dtype=lane_vec, ndim=2)  # (rows, packs) of L-lane vectors
     lane_respond = lane_contact_response(real_name, dim, L)
     h = dim + 1  # prm: gravity[dim], rho, k[12], rest[12], damp[12] (the P layout of kernels.py)
 
     @ti.kernel
-    def pack(S: ti.template(), M: ti.template(), prm: ti.template(), x: t.vec_arr, v: t.vec_arr,
+    def pack(S: lanes_arr, M: lanes_arr, prm: t.real_arr, x: t.vec_arr, v: t.vec_arr,
              pinned: t.mask_arr, P: t.real_arr, I: t.int_arr):
         nx, H = I[I_NX], I[I_BAND]
         n = x.shape[1]
@@ -244,7 +238,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
             write_ghosts(S, 0, kp, r, nx, H)
 
     @ti.kernel
-    def unpack(S: ti.template(), x: t.vec_arr, v: t.vec_arr, I: t.int_arr):
+    def unpack(S: lanes_arr, x: t.vec_arr, v: t.vec_arr, I: t.int_arr):
         nx, H, src = I[I_NX], I[I_BAND], I[I_SRC]
         n = x.shape[1]
         ny = n // nx
@@ -295,7 +289,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
         """One component of kernels.pair_force: s n, minus the damping (damp dot) n."""
         f = s * n
         if ti.static(spring_damping):
-            f -= damp * dot * n
+            f = f - damp * dot * n  # not `-=`: vector code generation (kernels.simd) has no augmented minus
         return f
 
     @ti.func
@@ -316,7 +310,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
             f = [m * prm[a] for a in ti.static(range(dim))]  # m g
             if ti.static(medium_damping):
                 for a in ti.static(range(dim)):
-                    f[a] -= prm[dim] * S[xs + dim + a, kp]
+                    f[a] = f[a] - prm[dim] * S[xs + dim + a, kp]
             for a in ti.static(range(dim)):
                 F[a, kp] = f[a]
         lane_row = ti.Vector([lane * H for lane in range(L)])
@@ -374,20 +368,20 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     def make_run(nsub):
         @ti.kernel
-        def run(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: t.real2_arr,
-                F: ti.template(), I: t.int_arr, dt: real):
+        def run(S: lanes_arr, M: lanes_arr, prm: t.real_arr, off: t.int_arr, coll: t.real2_arr,
+                F: lanes_arr, I: t.int_arr, dt: real):
             rows, nx, ny, H = I[I_ROWS], I[I_NX], I[I_NY], I[I_BAND]
             for s in ti.static(range(nsub)):  # each top-level loop ends in a barrier
                 for q in range(rows):
                     substep_row(S, M, prm, off, coll, F, s % 2, q, nx, ny, H, dt)
 
-        return run
+        return vector_codegen(run)
 
     runs = {n: make_run(n) for n in (1, 2, SUBSTEPS_PER_LAUNCH)}
 
     @ti.kernel
-    def run_serial(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: t.real2_arr,
-                   F: ti.template(), I: t.int_arr, dt: real, nsub: ti.i32):
+    def run_serial(S: lanes_arr, M: lanes_arr, prm: t.real_arr, off: t.int_arr, coll: t.real2_arr,
+                   F: lanes_arr, I: t.int_arr, dt: real, nsub: ti.i32):
         # One thread, every substep of the call in one launch: no barriers, no worker wake-ups; the substep
         # loop is a runtime loop and the source buffer a runtime value (one substep body to compile).
         rows, nx, ny, H = I[I_ROWS], I[I_NX], I[I_NY], I[I_BAND]
@@ -396,7 +390,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
             for q in range(rows):
                 substep_row(S, M, prm, off, coll, F, s % 2, q, nx, ny, H, dt)
 
-    runs["serial"] = run_serial
+    runs["serial"] = vector_codegen(run_serial)
     return pack, runs, unpack
 
 
