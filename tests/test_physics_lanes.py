@@ -93,13 +93,18 @@ def test_auto_lanes_follow_the_cpu_flags():
     assert lanes.cpu_simd_bytes({"avx2", "avx512f"}) == 64
     assert lanes.host_lanes(np.float32, {"sse2"}) == 4 and lanes.host_lanes(np.float64, {"sse2"}) == 2
     assert lanes.host_lanes(np.float32, {"avx2"}) == 8 and lanes.host_lanes(np.float64, {"avx2"}) == 4
-    # AVX-512: still one ymm register's worth (16 float32 lanes measured slower, see AUTO_MAX_BYTES)
+    # AVX-512: one ymm register's worth for scalarised kernels (AUTO_MAX_BYTES), a zmm register in this layout
     assert lanes.host_lanes(np.float32, {"avx2", "avx512f"}) == 8
+    assert lanes.host_lanes(np.float32, {"avx2", "avx512f"}, max_bytes=lanes.LAYOUT_MAX_BYTES) == 16
+    assert lanes.host_lanes(np.float64, {"avx2", "avx512f"}, max_bytes=lanes.LAYOUT_MAX_BYTES) == 8
+    assert lanes.host_lanes(np.float32, {"avx2"}, max_bytes=lanes.LAYOUT_MAX_BYTES) == 8
     with open("/proc/cpuinfo") as fh:
-        host_avx2 = " avx2" in fh.read()
-    assert lanes.lanes_for(np.float32, 128) == (8 if host_avx2 else 4)
+        flags = set(next(ln for ln in fh if ln.startswith("flags")).partition(":")[2].split())
+    host = 16 if "avx512f" in flags else 8 if "avx2" in flags else 4
+    assert lanes.lanes_for(np.float32, 128) == host
     # "auto" halves the lanes while a band would get fewer than 2 rows; a count is taken as given
     assert lanes.lanes_for(np.float32, 8) == 4 and lanes.lanes_for(np.float32, 8, lanes=8) == 8
+    assert lanes.lanes_for(np.float32, 16) == min(host, 8)  # 16 rows: bands of 2 rows at most 8 lanes
     assert lanes.supports(tp.cloth(3, 8), np.float32) and not lanes.supports(tp.cloth(3, 8), np.float32, lanes=8)
 
 

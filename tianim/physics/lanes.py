@@ -3,24 +3,25 @@
 Why a layout of its own. Taichi's CPU backend compiles the body of a parallel loop into a
 function that walks its chunk of indices one at a time, reloading every external array's pointer
 and shape at each access (a store might alias them); LLVM vectorises neither that loop nor the
-accesses. It does SLP-vectorise the straight-line lanes of a ``ti.Vector`` kept in a ``ti.field``.
-Measured on the optimised LLVM IR (``ti.init(print_kernel_llvm_ir_optimized=True)``) of
-``y[i] = a * x[i] + sqrt(y[i])`` with 8-lane vectors: taichi 1.7.4 emits ``<4 x float>`` loads,
-``sqrt.v4f32`` and ``fdiv <4 x float>`` for ``ti.Vector.field`` storage, and scalar code for the same
-body on ``ti.types.ndarray`` arguments or on scalar fields; quadrants 1.3.3 emits scalar code in all
-three forms (there this layout still ran 1.1-1.4x the substep layout, 64x64-128x128, against 2.3-4.2x
-on taichi). The number of lanes ``L`` is an option (``lanes=``: :func:`lanes_for`; "auto" from the host's
-CPU flags, :func:`host_lanes`: 8 float32 / 4 float64 with AVX2 or AVX-512, 4 / 2 with SSE only). On the
-AVX-512 host of this project (taichi 1.7.4) the optimised IR holds ``<4 x float>`` operations whatever L
-(LLVM's vectoriser works to a 16-byte width there), so 8 lanes are two independent 4-wide chains:
-measured at 128x128, float32, one thread, 8 lanes ran 1.01-1.03x the speed of 4 (16: 0.89x) and compile
-in 4.9 s against 2.8 s (16: 9.3 s) cold; a session on an AVX2 host measured 8 lanes 1.19-1.22x faster.
-Why 16 bytes on this host: taichi's optimiser (``global_optimize_module_cpu`` in its source) builds its target machine
-from ``llvm::sys::getHostCPUName()`` with no feature string, and its LLVM 15 does not know this CPU (AMD
-family 26, Zen 5; numba's LLVM 22 calls it ``znver5``), so the vectorisers see generic x86-64 (SSE2,
-16-byte registers); numba's vectorising bench kernel runs 16 float32 lanes in zmm registers here
-(``vsqrtps``/``vdivps`` on zmm, ``inspect_asm``), 4x this layout's width per instruction.
-The state of a call lives in a pool of vector fields of L lanes:
+accesses. What does vectorise is the straight-line lanes of a ``ti.Vector``, and how well depends on
+the code generation:
+
+* scalarised (Taichi's default, ``real_matrix_scalarize``): a vector is split into scalars and LLVM's SLP
+  vectoriser regroups them, to the width of taichi's optimiser target, which it builds from
+  ``llvm::sys::getHostCPUName()`` with no feature string (``global_optimize_module_cpu``). On a CPU its
+  LLVM 15 knows, that is the host (AVX2: ``<8 x float>``); on this project's AMD family 26 (Zen 5) host
+  it is generic x86-64, 16 bytes whatever L; quadrants 1.3.3 regroups nothing (scalar code). Storage matters
+  there too: ``ti.Vector.field`` loads regroup, the same body on ndarrays stays scalar;
+* vector code generation (:mod:`tianim.kernels.simd`, what this layout's run kernels use): a vector of L
+  lanes loaded from an ndarray of L-lane vectors stays one ``<L x float>`` LLVM value, and the JIT lowers it
+  with the host's own CPU features (zmm registers with AVX-512), on taichi and quadrants alike. Same IEEE
+  operations lane by lane: the same bits (tested).
+
+The number of lanes ``L`` is an option (``lanes=``: :func:`lanes_for`; "auto" from the host's CPU flags,
+:func:`host_lanes` up to :data:`LAYOUT_MAX_BYTES`: 16 float32 / 8 float64 with AVX-512, 8 / 4 with AVX2,
+4 / 2 with SSE only). Measured at 128x128, float32, one thread, Zen 5: 4 / 8 / 16 lanes 3.9k / 7.2k / 10.8k
+substeps/s; with the scalarised code generation this layout had before, 8 lanes ran 5.8k (two 4-wide chains).
+The state of a call lives in a pool of ndarrays of L-lane vectors:
 
 * the ``ny`` rows of each copy are cut into ``L`` bands of ``H = ceil(ny / L)`` rows (the last band
   padded); lane ``l`` of pack ``(r, c)`` holds particle ``(l H + r, c)``;
@@ -45,13 +46,12 @@ The state of a call lives in a pool of vector fields of L lanes:
   same terms summed in the same order), so the results are bit-identical to the other layouts (tested),
   for any thread count and batch.
 
-Where the time goes (optimised LLVM IR, ``ti.init(print_kernel_llvm_ir_optimized=True)``, of the offset
-pass): the inner column loop is straight-line ``<4 x float>`` code, one vector load per neighbour
-component, one ``sqrt.v4f32`` and one ``fdiv`` per 4 lanes, no branch and no division of integers. The
-vectors are 16 bytes wide because taichi's optimiser targets generic x86-64 on this host (note above);
-numba's kernel runs 16-lane zmm vectors and one division per spring (``s / |d|``) where tianim's
-arithmetic (``1 / |d|``, then a product per component, kept for bit-identity with the other layouts)
-needs a reciprocal and more products. That width, not the traversal, is the remaining gap.
+Where the time goes. The inner column loop is straight-line vector code: one vector load per neighbour
+component, one square root and one division per L lanes, no branch and no division of integers. Against the
+cloth bench's vectorising numba kernel (16 float32 lanes in zmm registers, one division per spring, ``s / |d|``,
+where tianim's arithmetic, ``1 / |d|`` then a product per component, is kept for bit-identity with the other
+layouts), one thread of this layout now runs about what one thread of numba's does (128x128: 5.6 ns per
+particle-substep); what is left is the second thread (the serial path, below, uses one).
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
 the pool, and unpacks. Up to :data:`SERIAL_MAX_PARTICLES` (batch x band rows x L x nx) one thread runs every
@@ -83,10 +83,15 @@ from tianim.physics.packed import I_BAND, I_NX, I_NY, I_ROWS, I_SRC, pack_params
 SIMD_BYTES = (("avx512f", 64), ("avx2", 32), ("avx", 32))
 #: Lane counts a caller may ask for (``lanes=``), by float type; the smallest is one SSE register.
 LANE_CHOICES = {"float32": (4, 8, 16), "float64": (2, 4, 8)}
-#: Widest vector "auto" uses [bytes], measured (see :func:`host_lanes`): on this project's AVX-512 host,
-#: 16 float32 lanes ran slower than 8 at 128x128 (LLVM splits 64-byte vectors in two ymm halves and
-#: 3 D components of 16 lanes do not fit the register file), so "auto" stops at one ymm register.
+#: Widest vector "auto" uses [bytes] for kernels left to Taichi's scalarising code generation (the particle
+#: lanes, XPBD's lanes): on this project's AVX-512 host 16 float32 lanes ran slower than 8 there (LLVM regroups
+#: the scalars to its target's width, see the note above), so they stop at one ymm register.
 AUTO_MAX_BYTES = 32
+#: Widest vector "auto" uses [bytes] in this layout, whose run kernels keep their vectors whole
+#: (:mod:`tianim.kernels.simd`): one register of the host, zmm included. Measured at 128x128, float32, one
+#: thread, Zen 5 (AVX-512): 16 lanes 10.8k substeps/s against 7.2k for 8 (64x64: 36k / 26k; 256x256: 2.9k /
+#: 1.9k); their cold compile 2.1 s against 1.1 s (64x64, damping and a ground).
+LAYOUT_MAX_BYTES = 64
 #: Substeps per launch of the main kernel (even: the ping-pong ends in the first buffer).
 SUBSTEPS_PER_LAUNCH = 8  # 16 ran ~2% faster at 128x128 but compiled 17 s cold (0.9 s per unrolled substep)
 #: Largest batch x padded grid [particles] that runs on one thread, all substeps in one launch: below it the
@@ -121,11 +126,12 @@ def _host_flags() -> frozenset:
 _FLAGS = None
 
 
-def host_lanes(dtype, flags=None) -> int:
-    """The ``lanes="auto"`` count for ``dtype``: one vector register of the host, at most
-    :data:`AUTO_MAX_BYTES` (8 float32 / 4 float64 lanes with AVX2 or AVX-512, 4 / 2 with SSE only)."""
+def host_lanes(dtype, flags=None, max_bytes=AUTO_MAX_BYTES) -> int:
+    """The ``lanes="auto"`` count for ``dtype``: one vector register of the host, at most ``max_bytes``
+    (:data:`AUTO_MAX_BYTES`: 8 float32 / 4 float64 lanes with AVX2 or AVX-512, 4 / 2 with SSE only;
+    :data:`LAYOUT_MAX_BYTES`, this layout's: 16 / 8 with AVX-512)."""
     itemsize = np.dtype(dtype).itemsize
-    return min(cpu_simd_bytes(flags), AUTO_MAX_BYTES) // itemsize
+    return min(cpu_simd_bytes(flags), max_bytes) // itemsize
 
 
 def check_lanes(lanes, dtype=None):
@@ -142,10 +148,11 @@ def check_lanes(lanes, dtype=None):
 
 def lanes_for(dtype, ny=None, lanes="auto") -> int:
     """Particles per vector for the state's float type: ``lanes`` when a count, else :func:`host_lanes`
-    halved while a grid of ``ny`` rows would get fewer than 2 rows per band (down to one SSE register)."""
+    (up to :data:`LAYOUT_MAX_BYTES`) halved while a grid of ``ny`` rows would get fewer than 2 rows per band
+    (down to one SSE register)."""
     if lanes != "auto":
         return int(lanes)
-    L = host_lanes(dtype)
+    L = host_lanes(dtype, max_bytes=LAYOUT_MAX_BYTES)
     smallest = LANE_CHOICES[np.dtype(dtype).name][0]
     while ny is not None and L > smallest and -(-ny // L) < 2:
         L //= 2
