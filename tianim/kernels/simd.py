@@ -13,9 +13,24 @@ taichi 0.48 -> 0.14 ns per element, quadrants 2.14 -> 0.16 ns, bit-identical (th
 lane by lane; ``fast_math=False``, so no contraction).
 
 :func:`vector_codegen` wraps a kernel so that it compiles (at its first call, per argument variant)
-with that setting and every other kernel keeps the default. Storage must be ndarrays:
-``ti.Vector.field`` loads in that mode abort inside taichi 1.7.4's LLVM (an assertion on the load's
-pointer type).
+with that setting and every other kernel keeps the default. What that mode supports in taichi 1.7.4,
+found by small kernels (each failure kills the process, so keep to this list):
+
+* vectors of 2, 4, 8 or 16 lanes in ndarrays, loaded, stored, shuffled (``ti.Vector([u[j] ...])``),
+  compared, combined with ``&`` / ``|``, selected, ``+ - * /``, ``+=``, ``sqrt``, ``min``/``max``,
+  ``floor``: the same bits as the scalarised code;
+* not: ``ti.Vector.field`` loads (an LLVM assertion on the load's pointer type); unary minus, ``-=`` and
+  ``abs`` on vectors (assertion / abort: write ``-1 * a``, the same bits, and ``a = a - b``); a vector of
+  3 lanes (a position) stored or loaded in a loop (segmentation fault), so a kernel with 3-vector
+  arguments stays scalarised;
+* wrong results: a vector built from the lanes of a comparison's result (a shifted mask) reads the
+  shifted lanes as true; shift an integer mask (``ti.select(ok, 1, 0)``) instead.
+
+The explicit lanes layout's run kernels (:mod:`tianim.physics.lanes`) use it. XPBD's lane kernel fuses the
+pickers' 3-vector code and the pack into its launch, so it stays scalarised: with those parts changed
+(records as 2-D arrays, an integer mask shift) its one-copy substeps were bit-identical and 1.59x faster
+(64x64, 8 lanes, one thread: 4.2k -> 6.6k substeps/s), and copies beyond the first crashed on the
+3-vector state arrays.
 """
 
 from __future__ import annotations
