@@ -303,7 +303,7 @@ def test_lower_layers_load_no_physics_after_their_first_kernels():
 
 #: The scalars a kernel may take beside its arrays (docs/architecture.md, "One argument convention"): the
 #: call's step size and loop counts. Everything else is an entry of a packed array with named offsets.
-_KERNEL_SCALARS_ALLOWED = {"dt", "h", "substeps", "nsub", "frames", "steps"}
+_KERNEL_SCALARS_ALLOWED = {"dt", "h", "substeps", "nsub", "frames", "steps", "workers"}
 #: Annotations of scalar kernel arguments (Taichi's primitive types and the factories' aliases for them).
 _SCALAR_ANNOTATIONS = {"real", "vec", "f32", "f64", "int", "float", "t.real", "t.vec"}
 

@@ -30,10 +30,10 @@ SCENES = {
 }
 
 
-@pytest.fixture(params=["lanes_serial", "lanes_parallel"])
+@pytest.fixture(params=["lanes_serial", "lanes_parallel", "lanes_tickets"])
 def lanes_mode(request):
-    """Both paths of the layout, as solver layouts: one thread for the whole call, or parallel loops with
-    barriers."""
+    """The paths of the layout, as solver layouts: one thread for the whole call, parallel loops with
+    barriers, or every thread in one launch taking row tickets."""
     return request.param
 
 
@@ -184,8 +184,11 @@ _THREAD_SCRIPT = textwrap.dedent("""
     state.x[1] += 0.01
     # (the serial path runs on one thread); 5 substeps: launches of 2, 2 and 1 (the 8-substep launch unrolls
     # the same loops 8 times)
+    other = state.copy()
     tp.step(model, state, 1e-4, substeps=5, layout="lanes_parallel")
-    print(hashlib.sha256(state.x.tobytes() + state.v.tobytes()).hexdigest())
+    tp.step(model, other, 1e-4, substeps=5, layout="lanes_tickets")  # every thread takes row tickets
+    print(hashlib.sha256(state.x.tobytes() + state.v.tobytes()).hexdigest(),
+          hashlib.sha256(other.x.tobytes() + other.v.tobytes()).hexdigest())
 """)
 
 

@@ -22,8 +22,9 @@ from tianim.physics.solver_base import Solver, _with_passes, check_state
 from tianim.physics.strain import as_strain_limit
 
 #: Loop layouts of the explicit kernels (all give bit-identical results; "lanes": symplectic Euler on grids only,
-#: its thread path chosen from the scene; "lanes_serial" / "lanes_parallel" force one (tianim.physics.lanes)).
-LAYOUTS = ("auto", "serial", "frame", "substep", "lanes", "lanes_serial", "lanes_parallel")
+#: its thread path chosen from the scene; "lanes_serial" / "lanes_parallel" / "lanes_tickets" force one
+#: (tianim.physics.lanes)).
+LAYOUTS = ("auto", "serial", "frame", "substep", "lanes", "lanes_serial", "lanes_parallel", "lanes_tickets")
 
 
 class _Explicit(Solver):
@@ -35,8 +36,10 @@ class _Explicit(Solver):
         ``"auto"`` (:func:`choose_layout`), ``"serial"``, ``"frame"``, ``"substep"`` or ``"lanes"``
         (symplectic Euler on a cloth grid: :mod:`tianim.physics.lanes`; ``"lanes_serial"`` /
         ``"lanes_parallel"``: its one-thread or its parallel path, instead of the choice from the
-        scene size); all give bit-identical results. With passes (below), ``"serial"`` and
-        ``"lanes_serial"`` run the passes' loops serially, ``"substep"`` and ``"lanes_parallel"`` in
+        scene size; ``"lanes_tickets"``: every thread in one launch, opt-in: 1.5-1.6x the one-thread
+        path on an idle 2-core machine, 0.15-0.5x when other processes compete for the cores, CPU only);
+        all give bit-identical results. With passes (below), ``"serial"`` and ``"lanes_serial"`` run
+        the passes' loops serially, ``"substep"``, ``"lanes_parallel"`` and ``"lanes_tickets"`` in
         parallel; otherwise the scene size decides.
     lanes : "auto" or int
         Particles per SIMD vector in the lanes layouts (:func:`tianim.physics.lanes.lanes_for`:
@@ -81,7 +84,8 @@ class _Explicit(Solver):
 
 #: The passes' loops (tianim.physics.passes) under an explicit solver's layout: serial or parallel as the
 #: layout's own loops; "auto" and "frame" leave the choice to the scene size.
-_PASS_LOOPS = {"serial": "serial", "substep": "parallel", "lanes_serial": "serial", "lanes_parallel": "parallel"}
+_PASS_LOOPS = {"serial": "serial", "substep": "parallel", "lanes_serial": "serial", "lanes_parallel": "parallel",
+               "lanes_tickets": "parallel"}
 
 
 

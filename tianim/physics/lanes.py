@@ -54,14 +54,26 @@ layouts), one thread of this layout now runs about what one thread of numba's do
 particle-substep); what is left is the second thread (the serial path, below, uses one).
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
-the pool, and unpacks. Up to :data:`SERIAL_MAX_PARTICLES` (batch x band rows x L x nx) one thread runs every
-substep of the call in one launch (path ``"serial"``, a runtime loop over the substeps); above it,
-:data:`SUBSTEPS_PER_LAUNCH` substeps per launch, one parallel loop each (path ``"parallel"``). The
-solver layouts ``"lanes_serial"`` / ``"lanes_parallel"`` force a path (``launch_lanes(path=)``).
-On the 2-vCPU machines this project targets, Taichi's workers sleep between
-parallel loops and take a few hundred microseconds to wake, so a substep of a 128x128 cloth (about
-0.3 ms on one thread) runs faster on one thread than split over two with a barrier after it; from
-256x256 on, two threads win.
+the pool, and unpacks. ``"auto"`` runs every substep of the call in one launch on one thread (path
+``"serial"``, a runtime loop over the substeps; on a GPU, the parallel path); path ``"parallel"`` launches :data:`SUBSTEPS_PER_LAUNCH`
+substeps at a time, one parallel loop over the pack rows each. The solver layouts ``"lanes_serial"`` / ``"lanes_parallel"`` / ``"lanes_tickets"`` force a
+path (``launch_lanes(path=)``).
+
+Threads, measured. Taichi 1.7.4's CPU code generation gives every task of a parallel loop at least 512
+indices (``cpu_block_dim_adaptive`` overrides ``ti.loop_config(block_dim=)``), so the parallel path's loop
+over a cloth's 8 to 64 pack rows is one task: it runs on one thread with a launch per substep, 0.75-0.99x
+the serial path from 64x64 to 512x512. The ticket path (``"tickets"``, opt-in) puts every substep of the
+call in one launch of T = threads workers, one task each (:data:`ROW_TASK_ITEMS` loop indices, one of which
+works): a worker takes the next (substep, row) ticket from an atomic counter and starts it once every row of
+the previous substep is done (a second counter on its own cache line, :data:`TICKET_LINE`); no worker waits
+on a ticket not yet taken, so it cannot deadlock. On an idle 2-vCPU machine it runs 1.47x (128x128, AVX2),
+1.47x (256x256) and 1.63x (512x512) the serial path (1.45-1.48x at 256x256 and 512x512 on an AVX-512 host,
+0.77x at 128x128 there: the substep is too short for a barrier per substep). But its workers spin: with two
+other busy processes on the two cores a descheduled worker stalls the others for a time slice, and it fell
+to 0.15x (128x128) and 0.47x (256x256) of the serial path, which is why ``"auto"`` does not take it
+(training runs several processes per machine). ``"auto"`` takes the serial path at every size: the parallel
+path never beat it (0.93x with 8 copies of 128x128, 0.97x with 32 copies of 64x64), and it is the one that
+cannot be hurt by a descheduled thread.
 The stencil loop and the serial path's substep loop are runtime loops (the source buffer a runtime
 value: one substep body to compile) so that compiling stays short. The pool grows by doubling (one compile
 of the kernels per growth); the kernels take sizes as arguments, so a second scene or another batch
@@ -75,6 +87,7 @@ from tianim.kernels.contact import lane_contact_response
 from tianim.kernels import cached_variants, kernel_types
 from tianim.kernels.simd import vector_codegen
 from tianim.physics.model import GRID_STENCIL
+from tianim.runtime import current_arch, num_threads
 from tianim.physics.packed import I_BAND, I_NX, I_NY, I_ROWS, I_SRC, pack_params
 
 #: Vector register width [bytes] of the host's widest float SIMD, by CPU flag (``/proc/cpuinfo``); SSE2 (16)
@@ -94,9 +107,17 @@ AUTO_MAX_BYTES = 32
 LAYOUT_MAX_BYTES = 64
 #: Substeps per launch of the main kernel (even: the ping-pong ends in the first buffer).
 SUBSTEPS_PER_LAUNCH = 8  # 16 ran ~2% faster at 128x128 but compiled 17 s cold (0.9 s per unrolled substep)
-#: Largest batch x padded grid [particles] that runs on one thread, all substeps in one launch: below it the
-#: second thread's wake-ups at each substep's barrier cost more than it computes (measured, see the note).
-SERIAL_MAX_PARTICLES = 1 << 15  # measured on 2 vCPUs, 4 lanes: 1 thread 1.25-1.3x the 2-thread path at 128^2, 0.8-0.9x at 256^2
+#: Offset [int32] of the ticket path's finished-rows counter from its tickets-taken counter: 64 bytes, one
+#: cache line each, so the workers polling one do not slow the one taking a ticket.
+TICKET_LINE = 16
+#: Loop indices per worker of the ticket path. Taichi 1.7.4's CPU code generation gives each task of a
+#: parallel loop at least 512 indices (its adaptive block size, ``cpu_block_dim_adaptive``, which overrides
+#: ``ti.loop_config(block_dim=)``), so a loop of a few indices runs as one task on one thread: spread over
+#: ROW_TASK_ITEMS indices each (one of which works), the T workers become T tasks.
+ROW_TASK_ITEMS = 512
+#: CPU archs: where the ticket path can run (threads that each take one task and spin on shared counters)
+#: and where "auto" takes the serial path.
+CPU_ARCHES = ("x64", "arm64")
 #: Smallest pool, in packs (grown by doubling).
 MIN_CAPACITY = 1 << 12
 
@@ -179,6 +200,7 @@ class _Pool:
         self.prm = ti.ndarray(real, dim + 1 + 3 * _N_OFF)
         self.off = ti.ndarray(ti.i32, 2 * _N_OFF)
         self.off.from_numpy(np.array([a for dc, dr, _ in GRID_STENCIL for a in (dc, dr)], dtype=np.int32))
+        self.tickets = ti.ndarray(ti.i32, 2 * TICKET_LINE)  # the ticket path's counters: taken, rows finished
         self.capacity = capacity
 
 
@@ -398,26 +420,54 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
                 substep_row(S, M, prm, off, coll, F, s % 2, q, nx, ny, H, dt)
 
     runs["serial"] = vector_codegen(run_serial)
+
+    @ti.kernel
+    def run_tickets(S: lanes_arr, M: lanes_arr, prm: t.real_arr, off: t.int_arr, coll: t.real2_arr,
+                    F: lanes_arr, I: t.int_arr, dt: real, nsub: ti.i32, workers: ti.i32, C: t.int_arr):
+        # Every substep of the call in one launch on `workers` tasks (see ROW_TASK_ITEMS). Ticket g
+        # is pack row g % rows of substep g // rows; the workers take tickets in order from C[0] and start a
+        # ticket's row once every row of the previous substep is done (C[TICKET_LINE] counts finished rows).
+        # No worker ever waits on a ticket not yet taken, so this is deadlock-free however the tasks are
+        # scheduled: a worker alone takes every ticket in order.
+        rows, nx, ny, H = I[I_ROWS], I[I_NX], I[I_NY], I[I_BAND]
+        C[0] = 0
+        C[TICKET_LINE] = 0
+        total = nsub * rows
+        for w in range(workers * ROW_TASK_ITEMS):
+            if w % ROW_TASK_ITEMS == 0:
+                g = ti.atomic_add(C[0], 1)
+                while g < total:
+                    s = g // rows
+                    while ti.atomic_add(C[TICKET_LINE], 0) < s * rows:  # the previous substep's rows
+                        pass
+                    substep_row(S, M, prm, off, coll, F, s % 2, g - s * rows, nx, ny, H, dt)
+                    ti.atomic_add(C[TICKET_LINE], 1)
+                    g = ti.atomic_add(C[0], 1)
+
+    runs["tickets"] = vector_codegen(run_tickets)
     return pack, runs, unpack
 
 
 #: Thread paths of the layout (``launch_lanes(path=)``): "auto" chooses from the scene size.
-PATHS = ("auto", "serial", "parallel")
+PATHS = ("auto", "serial", "parallel", "tickets")
 
 
 def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto", lanes="auto") -> None:
     """Advance ``state`` by ``substeps`` symplectic Euler steps of ``dt`` in the lanes layout
     (no validation: :func:`tianim.physics.explicit.launch` is the caller). ``data`` is
     ``model.kernel_data(state.dtype)``. ``path``: ``"serial"`` (one thread, the whole call in one
-    launch), ``"parallel"`` (parallel loops, :data:`SUBSTEPS_PER_LAUNCH` substeps per launch) or
-    ``"auto"`` (serial up to :data:`SERIAL_MAX_PARTICLES` batch x padded grid). ``lanes``: particles per
+    launch), ``"parallel"`` (parallel loops, :data:`SUBSTEPS_PER_LAUNCH` substeps per launch),
+    ``"tickets"`` (every substep in one launch on all threads, rows taken from a counter; CPU only) or
+    ``"auto"`` (serial on a CPU: the fastest on every measured size, see the module note; parallel on a
+    GPU). ``lanes``: particles per
     vector (:func:`lanes_for`; "auto": from the host CPU). Every path and lane count is bit-identical."""
+    if path == "tickets" and current_arch() not in CPU_ARCHES:
+        raise ValueError(f"layout='lanes_tickets' spins on counters shared by CPU threads; got arch "
+                         f"{current_arch()!r}; use layout='lanes' or 'lanes_parallel' there")
     g = model.grid
     real_name = state.dtype.name
     L = lanes_for(state.dtype, g.ny, lanes)
     H = -(-g.ny // L)
-    npk = H * g.nx
-    packs = state.batch * npk
     pool = _pool(real_name, model.dim, L, state.batch * (H + 4) * g.nx)  # with the ghost rows
     pack, runs, unpack = lane_kernels(real_name, model.dim, L, len(model.colliders) > 0,
                                       model.has_spring_damping, model.medium_damping > 0)
@@ -427,8 +477,15 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], I)
     dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
     args = (S, M, prm, off, data["coll"], pool.force, I, dt)
-    if path == "serial" or (path == "auto" and packs * L <= SERIAL_MAX_PARTICLES):
+    if path == "auto":
+        path = "serial" if current_arch() in CPU_ARCHES else "parallel"  # one GPU thread would crawl
+    if path == "serial":
         runs["serial"](*args, substeps)
+        unpack(S, state.x, state.v, I)
+        return
+    if path == "tickets":
+        workers = max(1, min(num_threads() or 1, state.batch * H))
+        runs["tickets"](*args, substeps, workers, pool.tickets)
         unpack(S, state.x, state.v, I)
         return
     for _ in range(substeps // SUBSTEPS_PER_LAUNCH):
