@@ -13,7 +13,10 @@ tianim before anything is timed, then timed in the same process:
 
 tianim runs as a user would call it (``tp.step``, layout ``"auto"``, watchdog on: the ``"lanes"``
 layout of :mod:`tianim.physics.lanes` from 32x32 up); ``substep_layout_substeps_per_s`` is the same
-call with ``layout="substep"`` (the one-particle-per-thread kernel it replaced). The candidates are
+call with ``layout="substep"`` (the one-particle-per-thread kernel it replaced) and
+``tickets_substeps_per_s`` with ``layout="lanes_tickets"`` (every thread in one launch: opt-in, as it spins
+and slows badly when other processes compete for the cores; checked bit-identical to ``"auto"`` first;
+``tickets_speedup_vs_numba_vector`` compares it with numba on the same threads). The candidates are
 timed in turn within each round (medians over rounds), so load from other processes slows them alike.
 
 ``bandwidth_fraction``: the bytes a substep must move at least (read and write x and v,
@@ -209,10 +212,16 @@ def run(sizes=(128, 256, 512), repeats=5, numpy_max=256) -> dict:
         k = max(8, int(2e6 // model.n_particles))  # substeps per timed call
         kr = max(2, k // 4)  # the references take longer per substep
         sub_state = perturbed_state(model)
+        tick_state = perturbed_state(model)
+        tp.step(model, state, dt, substeps=k)
+        tp.step(model, tick_state, dt, substeps=k, layout="lanes_tickets")
+        if not np.array_equal(state.x, tick_state.x):
+            raise RuntimeError(f"the lanes_tickets path and layout 'auto' differ on the {n}x{n} cloth")
         fast = FastNumpyCloth(model, state.x[0], state.v[0], state.pinned[0])
         fns = {
             "tianim": lambda: tp.step(model, state, dt, substeps=k),  # layout "auto" (lanes here), watchdog on
             "tianim_substep": lambda: tp.step(model, sub_state, dt, substeps=k, layout="substep"),
+            "tianim_tickets": lambda: tp.step(model, tick_state, dt, substeps=k, layout="lanes_tickets"),
             "numpy": lambda: fast.step(dt, kr),
         }
         if warp_err is not None:
@@ -231,6 +240,7 @@ def run(sizes=(128, 256, 512), repeats=5, numpy_max=256) -> dict:
             "substeps_per_s": k / t["tianim"],
             "spring_updates_per_s": k / t["tianim"] * model.n_springs,
             "substep_layout_substeps_per_s": k / t["tianim_substep"],
+            "tickets_substeps_per_s": k / t["tianim_tickets"],  # opt-in: every thread (tianim.physics.lanes)
         }
         row["bandwidth_fraction"] = row["substeps_per_s"] * model.n_particles * 4 * model.dim * 4 / bandwidth
         row["numpy_substeps_per_s"] = kr / t["numpy"]
@@ -241,6 +251,8 @@ def run(sizes=(128, 256, 512), repeats=5, numpy_max=256) -> dict:
         for name in ("numba_simple", "numba_vector", "jax"):
             row[f"{name}_substeps_per_s"] = k / t[name] if name in t else None
             row[f"speedup_vs_{name}"] = t[name] / t["tianim"] if name in t else None
+        row["tickets_speedup_vs_numba_vector"] = (t["numba_vector"] / t["tianim_tickets"]
+                                                  if "numba_vector" in t else None)
         if n <= numpy_max:
             kn = max(2, k // 8)
             t_np = time_numpy(model, state, dt, kn, max(3, repeats // 2))
@@ -261,7 +273,7 @@ def main(argv) -> int:
                               "speedup_vs_numpy_simple", "bandwidth_fraction"])
     print_table(res["rows"], ["size", "substeps_per_s", "numba_simple_substeps_per_s", "speedup_vs_numba_simple",
                               "numba_vector_substeps_per_s", "speedup_vs_numba_vector", "jax_substeps_per_s",
-                              "speedup_vs_jax"])
+                              "speedup_vs_jax", "tickets_substeps_per_s", "tickets_speedup_vs_numba_vector"])
     for name, note in PEER_NOTES.items():
         if name not in res["peer_agreement_max_abs_m"]:
             print(note)
@@ -276,6 +288,8 @@ def main(argv) -> int:
     for name in ("numba_simple", "numba_vector", "jax"):
         summary[f"{name}_substeps_per_s"] = main_row.get(f"{name}_substeps_per_s")
         summary[f"speedup_vs_{name}"] = main_row.get(f"speedup_vs_{name}")
+    summary["tickets_substeps_per_s"] = main_row["tickets_substeps_per_s"]
+    summary["tickets_speedup_vs_numba_vector"] = main_row["tickets_speedup_vs_numba_vector"]
     summary["threads"] = res["threads"]
     if res["warp_agreement_max_abs_m"] is None:
         print("warp: not installed (pip install warp-lang, or the bench extra); warp_* keys are null")
