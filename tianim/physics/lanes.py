@@ -54,26 +54,29 @@ layouts), one thread of this layout now runs about what one thread of numba's do
 particle-substep); what is left is the second thread (the serial path, below, uses one).
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
-the pool, and unpacks. ``"auto"`` runs every substep of the call in one launch on one thread (path
-``"serial"``, a runtime loop over the substeps; on a GPU, the parallel path); path ``"parallel"`` launches :data:`SUBSTEPS_PER_LAUNCH`
-substeps at a time, one parallel loop over the pack rows each. The solver layouts ``"lanes_serial"`` / ``"lanes_parallel"`` / ``"lanes_tickets"`` force a
-path (``launch_lanes(path=)``).
+the pool, and unpacks. Up to :data:`SERIAL_MAX_PARTICLES` (batch x band rows x L x nx) one thread runs every
+substep of the call in one launch (path ``"serial"``, a runtime loop over the substeps); above it (and on a
+GPU), :data:`SUBSTEPS_PER_LAUNCH` substeps per launch, one parallel loop each (path ``"parallel"``). The
+solver layouts ``"lanes_serial"`` / ``"lanes_parallel"`` / ``"lanes_tickets"`` force a path
+(``launch_lanes(path=)``).
 
 Threads, measured. Taichi 1.7.4's CPU code generation gives every task of a parallel loop at least 512
-indices (``cpu_block_dim_adaptive`` overrides ``ti.loop_config(block_dim=)``), so the parallel path's loop
-over a cloth's 8 to 64 pack rows is one task: it runs on one thread with a launch per substep, 0.75-0.99x
-the serial path from 64x64 to 512x512. The ticket path (``"tickets"``, opt-in) puts every substep of the
-call in one launch of T = threads workers, one task each (:data:`ROW_TASK_ITEMS` loop indices, one of which
-works): a worker takes the next (substep, row) ticket from an atomic counter and starts it once every row of
-the previous substep is done (a second counter on its own cache line, :data:`TICKET_LINE`); no worker waits
-on a ticket not yet taken, so it cannot deadlock. On an idle 2-vCPU machine it runs 1.47x (128x128, AVX2),
-1.47x (256x256) and 1.63x (512x512) the serial path (1.45-1.48x at 256x256 and 512x512 on an AVX-512 host,
-0.77x at 128x128 there: the substep is too short for a barrier per substep). But its workers spin: with two
-other busy processes on the two cores a descheduled worker stalls the others for a time slice, and it fell
-to 0.15x (128x128) and 0.47x (256x256) of the serial path, which is why ``"auto"`` does not take it
-(training runs several processes per machine). ``"auto"`` takes the serial path at every size: the parallel
-path never beat it (0.93x with 8 copies of 128x128, 0.97x with 32 copies of 64x64), and it is the one that
-cannot be hurt by a descheduled thread.
+indices (``cpu_block_dim_adaptive`` overrides ``ti.loop_config(block_dim=)``), so a loop over a cloth's 8 to
+64 pack rows was one task on one thread (the parallel path ran 0.75-0.99x the serial path before this was
+found). Both parallel paths therefore loop over T x :data:`ROW_TASK_ITEMS` indices, T = the threads (at most
+the rows), one of each ROW_TASK_ITEMS working: T tasks. The parallel path gives worker w the rows w,
+w + T, ... and ends each substep in Taichi's barrier between loops (its workers sleep there, so it degrades
+gently when other processes share the cores). The ticket path (``"tickets"``, opt-in) puts every substep
+of the call in one launch: a worker takes the next (substep, row) ticket from an atomic counter and starts
+it once every row of the previous substep is done (a second counter on its own cache line,
+:data:`TICKET_LINE`); no worker waits on a ticket not yet taken, so it cannot deadlock. Measured on an idle
+2-vCPU AVX2 host against the serial path (interleaved rounds, medians): parallel 1.36x at 128x128, 1.13x at
+256x256, 1.2x at 512x512, 0.55x at 64x64; tickets 1.47-1.7x from 128x128 on (1.45-1.48x at 256x256 and
+512x512 on an AVX-512 host, 0.77x at 128x128 there). But the ticket workers spin: with two busy processes
+beside it one run fell to 0.15x (128x128) and 0.47x (256x256) the serial path, another to 0.8x and 1.0x,
+as a descheduled worker stalls the others for a time slice, so ``"auto"`` (training runs several
+processes per machine) takes the serial path up to :data:`SERIAL_MAX_PARTICLES` and the parallel path
+above it; on a GPU always the parallel path.
 The stencil loop and the serial path's substep loop are runtime loops (the source buffer a runtime
 value: one substep body to compile) so that compiling stays short. The pool grows by doubling (one compile
 of the kernels per growth); the kernels take sizes as arguments, so a second scene or another batch
@@ -107,6 +110,12 @@ AUTO_MAX_BYTES = 32
 LAYOUT_MAX_BYTES = 64
 #: Substeps per launch of the main kernel (even: the ping-pong ends in the first buffer).
 SUBSTEPS_PER_LAUNCH = 8  # 16 ran ~2% faster at 128x128 but compiled 17 s cold (0.9 s per unrolled substep)
+#: Largest batch x padded grid [particles] that "auto" runs on one thread, every substep in one launch: up
+#: to it a barrier per substep costs more than the second thread gives (2 vCPUs, AVX2, 8 lanes: one
+#: thread 1.8x the parallel path at 64x64, the parallel path 1.36x one thread at 128x128 (16,384), 1.4x
+#: for 4 copies of 128x128, 1.5x for 16 of 64x64; on an AVX-512 host, 16 lanes, 128x128 was a substep
+#: too short for two threads): 128x128 alone stays on one thread.
+SERIAL_MAX_PARTICLES = 1 << 14
 #: Offset [int32] of the ticket path's finished-rows counter from its tickets-taken counter: 64 bytes, one
 #: cache line each, so the workers polling one do not slow the one taking a ticket.
 TICKET_LINE = 16
@@ -398,11 +407,15 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
     def make_run(nsub):
         @ti.kernel
         def run(S: lanes_arr, M: lanes_arr, prm: t.real_arr, off: t.int_arr, coll: t.real2_arr,
-                F: lanes_arr, I: t.int_arr, dt: real):
+                F: lanes_arr, I: t.int_arr, dt: real, workers: ti.i32):
             rows, nx, ny, H = I[I_ROWS], I[I_NX], I[I_NY], I[I_BAND]
             for s in ti.static(range(nsub)):  # each top-level loop ends in a barrier
-                for q in range(rows):
-                    substep_row(S, M, prm, off, coll, F, s % 2, q, nx, ny, H, dt)
+                for w in range(workers * ROW_TASK_ITEMS):  # one task per worker (see ROW_TASK_ITEMS)
+                    if w % ROW_TASK_ITEMS == 0:
+                        q = w // ROW_TASK_ITEMS
+                        while q < rows:  # rows w, w + workers, ...
+                            substep_row(S, M, prm, off, coll, F, s % 2, q, nx, ny, H, dt)
+                            q += workers
 
         return vector_codegen(run)
 
@@ -458,8 +471,8 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     ``model.kernel_data(state.dtype)``. ``path``: ``"serial"`` (one thread, the whole call in one
     launch), ``"parallel"`` (parallel loops, :data:`SUBSTEPS_PER_LAUNCH` substeps per launch),
     ``"tickets"`` (every substep in one launch on all threads, rows taken from a counter; CPU only) or
-    ``"auto"`` (serial on a CPU: the fastest on every measured size, see the module note; parallel on a
-    GPU). ``lanes``: particles per
+    ``"auto"`` (serial up to :data:`SERIAL_MAX_PARTICLES` batch x padded grid on a CPU, else parallel).
+    ``lanes``: particles per
     vector (:func:`lanes_for`; "auto": from the host CPU). Every path and lane count is bit-identical."""
     if path == "tickets" and current_arch() not in CPU_ARCHES:
         raise ValueError(f"layout='lanes_tickets' spins on counters shared by CPU threads; got arch "
@@ -477,22 +490,24 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], I)
     dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
     args = (S, M, prm, off, data["coll"], pool.force, I, dt)
-    if path == "auto":
-        path = "serial" if current_arch() in CPU_ARCHES else "parallel"  # one GPU thread would crawl
+    if path == "auto":  # on a GPU always parallel: one GPU thread would crawl
+        cpu = current_arch() in CPU_ARCHES
+        path = "serial" if cpu and state.batch * H * L * g.nx <= SERIAL_MAX_PARTICLES else "parallel"
     if path == "serial":
         runs["serial"](*args, substeps)
         unpack(S, state.x, state.v, I)
         return
+    cpu = current_arch() in CPU_ARCHES
+    workers = max(1, min(num_threads() or 1, state.batch * H)) if cpu else state.batch * H  # GPU: a row each
     if path == "tickets":
-        workers = max(1, min(num_threads() or 1, state.batch * H))
         runs["tickets"](*args, substeps, workers, pool.tickets)
         unpack(S, state.x, state.v, I)
         return
     for _ in range(substeps // SUBSTEPS_PER_LAUNCH):
-        runs[SUBSTEPS_PER_LAUNCH](*args)
+        runs[SUBSTEPS_PER_LAUNCH](*args, workers)
     rest = substeps % SUBSTEPS_PER_LAUNCH
     for _ in range(rest // 2):
-        runs[2](*args)
+        runs[2](*args, workers)
     if rest % 2:
-        runs[1](*args)
+        runs[1](*args, workers)
     unpack(S, state.x, state.v, I)  # rest % 2 == substeps % 2: the parity of the substeps run
