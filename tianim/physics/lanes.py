@@ -54,7 +54,7 @@ layouts), one thread of this layout now runs about what one thread of numba's do
 particle-substep); what is left is the second thread (the serial path, below, uses one).
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
-the pool, and unpacks. Up to :data:`SERIAL_MAX_PARTICLES` (batch x band rows x L x nx) one thread runs every
+the pool, and unpacks. Up to :data:`SERIAL_MAX_PACKS` (batch x band rows x nx) one thread runs every
 substep of the call in one launch (path ``"serial"``, a runtime loop over the substeps); above it (and on a
 GPU), :data:`SUBSTEPS_PER_LAUNCH` substeps per launch, one parallel loop each (path ``"parallel"``). The
 solver layouts ``"lanes_serial"`` / ``"lanes_parallel"`` / ``"lanes_tickets"`` force a path
@@ -75,7 +75,7 @@ it once every row of the previous substep is done (a second counter on its own c
 512x512 on an AVX-512 host, 0.77x at 128x128 there). But the ticket workers spin: with two busy processes
 beside it one run fell to 0.15x (128x128) and 0.47x (256x256) the serial path, another to 0.8x and 1.0x,
 as a descheduled worker stalls the others for a time slice, so ``"auto"`` (training runs several
-processes per machine) takes the serial path up to :data:`SERIAL_MAX_PARTICLES` and the parallel path
+processes per machine) takes the serial path up to :data:`SERIAL_MAX_PACKS` and the parallel path
 above it; on a GPU always the parallel path.
 The stencil loop and the serial path's substep loop are runtime loops (the source buffer a runtime
 value: one substep body to compile) so that compiling stays short. The pool grows by doubling (one compile
@@ -110,12 +110,13 @@ AUTO_MAX_BYTES = 32
 LAYOUT_MAX_BYTES = 64
 #: Substeps per launch of the main kernel (even: the ping-pong ends in the first buffer).
 SUBSTEPS_PER_LAUNCH = 8  # 16 ran ~2% faster at 128x128 but compiled 17 s cold (0.9 s per unrolled substep)
-#: Largest batch x padded grid [particles] that "auto" runs on one thread, every substep in one launch: up
-#: to it a barrier per substep costs more than the second thread gives (2 vCPUs, AVX2, 8 lanes: one
-#: thread 1.8x the parallel path at 64x64, the parallel path 1.36x one thread at 128x128 (16,384), 1.4x
-#: for 4 copies of 128x128, 1.5x for 16 of 64x64; on an AVX-512 host, 16 lanes, 128x128 was a substep
-#: too short for two threads): 128x128 alone stays on one thread.
-SERIAL_MAX_PARTICLES = 1 << 14
+#: Most packs (batch x band rows x nx: L particles each) that "auto" runs on one thread, every substep in
+#: one launch: up to it a barrier per substep (about 0.14 ms on 2 vCPUs) costs more than the second thread
+#: gives. In packs, not particles, since a substep's time follows the packs (one vector op per pack): on a
+#: 2-vCPU AVX2 host (8 lanes) one thread ran 1.8x the parallel path at 64x64 (512 packs) and the parallel
+#: path 1.36x one thread at 128x128 (2,048 packs), 1.4x for 4 copies of 128x128, 1.5x for 16 of 64x64; on
+#: an AVX-512 host (16 lanes) 128x128 (1,024 packs, 0.1 ms a substep) was too short for two threads.
+SERIAL_MAX_PACKS = 1 << 10
 #: Offset [int32] of the ticket path's finished-rows counter from its tickets-taken counter: 64 bytes, one
 #: cache line each, so the workers polling one do not slow the one taking a ticket.
 TICKET_LINE = 16
@@ -471,7 +472,7 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     ``model.kernel_data(state.dtype)``. ``path``: ``"serial"`` (one thread, the whole call in one
     launch), ``"parallel"`` (parallel loops, :data:`SUBSTEPS_PER_LAUNCH` substeps per launch),
     ``"tickets"`` (every substep in one launch on all threads, rows taken from a counter; CPU only) or
-    ``"auto"`` (serial up to :data:`SERIAL_MAX_PARTICLES` batch x padded grid on a CPU, else parallel).
+    ``"auto"`` (serial up to :data:`SERIAL_MAX_PACKS` packs on a CPU, else parallel).
     ``lanes``: particles per
     vector (:func:`lanes_for`; "auto": from the host CPU). Every path and lane count is bit-identical."""
     if path == "tickets" and current_arch() not in CPU_ARCHES:
@@ -492,7 +493,7 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     args = (S, M, prm, off, data["coll"], pool.force, I, dt)
     if path == "auto":  # on a GPU always parallel: one GPU thread would crawl
         cpu = current_arch() in CPU_ARCHES
-        path = "serial" if cpu and state.batch * H * L * g.nx <= SERIAL_MAX_PARTICLES else "parallel"
+        path = "serial" if cpu and state.batch * H * g.nx <= SERIAL_MAX_PACKS else "parallel"
     if path == "serial":
         runs["serial"](*args, substeps)
         unpack(S, state.x, state.v, I)
