@@ -50,8 +50,10 @@ Where the time goes. The inner column loop is straight-line vector code: one vec
 component, one square root and one division per L lanes, no branch and no division of integers. Against the
 cloth bench's vectorising numba kernel (16 float32 lanes in zmm registers, one division per spring, ``s / |d|``,
 where tianim's arithmetic, ``1 / |d|`` then a product per component, is kept for bit-identity with the other
-layouts), one thread of this layout now runs about what one thread of numba's does (128x128: 5.6 ns per
-particle-substep); what is left is the second thread (the serial path, below, uses one).
+layouts), one thread of this layout ran about what one thread of numba's does on an AVX-512 host (128x128:
+5.6 ns per particle-substep); on a 2-vCPU AVX2 host (8 lanes) about 0.65x (33 against 21 ns per
+particle-substep at 128x128), and the gap grows with the grid (0.36-0.44x on two threads at 256x256 and
+512x512, where numba's row views stream and the packs' neighbour rows do not).
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
 the pool, and unpacks. Up to :data:`SERIAL_MAX_PACKS` (batch x band rows x nx) one thread runs every
@@ -120,13 +122,13 @@ SERIAL_MAX_PACKS = 1 << 10
 #: Offset [int32] of the ticket path's finished-rows counter from its tickets-taken counter: 64 bytes, one
 #: cache line each, so the workers polling one do not slow the one taking a ticket.
 TICKET_LINE = 16
-#: Loop indices per worker of the ticket path. Taichi 1.7.4's CPU code generation gives each task of a
+#: Loop indices per worker of the parallel and ticket paths. Taichi 1.7.4's CPU code generation gives each task of a
 #: parallel loop at least 512 indices (its adaptive block size, ``cpu_block_dim_adaptive``, which overrides
 #: ``ti.loop_config(block_dim=)``), so a loop of a few indices runs as one task on one thread: spread over
 #: ROW_TASK_ITEMS indices each (one of which works), the T workers become T tasks.
 ROW_TASK_ITEMS = 512
-#: CPU archs: where the ticket path can run (threads that each take one task and spin on shared counters)
-#: and where "auto" takes the serial path.
+#: CPU archs: where the ticket path can run (threads that each take one task and spin on shared counters),
+#: where "auto" may take the serial path and the parallel path has one worker per thread.
 CPU_ARCHES = ("x64", "arm64")
 #: Smallest pool, in packs (grown by doubling).
 MIN_CAPACITY = 1 << 12
@@ -472,12 +474,9 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     ``model.kernel_data(state.dtype)``. ``path``: ``"serial"`` (one thread, the whole call in one
     launch), ``"parallel"`` (parallel loops, :data:`SUBSTEPS_PER_LAUNCH` substeps per launch),
     ``"tickets"`` (every substep in one launch on all threads, rows taken from a counter; CPU only) or
-    ``"auto"`` (serial up to :data:`SERIAL_MAX_PACKS` packs on a CPU, else parallel).
-    ``lanes``: particles per
-    vector (:func:`lanes_for`; "auto": from the host CPU). Every path and lane count is bit-identical."""
-    if path == "tickets" and current_arch() not in CPU_ARCHES:
-        raise ValueError(f"layout='lanes_tickets' spins on counters shared by CPU threads; got arch "
-                         f"{current_arch()!r}; use layout='lanes' or 'lanes_parallel' there")
+    ``"auto"`` (serial up to :data:`SERIAL_MAX_PACKS` packs on a CPU, else parallel). ``lanes``:
+    particles per vector (:func:`lanes_for`; "auto": from the host CPU). Every path and lane count is
+    bit-identical."""
     g = model.grid
     real_name = state.dtype.name
     L = lanes_for(state.dtype, g.ny, lanes)
@@ -485,6 +484,10 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     pool = _pool(real_name, model.dim, L, state.batch * (H + 4) * g.nx)  # with the ghost rows
     pack, runs, unpack = lane_kernels(real_name, model.dim, L, len(model.colliders) > 0,
                                       model.has_spring_damping, model.medium_damping > 0)
+    cpu = current_arch() in CPU_ARCHES  # (after the kernels: Taichi is initialised)
+    if path == "tickets" and not cpu:
+        raise ValueError(f"layout='lanes_tickets' spins on counters shared by CPU threads; got arch "
+                         f"{current_arch()!r}; use layout='lanes' or 'lanes_parallel' there")
     S, M, prm, off = pool.state, pool.mass, pool.prm, pool.off
     _, I = pack_params(state.dtype, model.dim, nx=g.nx, ny=g.ny, band=H, rows=state.batch * H,
                        src=substeps % 2)  # src: the buffer the last substep writes
@@ -492,13 +495,11 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
     args = (S, M, prm, off, data["coll"], pool.force, I, dt)
     if path == "auto":  # on a GPU always parallel: one GPU thread would crawl
-        cpu = current_arch() in CPU_ARCHES
         path = "serial" if cpu and state.batch * H * g.nx <= SERIAL_MAX_PACKS else "parallel"
     if path == "serial":
         runs["serial"](*args, substeps)
         unpack(S, state.x, state.v, I)
         return
-    cpu = current_arch() in CPU_ARCHES
     workers = max(1, min(num_threads() or 1, state.batch * H)) if cpu else state.batch * H  # GPU: a row each
     if path == "tickets":
         runs["tickets"](*args, substeps, workers, pool.tickets)
