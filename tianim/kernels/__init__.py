@@ -5,7 +5,10 @@
 * :func:`kernel_types` - the Taichi types of a float type and dimension;
 * :mod:`tianim.kernels.colliders` - the collider types and the (C, 7) collider table kernels read;
 * :mod:`tianim.kernels.contact` - the contact response with those colliders, as ``ti.func`` factories;
-* :mod:`tianim.kernels.grid` - the neighbour grid's steps (cell ids, counting sort, queries) as ``ti.func``s.
+* :mod:`tianim.kernels.grid` - the neighbour grid's steps (cell ids, counting sort, queries) as ``ti.func``s;
+* :mod:`tianim.kernels.tasks` - one CPU task per item of a short parallel loop over heavy items (copies,
+  rows of packs): Taichi 1.7.4 gives a CPU task at least 512 indices;
+* :mod:`tianim.kernels.simd` - vector code generation around a kernel call.
 
 Taichi itself is imported only by :mod:`tianim._ti` (and initialised by :mod:`tianim.runtime`); importing
 this package or any of its modules loads no Taichi module and imports nothing above it (no physics,

@@ -34,6 +34,7 @@ import numpy as np
 
 from tianim.kernels.contact import contact_response
 from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.tasks import task_funcs
 from tianim.physics.model import GRID_STENCIL, TOPO_NX
 
 #: Phases of each integrator: (``pre`` run once per call, ``step`` per substep).
@@ -203,6 +204,7 @@ def substep_funcs(real_name, dim, grid, colliders, spring_damping, medium_dampin
 @cached_variants
 def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medium_damping):
     t = kernel_types(real_name, dim)
+    task_stride, item_of = task_funcs()
     ti, real, vec_arr, work_arr = t.ti, t.real, t.vec_arr, t.work_arr
     real_arr, int_arr, coll_arr, mask_arr = t.real_arr, t.int_arr, t.real2_arr, t.mask_arr
     pre_phases, step_phases = PHASES[method]
@@ -278,12 +280,15 @@ def _build(real_name, dim, method, layout, grid, colliders, spring_damping, medi
                     nx = T[TOPO_NX]
                 # One loop over copies (parallel, or serial for the "serial" layout);
                 # substeps and particles run serially inside it.
+                stride = task_stride(x.shape[0])  # one task per copy (tianim.kernels.tasks)
                 ti.loop_config(serialize=ti.static(layout == "serial"))
-                for b in range(x.shape[0]):
-                    for _s in range(nsub if ti.static(serial_substeps) else 1):
-                        for p in ti.static(phases):
-                            for i in range(n):
-                                phase(p, b, i, x, v, W, pinned, P, T, coll, dt, nx)
+                for w in range(x.shape[0] * stride):
+                    b = item_of(w, stride)
+                    if b >= 0:
+                        for _s in range(nsub if ti.static(serial_substeps) else 1):
+                            for p in ti.static(phases):
+                                for i in range(n):
+                                    phase(p, b, i, x, v, W, pinned, P, T, coll, dt, nx)
 
             return kernel
 

@@ -65,8 +65,8 @@ solver layouts ``"lanes_serial"`` / ``"lanes_parallel"`` / ``"lanes_tickets"`` f
 Threads, measured. Taichi 1.7.4's CPU code generation gives every task of a parallel loop at least 512
 indices (``cpu_block_dim_adaptive`` overrides ``ti.loop_config(block_dim=)``), so a loop over a cloth's 8 to
 64 pack rows was one task on one thread (the parallel path ran 0.75-0.99x the serial path before this was
-found). Both parallel paths therefore loop over T x :data:`ROW_TASK_ITEMS` indices, T = the threads (at most
-the rows), one of each ROW_TASK_ITEMS working: T tasks. The parallel path gives worker w the rows w,
+found). Both parallel paths therefore run T tasks, T = the threads (at most the rows), each one loop index
+of :mod:`tianim.kernels.tasks`. The parallel path gives worker w the rows w,
 w + T, ... and ends each substep in Taichi's barrier between loops (its workers sleep there, so it degrades
 gently when other processes share the cores). The ticket path (``"tickets"``, opt-in) puts every substep
 of the call in one launch: a worker takes the next (substep, row) ticket from an atomic counter and starts
@@ -91,6 +91,7 @@ from tianim import _ti
 from tianim.kernels.contact import lane_contact_response
 from tianim.kernels import cached_variants, kernel_types
 from tianim.kernels.simd import vector_codegen
+from tianim.kernels.tasks import task_funcs
 from tianim.physics.model import GRID_STENCIL
 from tianim.runtime import current_arch, num_threads
 from tianim.physics.packed import I_BAND, I_NX, I_NY, I_ROWS, I_SRC, pack_params
@@ -122,11 +123,6 @@ SERIAL_MAX_PACKS = 1 << 10
 #: Offset [int32] of the ticket path's finished-rows counter from its tickets-taken counter: 64 bytes, one
 #: cache line each, so the workers polling one do not slow the one taking a ticket.
 TICKET_LINE = 16
-#: Loop indices per worker of the parallel and ticket paths. Taichi 1.7.4's CPU code generation gives each task of a
-#: parallel loop at least 512 indices (its adaptive block size, ``cpu_block_dim_adaptive``, which overrides
-#: ``ti.loop_config(block_dim=)``), so a loop of a few indices runs as one task on one thread: spread over
-#: ROW_TASK_ITEMS indices each (one of which works), the T workers become T tasks.
-ROW_TASK_ITEMS = 512
 #: CPU archs: where the ticket path can run (threads that each take one task and spin on shared counters),
 #: where "auto" may take the serial path and the parallel path has one worker per thread.
 CPU_ARCHES = ("x64", "arm64")
@@ -239,6 +235,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
     t = kernel_types(real_name, dim)
     ti, real = t.ti, t.real
     lane_vec = ti.types.vector(L, real)
+    task_stride, item_of = task_funcs()
     lanes_arr = ti.types.ndarray(dtype=lane_vec, ndim=2)  # (rows, packs) of L-lane vectors
     lane_respond = lane_contact_response(real_name, dim, L)
     h = dim + 1  # prm: gravity[dim], rho, k[12], rest[12], damp[12] (the P layout of kernels.py)
@@ -412,10 +409,11 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
         def run(S: lanes_arr, M: lanes_arr, prm: t.real_arr, off: t.int_arr, coll: t.real2_arr,
                 F: lanes_arr, I: t.int_arr, dt: real, workers: ti.i32):
             rows, nx, ny, H = I[I_ROWS], I[I_NX], I[I_NY], I[I_BAND]
+            stride = task_stride(workers)
             for s in ti.static(range(nsub)):  # each top-level loop ends in a barrier
-                for w in range(workers * ROW_TASK_ITEMS):  # one task per worker (see ROW_TASK_ITEMS)
-                    if w % ROW_TASK_ITEMS == 0:
-                        q = w // ROW_TASK_ITEMS
+                for w in range(workers * stride):  # one task per worker (tianim.kernels.tasks)
+                    q = item_of(w, stride)
+                    if q >= 0:
                         while q < rows:  # rows w, w + workers, ...
                             substep_row(S, M, prm, off, coll, F, s % 2, q, nx, ny, H, dt)
                             q += workers
@@ -440,7 +438,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
     @ti.kernel
     def run_tickets(S: lanes_arr, M: lanes_arr, prm: t.real_arr, off: t.int_arr, coll: t.real2_arr,
                     F: lanes_arr, I: t.int_arr, dt: real, nsub: ti.i32, workers: ti.i32, C: t.int_arr):
-        # Every substep of the call in one launch on `workers` tasks (see ROW_TASK_ITEMS). Ticket g
+        # Every substep of the call in one launch on `workers` tasks. Ticket g
         # is pack row g % rows of substep g // rows; the workers take tickets in order from C[0] and start a
         # ticket's row once every row of the previous substep is done (C[TICKET_LINE] counts finished rows).
         # No worker ever waits on a ticket not yet taken, so this is deadlock-free however the tasks are
@@ -449,8 +447,9 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
         C[0] = 0
         C[TICKET_LINE] = 0
         total = nsub * rows
-        for w in range(workers * ROW_TASK_ITEMS):
-            if w % ROW_TASK_ITEMS == 0:
+        stride = task_stride(workers)
+        for w in range(workers * stride):  # one task per worker (tianim.kernels.tasks)
+            if item_of(w, stride) >= 0:
                 g = ti.atomic_add(C[0], 1)
                 while g < total:
                     s = g // rows

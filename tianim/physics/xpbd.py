@@ -88,6 +88,7 @@ from tianim.physics.packed import I_ITERS, I_NSPRINGS, I_NX, P_G, P_H, P_RHO, pa
 from tianim.physics.xpbd_lanes import lane_funcs
 from tianim.physics import xpbd_lanes
 from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.tasks import task_funcs
 
 #: On a GPU, grids with at least this many particles (per copy) run the per-particle parallel layout.
 #: On the CPU the per-copy layout is used: measured on 2 cores, a 64x64 stiff cloth at 20 substeps took
@@ -122,6 +123,7 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
     respond = contact_response(real_name, dim)
     geometry, extent, along = colour_funcs()
     scalars = scalar_funcs(real_name, dim)
+    task_stride, item_of = task_funcs()
 
     @ti.func
     def project(b, i, j, s, li, x: T, dx: T, rem: T, lam: T, pinned: T, inv_mass: T, k: T, rest: T, damp: T, h):
@@ -279,11 +281,14 @@ def _kernels(real_name, dim, grid, spring_damping, medium_damping, colliders, co
                  ends: int_arr, k: real_arr, rest: real_arr, damp: real_arr, coll: real2_arr, P: real_arr,
                  I: int_arr, nsub: ti.i32):
         g, rho, h, g_norm, nx, n_springs, iters = scalars(P, I)
+        stride = task_stride(x.shape[0])
         ti.loop_config(serialize=serial)  # one copy: no thread wake-up
-        for b in range(x.shape[0]):
-            for _sub in range(nsub):
-                copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h, nx,
-                             n_springs, iters, g_norm)
+        for w in range(x.shape[0] * stride):  # one task per copy (tianim.kernels.tasks)
+            b = item_of(w, stride)
+            if b >= 0:
+                for _sub in range(nsub):
+                    copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h, nx,
+                                 n_springs, iters, g_norm)
 
     kernels = {"per_copy": per_copy}
     lane = lane_funcs(real_name, lanes, spring_damping, medium_damping, colliders) if lanes else None

@@ -19,6 +19,7 @@ from tianim.physics.selfcollision import contact_update_funcs, contacts_for
 from tianim.physics import xpbd_lanes
 from tianim.physics.xpbd import _kernels, scalar_funcs
 from tianim.kernels import kernel_types
+from tianim.kernels.tasks import task_funcs
 
 
 def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, serial, lane=None, L=0):
@@ -54,6 +55,7 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
     respond = contact_response(real_name, dim)
     rebuild = scm.rebuild_funcs(real_name, dim, grid)
     scalars = scalar_funcs(real_name, dim)
+    task_stride, item_of = task_funcs()
     pack_copy, lane_substep, unpack_copy = lane if lane is not None else (None, None, None)
 
     @ti.func
@@ -75,51 +77,54 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
         H = I[I_NY] // ti.static(max(L, 1))  # band rows of the lanes layout
         inv_h = 1 / h
         n = x.shape[1]
+        stride = task_stride(x.shape[0])
         ti.loop_config(serialize=serial)  # one copy: no thread wake-up
-        for b in range(x.shape[0]):
-            nsub = cs[b, C_LIM]
-            done = nsub  # substeps run; below nsub once the copy stopped
-            for sub in range(nsub):
-                if done == nsub:
-                    if ti.static(not L):
-                        copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h,
-                                     nx, n_springs, iters, g_norm)
-                    else:
-                        pack_copy(S, b, x, v, pinned, inv_mass, nx, H)
-                        lane_substep(S, b, k, rest, damp, coll, g, rho, h, nx, H, iters, g_norm)
-                        unpack_copy(S, b, x, v, nx, H)
-                    hi = ti.Vector([-1e30] * dim, dt=real)
-                    lo = ti.Vector([1e30] * dim, dt=real)
-                    for i in range(n):
-                        d = x[b, i] - xb[b, i]
-                        hi = ti.max(hi, d)
-                        lo = ti.min(lo, d)
-                    w = hi - lo
-                    valid = 1
-                    if not w.dot(w) <= margin * margin:  # stale lists: rebuild them here
-                        valid = rebuild(b, x, xb, nbr, count, cell, start, order, xs, G, dims, excl_off, excl_idx,
-                                        k_excl, nx)
-                        cs[b, C_REBUILT] += valid
-                    if valid == 1:
-                        for it in range(sc_iters):
-                            for i in range(n):
-                                if it % 2 == 0:
-                                    contact_sweep(b, i, x, W, v, pinned, inv_mass, nbr, count, excl_off, excl_idx,
-                                                  k_excl, nx, thick, inv_h, vcap)
-                                else:
-                                    contact_sweep(b, i, W, x, v, pinned, inv_mass, nbr, count, excl_off, excl_idx,
-                                                  k_excl, nx, thick, inv_h, vcap)
-                        if ti.static(sc_iters % 2 == 1):
-                            for i in range(n):
-                                x[b, i] = W[b, i]
-                        if ti.static(colliders):
-                            for i in range(n):
-                                if pinned[b, i] == 0:
-                                    x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, g_norm_c, h)
-                    else:  # lists not rebuilt here: stop after this substep's XPBD part (the caller rebuilds)
-                        cs[b, C_RUN] = 0
-                        done = sub + 1
-            cs[b, C_LIM] = done
+        for task in range(x.shape[0] * stride):  # one task per copy (tianim.kernels.tasks)
+            b = item_of(task, stride)
+            if b >= 0:
+                nsub = cs[b, C_LIM]
+                done = nsub  # substeps run; below nsub once the copy stopped
+                for sub in range(nsub):
+                    if done == nsub:
+                        if ti.static(not L):
+                            copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h,
+                                         nx, n_springs, iters, g_norm)
+                        else:
+                            pack_copy(S, b, x, v, pinned, inv_mass, nx, H)
+                            lane_substep(S, b, k, rest, damp, coll, g, rho, h, nx, H, iters, g_norm)
+                            unpack_copy(S, b, x, v, nx, H)
+                        hi = ti.Vector([-1e30] * dim, dt=real)
+                        lo = ti.Vector([1e30] * dim, dt=real)
+                        for i in range(n):
+                            d = x[b, i] - xb[b, i]
+                            hi = ti.max(hi, d)
+                            lo = ti.min(lo, d)
+                        w = hi - lo
+                        valid = 1
+                        if not w.dot(w) <= margin * margin:  # stale lists: rebuild them here
+                            valid = rebuild(b, x, xb, nbr, count, cell, start, order, xs, G, dims, excl_off, excl_idx,
+                                            k_excl, nx)
+                            cs[b, C_REBUILT] += valid
+                        if valid == 1:
+                            for it in range(sc_iters):
+                                for i in range(n):
+                                    if it % 2 == 0:
+                                        contact_sweep(b, i, x, W, v, pinned, inv_mass, nbr, count, excl_off, excl_idx,
+                                                      k_excl, nx, thick, inv_h, vcap)
+                                    else:
+                                        contact_sweep(b, i, W, x, v, pinned, inv_mass, nbr, count, excl_off, excl_idx,
+                                                      k_excl, nx, thick, inv_h, vcap)
+                            if ti.static(sc_iters % 2 == 1):
+                                for i in range(n):
+                                    x[b, i] = W[b, i]
+                            if ti.static(colliders):
+                                for i in range(n):
+                                    if pinned[b, i] == 0:
+                                        x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, g_norm_c, h)
+                        else:  # lists not rebuilt here: stop after this substep's XPBD part (the caller rebuilds)
+                            cs[b, C_RUN] = 0
+                            done = sub + 1
+                cs[b, C_LIM] = done
 
     return per_copy_contact
 

@@ -13,6 +13,7 @@ from tianim.physics import xpbd_lanes
 from tianim.physics.packed import I_BAND, P_MOVE
 from tianim.physics.xpbd import _kernels, scalar_funcs, xpbd_params
 from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.tasks import task_funcs
 
 
 #: Offsets of the pickers' float64 parameters (``pick``, one row for all copies): the pick radius [m]
@@ -108,6 +109,7 @@ def lanes_frames_kernel(real_name, spring_damping, medium_damping, colliders, L)
     real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
     T = ti.template()
     picker_move, record = picker_funcs(real_name, dim)
+    task_stride, item_of = task_funcs()
     scalars = scalar_funcs(real_name, dim)
     pack_copy, lane_substep, unpack_copy = xpbd_lanes.lane_funcs(real_name, L, spring_damping, medium_damping,
                                                                  colliders)
@@ -119,14 +121,17 @@ def lanes_frames_kernel(real_name, spring_damping, medium_damping, colliders, L)
                      frames: ti.i32, xa: work_arr, va: work_arr, pa: u8_3, xp: work_arr, vp: work_arr):
         g, rho, h, g_norm, nx, _n_springs, iters = scalars(P, I)
         H, reach, move = I[I_BAND], pick[PICK_REACH], P[P_MOVE]
-        for b in range(x.shape[0]):
-            for f in range(frames):
-                picker_move(b, f, x, v, pinned, act, pos, new, held, low, high, reach, move, xa, va, pa)
-                pack_copy(S, b, x, v, pinned, inv_mass, nx, H)
-                for _sub in range(nsub):
-                    lane_substep(S, b, k, rest, damp, coll, g, rho, h, nx, H, iters, g_norm)
-                unpack_copy(S, b, x, v, nx, H)
-                record(b, f, x, v, xp, vp)
+        stride = task_stride(x.shape[0])
+        for w in range(x.shape[0] * stride):  # one task per copy (tianim.kernels.tasks)
+            b = item_of(w, stride)
+            if b >= 0:
+                for f in range(frames):
+                    picker_move(b, f, x, v, pinned, act, pos, new, held, low, high, reach, move, xa, va, pa)
+                    pack_copy(S, b, x, v, pinned, inv_mass, nx, H)
+                    for _sub in range(nsub):
+                        lane_substep(S, b, k, rest, damp, coll, g, rho, h, nx, H, iters, g_norm)
+                    unpack_copy(S, b, x, v, nx, H)
+                    record(b, f, x, v, xp, vp)
 
     return frames_lanes
 
@@ -138,6 +143,7 @@ def _picker_kernel(real_name, dim, copy_substep, serial):
     ti, vec_arr, work_arr = t.ti, t.vec_arr, t.work_arr
     real_arr, int_arr, mask_arr, real2_arr = t.real_arr, t.int_arr, t.mask_arr, t.real2_arr
     picker_move, record = picker_funcs(real_name, dim)
+    task_stride, item_of = task_funcs()
     scalars = scalar_funcs(real_name, dim)
 
     @ti.kernel
@@ -148,14 +154,17 @@ def _picker_kernel(real_name, dim, copy_substep, serial):
                       xa: work_arr, va: work_arr, pa: u8_3, xp: work_arr, vp: work_arr):
         g, rho, h, g_norm, nx, n_springs, iters = scalars(P, I)
         reach, move = pick[PICK_REACH], P[P_MOVE]
+        stride = task_stride(x.shape[0])
         ti.loop_config(serialize=serial)  # one copy: no thread wake-up
-        for b in range(x.shape[0]):
-            for f in range(frames):
-                picker_move(b, f, x, v, pinned, act, pos, new, held, low, high, reach, move, xa, va, pa)
-                for _sub in range(nsub):
-                    copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h, nx,
-                                 n_springs, iters, g_norm)
-                record(b, f, x, v, xp, vp)
+        for w in range(x.shape[0] * stride):  # one task per copy (tianim.kernels.tasks)
+            b = item_of(w, stride)
+            if b >= 0:
+                for f in range(frames):
+                    picker_move(b, f, x, v, pinned, act, pos, new, held, low, high, reach, move, xa, va, pa)
+                    for _sub in range(nsub):
+                        copy_substep(b, x, v, dx, rem, lam, pinned, inv_mass, ends, k, rest, damp, coll, g, rho, h,
+                                     nx, n_springs, iters, g_norm)
+                    record(b, f, x, v, xp, vp)
 
     return picker_frames
 

@@ -14,6 +14,7 @@ corners clamped the same way) contain every point within ``r`` of ``p``, inside 
 
 from tianim.kernels import cached_variants, kernel_types
 from tianim.kernels.grid import BOX_PAD, grid_funcs
+from tianim.kernels.tasks import task_funcs
 
 #: Named offsets past the grid's own entries (D + 1 in ``geom``, D in ``dims``) of the queries' packed grid
 #: arguments (:func:`tianim.kernels.grid.pack_grid`, written by ``NeighbourGrid``): the query radius r [m]
@@ -28,6 +29,7 @@ def grid_kernels(real_name: str, dim: int):
     t = kernel_types(real_name, dim)
     ti, real = t.ti, t.real
     g = grid_funcs(real_name, dim)
+    task_stride, item_of = task_funcs()
     i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
     i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
     f64_1 = ti.types.ndarray(dtype=ti.f64, ndim=1)
@@ -55,8 +57,11 @@ def grid_kernels(real_name: str, dim: int):
         start[b, c] .. start[b, c + 1] is the span of cell c in order[b] (particle indices) and
         xs[b] (their positions, sorted). O(N + M) serial work per copy.
         """
-        for b in range(x.shape[0]):
-            g.sort_copy(b, x, cell, start, order, xs)
+        stride = task_stride(x.shape[0])
+        for w in range(x.shape[0] * stride):  # one task per copy (tianim.kernels.tasks)
+            b = item_of(w, stride)
+            if b >= 0:
+                g.sort_copy(b, x, cell, start, order, xs)
 
     @ti.kernel
     def query(q: t.vec_arr, xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1,
