@@ -25,6 +25,7 @@ avoid (weight, distance), wander (weight, jitter).
 from tianim.crowds._shapes import wall_parts
 from tianim.kernels.contact import contact_parts
 from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.tasks import task_funcs
 from tianim.kernels.grid import BOX_PAD, grid_funcs
 
 #: Names of the entries of the boids parameter vector, in order.
@@ -57,6 +58,7 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True,
     kept as the reference that tests/test_crowds.py checks it against bit for bit. Both add the same terms
     in the same order (a failing candidate adds +0.0, which changes no sum)."""
     t = kernel_types(real_name, dim)
+    task_stride, item_of = task_funcs()
     ti, real = t.ti, t.real
     surface, _ = contact_parts(real_name, dim)
     wall_surface = wall_parts(real_name, dim)
@@ -398,8 +400,11 @@ def boids_kernels(real_name: str, dim: int, steps: int = 1, masked: bool = True,
         for st in ti.static(range(steps)):
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 cell[b, i] = grid.cell_of(x[b, i], geom, dims)
-            for b in range(x.shape[0]):
-                grid.sort_copy(b, x, cell, start, order, xs)
+            stride = task_stride(x.shape[0])
+            for w in range(x.shape[0] * stride):  # one task per copy (tianim.kernels.tasks)
+                b = item_of(w, stride)
+                if b >= 0:
+                    grid.sort_copy(b, x, cell, start, order, xs)
             for b, k in ti.ndrange(x.shape[0], x.shape[1]):
                 vs[b, k] = v[b, order[b, k]]
             if ti.static(lanes > 1):

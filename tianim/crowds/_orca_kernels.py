@@ -14,6 +14,7 @@ only its own rows and its own new velocity: bit-identical for any thread count. 
 """
 
 from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.tasks import task_funcs
 from tianim.kernels.grid import grid_funcs
 
 #: RVO2's RVO_EPSILON: below it two ORCA lines count as parallel.
@@ -225,6 +226,7 @@ def orca_kernels(real_name: str, steps: int = 1):
     """``orca_steps``, advancing ``steps`` steps per launch (unrolled), for ``real_name`` positions (2D)."""
     agent_step = _agent_step(real_name)
     t = kernel_types(real_name, 2)
+    task_stride, item_of = task_funcs()
     ti, real = t.ti, t.real
     vec2 = ti.types.vector(2, real)
     grid = grid_funcs(real_name, 2)
@@ -262,8 +264,11 @@ def orca_kernels(real_name: str, steps: int = 1):
         for s in ti.static(range(steps)):  # unrolled: each step's loops are parallel top-level loops
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 cell[b, i] = grid.cell_of(x[b, i], geom, dims)
-            for b in range(x.shape[0]):
-                grid.sort_copy(b, x, cell, start, order, xs)
+            stride = task_stride(x.shape[0])
+            for w in range(x.shape[0] * stride):  # one task per copy (tianim.kernels.tasks)
+                b = item_of(w, stride)
+                if b >= 0:
+                    grid.sort_copy(b, x, cell, start, order, xs)
             for b, i in ti.ndrange(x.shape[0], x.shape[1]):
                 t_end = geom[T0 + b]
                 for _ in ti.static(range(s + 1)):  # t0 + dt + dt ..., as step-by-step calls add it up
@@ -290,6 +295,7 @@ def orca_copy_kernels(real_name: str, serial: bool = False):
     a 5-agent call); for one copy, where there is nothing to run in parallel. Same bits (a copy's
     arithmetic does not depend on the thread that runs it)."""
     t = kernel_types(real_name, 2)
+    task_stride, item_of = task_funcs()
     ti, real = t.ti, t.real
     grid = grid_funcs(real_name, 2)
     agent_step = _agent_step(real_name)
@@ -306,20 +312,25 @@ def orca_copy_kernels(real_name: str, serial: bool = False):
                         nd: real3d, ni: i32_3, out: real3d, arrival: f64_2, closest: real2d, geom: f64_1,
                         dims: t.int_arr, cell: i32_2, start: i32_2, order: i32_2, xs: t.vec_arr, steps: ti.i32):
         """``steps`` steps as ``orca_steps`` (same arguments), one thread per copy."""
+        stride = 1  # the serial variant: one index per copy, in the launching thread
+        if ti.static(not serial):
+            stride = task_stride(x.shape[0])
         if ti.static(serial):
             ti.loop_config(serialize=True)
-        for b in range(x.shape[0]):
-            t_end = geom[T0 + b]
-            for s in range(steps):
-                t_end += ti.cast(prm[2], ti.f64)
-                for i in range(x.shape[1]):
-                    cell[b, i] = grid.cell_of(x[b, i], geom, dims)
-                grid.sort_copy(b, x, cell, start, order, xs)
-                for i in range(x.shape[1]):
-                    agent_step(x, v, hd, target, prm, work, nd, ni, out, arrival, closest, geom, dims, start, order,
-                               xs, geom[REACH], t_end, dims[TICK0 + b] + s, b, i)
-                for i in range(x.shape[1]):
-                    x[b, i] = ti.Vector([out[b, i, 0], out[b, i, 1]])
-                    v[b, i] = ti.Vector([out[b, i, 2], out[b, i, 3]])
+        for w in range(x.shape[0] * stride):  # one task per copy (tianim.kernels.tasks)
+            b = item_of(w, stride)
+            if b >= 0:
+                t_end = geom[T0 + b]
+                for s in range(steps):
+                    t_end += ti.cast(prm[2], ti.f64)
+                    for i in range(x.shape[1]):
+                        cell[b, i] = grid.cell_of(x[b, i], geom, dims)
+                    grid.sort_copy(b, x, cell, start, order, xs)
+                    for i in range(x.shape[1]):
+                        agent_step(x, v, hd, target, prm, work, nd, ni, out, arrival, closest, geom, dims, start, order,
+                                   xs, geom[REACH], t_end, dims[TICK0 + b] + s, b, i)
+                    for i in range(x.shape[1]):
+                        x[b, i] = ti.Vector([out[b, i, 0], out[b, i, 1]])
+                        v[b, i] = ti.Vector([out[b, i, 2], out[b, i, 3]])
 
     return orca_copy_steps

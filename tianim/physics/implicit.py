@@ -42,6 +42,7 @@ import numpy as np
 from tianim.kernels.contact import contact_response
 from tianim.physics.model import GRID_STENCIL
 from tianim.kernels import cached_variants, kernel_types
+from tianim.kernels.tasks import task_funcs
 
 #: Work vectors of the solve, as the leading index of its work array W (K, B, N, D): the Newton iterate
 #: v+, the end-of-step positions x + h v+, the CG residual, direction, update (accumulated dv) and
@@ -67,6 +68,7 @@ def _kernel(real_name, dim, grid, spring_damping, medium_damping, colliders):
     ti, real, vec_arr, mat_arr, work_arr = t.ti, t.real, t.vec_arr, t.mat_arr, t.work_arr
     real_arr, int_arr, mask_arr = t.real_arr, t.int_arr, t.mask_arr
     stat_arr = ti.types.ndarray(dtype=ti.i32, ndim=2)
+    task_stride, item_of = task_funcs()
     n_stencil = len(GRID_STENCIL)
     eps = float(np.finfo(np.float64 if real_name == "float64" else np.float32).eps)
     T = ti.template()
@@ -195,76 +197,79 @@ def _kernel(real_name, dim, grid, spring_damping, medium_damping, colliders):
         g_norm = g.norm()
         h, newton_tol, cg_tol = C[_H], C[_NEWTON_TOL], C[_CG_TOL]
         nx, nsub, max_newton, max_cg = I[_NX], I[_NSUB], I[_MAX_NEWTON], I[_MAX_CG]
-        for b in range(x.shape[0]):
-            for _sub in range(nsub):
-                for i in range(n):
-                    W[_VN, b, i] = v[b, i]
-                g0 = ti.cast(-1, real)
-                for it in range(max_newton):
-                    # Residual at the current guess (positions at the end of the step).
+        stride = task_stride(x.shape[0])
+        for w in range(x.shape[0] * stride):  # one task per copy (tianim.kernels.tasks)
+            b = item_of(w, stride)
+            if b >= 0:
+                for _sub in range(nsub):
                     for i in range(n):
-                        W[_XS, b, i] = x[b, i] + h * W[_VN, b, i]
-                    gg = ti.cast(0, real)
-                    floor = ti.cast(0, real)
-                    for i in range(n):
-                        ri, size = residual(b, i, x, v, W, pinned, P, topo, g, rho, h, nx)
-                        W[_R, b, i] = -ri
-                        gg += ri.dot(ri)
-                        floor += (eps * size) ** 2
-                    if g0 < 0:
-                        g0 = gg
-                    # Converged, or down to the rounding floor of the float type (at least one
-                    # Newton step is always taken: B&W's linearly implicit step).
-                    if gg == 0 or (it > 0 and gg <= ti.max(newton_tol * newton_tol * g0, floor)):
-                        break
-                    stats[b, 0] += 1
-                    # Block-Jacobi preconditioned CG on J dv = -g (r holds -g; dv accumulates in z's partner p).
-                    rz = ti.cast(0, real)
-                    for i in range(n):
-                        pre[b, i] = diagonal_block(b, i, W, P, topo, rho, h, nx).inverse()
-                        zi = ti.Vector.zero(real, dim)
-                        if pinned[b, i] == 0:
-                            zi = pre[b, i] @ W[_R, b, i]
-                        W[_Z, b, i] = zi
-                        W[_P, b, i] = zi
-                        rz += W[_R, b, i].dot(zi)
-                        W[_AP, b, i] = ti.Vector.zero(real, dim)  # ap doubles as the accumulated update dv
-                    stop = cg_tol * cg_tol * gg
-                    for _c in range(max_cg):
-                        pap = ti.cast(0, real)
+                        W[_VN, b, i] = v[b, i]
+                    g0 = ti.cast(-1, real)
+                    for it in range(max_newton):
+                        # Residual at the current guess (positions at the end of the step).
                         for i in range(n):
-                            W[_Z, b, i] = jacobian_times(b, i, W, pinned, P, topo, rho, h, nx)
-                            pap += W[_P, b, i].dot(W[_Z, b, i])
-                        stats[b, 1] += 1
-                        if pap <= 0:
+                            W[_XS, b, i] = x[b, i] + h * W[_VN, b, i]
+                        gg = ti.cast(0, real)
+                        floor = ti.cast(0, real)
+                        for i in range(n):
+                            ri, size = residual(b, i, x, v, W, pinned, P, topo, g, rho, h, nx)
+                            W[_R, b, i] = -ri
+                            gg += ri.dot(ri)
+                            floor += (eps * size) ** 2
+                        if g0 < 0:
+                            g0 = gg
+                        # Converged, or down to the rounding floor of the float type (at least one
+                        # Newton step is always taken: B&W's linearly implicit step).
+                        if gg == 0 or (it > 0 and gg <= ti.max(newton_tol * newton_tol * g0, floor)):
                             break
-                        alpha = rz / pap
-                        rr = ti.cast(0, real)
+                        stats[b, 0] += 1
+                        # Block-Jacobi preconditioned CG on J dv = -g (r holds -g; dv accumulates in z's partner p).
+                        rz = ti.cast(0, real)
                         for i in range(n):
-                            W[_AP, b, i] += alpha * W[_P, b, i]
-                            W[_R, b, i] -= alpha * W[_Z, b, i]
-                            rr += W[_R, b, i].dot(W[_R, b, i])
-                        if rr <= stop:
-                            break
-                        rz_new = ti.cast(0, real)
-                        for i in range(n):
+                            pre[b, i] = diagonal_block(b, i, W, P, topo, rho, h, nx).inverse()
                             zi = ti.Vector.zero(real, dim)
                             if pinned[b, i] == 0:
                                 zi = pre[b, i] @ W[_R, b, i]
                             W[_Z, b, i] = zi
-                            rz_new += W[_R, b, i].dot(zi)
-                        beta = rz_new / rz
-                        rz = rz_new
+                            W[_P, b, i] = zi
+                            rz += W[_R, b, i].dot(zi)
+                            W[_AP, b, i] = ti.Vector.zero(real, dim)  # ap doubles as the accumulated update dv
+                        stop = cg_tol * cg_tol * gg
+                        for _c in range(max_cg):
+                            pap = ti.cast(0, real)
+                            for i in range(n):
+                                W[_Z, b, i] = jacobian_times(b, i, W, pinned, P, topo, rho, h, nx)
+                                pap += W[_P, b, i].dot(W[_Z, b, i])
+                            stats[b, 1] += 1
+                            if pap <= 0:
+                                break
+                            alpha = rz / pap
+                            rr = ti.cast(0, real)
+                            for i in range(n):
+                                W[_AP, b, i] += alpha * W[_P, b, i]
+                                W[_R, b, i] -= alpha * W[_Z, b, i]
+                                rr += W[_R, b, i].dot(W[_R, b, i])
+                            if rr <= stop:
+                                break
+                            rz_new = ti.cast(0, real)
+                            for i in range(n):
+                                zi = ti.Vector.zero(real, dim)
+                                if pinned[b, i] == 0:
+                                    zi = pre[b, i] @ W[_R, b, i]
+                                W[_Z, b, i] = zi
+                                rz_new += W[_R, b, i].dot(zi)
+                            beta = rz_new / rz
+                            rz = rz_new
+                            for i in range(n):
+                                W[_P, b, i] = W[_Z, b, i] + beta * W[_P, b, i]
                         for i in range(n):
-                            W[_P, b, i] = W[_Z, b, i] + beta * W[_P, b, i]
+                            W[_VN, b, i] += W[_AP, b, i]
                     for i in range(n):
-                        W[_VN, b, i] += W[_AP, b, i]
-                for i in range(n):
-                    v[b, i] = W[_VN, b, i]
-                    x[b, i] += h * W[_VN, b, i]
-                    if ti.static(colliders):
-                        if pinned[b, i] == 0:
-                            x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, g_norm, h)
+                        v[b, i] = W[_VN, b, i]
+                        x[b, i] += h * W[_VN, b, i]
+                        if ti.static(colliders):
+                            if pinned[b, i] == 0:
+                                x[b, i], v[b, i] = respond(x[b, i], v[b, i], coll, g_norm, h)
 
     return solve
 
