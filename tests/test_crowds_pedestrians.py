@@ -185,10 +185,12 @@ def test_orca_copy_kernel_equals_agent_kernel_and_any_chunking_bit_for_bit():
         assert all(np.array_equal(p, q, equal_nan=True) for p, q in zip(ref, got)), (copy_kernel, calls)
 
 
-def _one_copy_run(calls, solver=None, model_kw=None):
+def _one_copy_run(calls, solver=None, model_kw=None, batch=1):
     a, g = circle_scenario(7, 2.0)
     g[:, ::3] = 0.6 * a.x[:, ::3]  # some arrive within the run: arrival times are compared too
     m = ORCA(goals=g, radius=0.2, pref_speed=1.0, arrival_radius=0.3, **(model_kw or {}))
+    if batch > 1:  # copies started apart by a few cm
+        a = Agents(a.x + np.random.default_rng(3).normal(0.0, 0.03, (batch,) + a.x.shape[1:]))
     st, s = m.state(a), solver or CrowdSolver()
     for dt, substeps in calls:
         s.step(m, st, dt, substeps)
@@ -199,14 +201,18 @@ _CALLS = [(0.25, 1)] * 5 + [(0.1, 3), (0.25, 1)]
 _OUT = ("x", "v", "heading", "t", "ticks", "arrival_time", "closest")
 
 
-def test_orca_one_copy_serial_kernel_equals_the_parallel_copy_kernel_bit_for_bit():
-    """One copy steps in the serial variant of the copy kernel (threads="auto": no thread-pool dispatch):
-    the same bits as the parallel variant (threads="parallel"), with dt and substeps changing between calls."""
+@pytest.mark.parametrize("batch", [1, 5])
+def test_orca_serial_copy_kernel_equals_the_parallel_copy_kernel_bit_for_bit(batch):
+    """One copy, or a small batch (under SERIAL_MAX_AGENT_STEPS), steps in the serial variant of the copy
+    kernel (threads="auto": no thread-pool dispatch): the same bits as the parallel variant
+    (threads="parallel", copies spread over the threads), with dt and substeps changing between calls."""
     from tianim.crowds import _orca_kernels
+    from tianim.crowds.orca import SERIAL_MAX_AGENT_STEPS
 
-    fast = _one_copy_run(_CALLS, model_kw={"path": "copy"})
-    parallel = _one_copy_run(_CALLS, model_kw={"path": "copy", "threads": "parallel"})
-    serial = _one_copy_run(_CALLS, model_kw={"path": "copy", "threads": "serial"})
+    assert batch * 7 * 3 < SERIAL_MAX_AGENT_STEPS  # 'auto' takes the serial variant for every call here
+    fast = _one_copy_run(_CALLS, model_kw={"path": "copy"}, batch=batch)
+    parallel = _one_copy_run(_CALLS, model_kw={"path": "copy", "threads": "parallel"}, batch=batch)
+    serial = _one_copy_run(_CALLS, model_kw={"path": "copy", "threads": "serial"}, batch=batch)
     name = fast.x.dtype.name  # two distinct compiled variants were compared
     assert _orca_kernels.orca_copy_kernels(name, True) is not _orca_kernels.orca_copy_kernels(name, False)
     for name in _OUT:

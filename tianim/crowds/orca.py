@@ -47,6 +47,12 @@ MAX_STEPS_PER_LAUNCH = 4
 #: call in one launch, each copy's agents serial in one thread (launch and thread synchronisation cost
 #: more than such agents do). Both kernels give bit-identical results.
 COPY_KERNEL_MAX_AGENTS = 1024
+#: The copy kernel's ``threads="auto"`` runs its loop over copies serially (in the launching thread, no
+#: thread-pool dispatch) for one copy or below this many agent-steps a call (copies x agents x steps):
+#: waking the second thread costs more than it saves there. Measured on 2 vCPUs, ms a call serial /
+#: parallel: 16 copies x 5 agents x 1 step (CrowdNav's batch) 0.33 / 0.44, 64 x 10 x 1 0.57 / 0.80;
+#: 16 x 50 x 1 1.28 / 0.92, 64 x 10 x 16 4.05 / 2.95, 64 x 50 x 1 5.0 / 3.4.
+SERIAL_MAX_AGENT_STEPS = 1024
 
 
 class ORCA(PedestrianModel):
@@ -71,7 +77,8 @@ class ORCA(PedestrianModel):
     ``path``: ``"copy"`` (the copy-parallel kernel), ``"agent"`` (agent-parallel, ``steps_per_launch``
     unrolled steps a launch, default :data:`MAX_STEPS_PER_LAUNCH`) or ``"auto"`` (copy up to
     :data:`COPY_KERNEL_MAX_AGENTS`); ``threads``: the copy kernel's loop over copies, ``"serial"`` (one
-    thread: no thread-pool dispatch), ``"parallel"`` or ``"auto"`` (serial for one copy); bit-identical.
+    thread: no thread-pool dispatch), ``"parallel"`` or ``"auto"`` (serial for one copy or below
+    :data:`SERIAL_MAX_AGENT_STEPS` agent-steps a call); bit-identical.
     """
 
     METHOD = "orca"
@@ -158,7 +165,8 @@ class ORCA(PedestrianModel):
                 w["out"], state.arrival_time, state.closest, geom, dims, cell, start, order, xs)
 
         copy = self.path == "copy" or (self.path == "auto" and state.n <= COPY_KERNEL_MAX_AGENTS)
-        serial = self.threads == "serial" or (self.threads == "auto" and state.batch == 1)
+        serial = self.threads == "serial" or (self.threads == "auto" and (
+            state.batch == 1 or state.batch * state.n * steps < SERIAL_MAX_AGENT_STEPS))
         k = self.steps_per_launch  # agent path: k unrolled steps a launch; copy path: all steps in one launch
         chunks = [steps] if copy else [k] * (steps // k) + [1] * (steps % k)
         for chunk in chunks:
