@@ -2,6 +2,7 @@
 
     python demos/learning_curves.py --env tianim/ArmReach-v1 --steps 100000 --out curves.json
     python demos/learning_curves.py --algo sac --env tianim/RopeFlatten-v1 --steps 100000 --out curves.json
+    python demos/learning_curves.py --env tianim/ClothFold-v0 --bc-steps 16000 --steps 100000 --out curves.json
     python demos/learning_curves.py --chart curves.json --png docs/media/learning_curves.png
 
 Trains on the batched environment through :class:`envs.sb3.SB3VecEnv` (all copies stepped in one
@@ -9,7 +10,10 @@ kernel launch) with observation and reward normalisation, evaluates the determin
 every ``--eval-every`` steps on ``--episodes`` fixed-seed episodes of a single env, and measures
 the random-action and scripted-baseline returns on the same episodes. ``--algo ppo`` (default) is
 on-policy with one set of hyperparameters for every env; ``--algo sac`` is off-policy (the family of
-SoftGym's own state-based baselines, Lin et al. 2020), with one gradient step per collected transition. Results of several runs
+SoftGym's own state-based baselines, Lin et al. 2020), with one gradient step per collected transition.
+Two PPO options for tasks that random exploration does not find: ``--sde-sample-freq N``
+(time-correlated exploration, gSDE) and ``--bc-steps N`` (a warm start cloned from the scripted baseline
+with DAgger, :func:`behaviour_clone`; fine-tuned at learning rate 1e-4 and noise std 0.08). Results of several runs
 (one per ``--env``) are merged into ``--out``; ``--chart`` draws one panel per env: mean return
 against environment steps, with the random and scripted returns as horizontal lines. Needs the
 ``rl`` extra (``pip install torch==2.13.0 -e ".[rl]"``) and matplotlib.
@@ -24,7 +28,7 @@ import time
 
 
 def train(env_id: str, steps: int, num_envs: int, eval_every: int, episodes: int, n_steps: int, seed: int,
-          algo: str = "ppo") -> dict:
+          algo: str = "ppo", sde_sample_freq: int = 0, bc_steps: int = 0, bc_rounds: int = 3) -> dict:
     import gymnasium as gym
     import torch
     from stable_baselines3 import PPO, SAC
@@ -34,6 +38,10 @@ def train(env_id: str, steps: int, num_envs: int, eval_every: int, episodes: int
     import envs  # noqa: F401  (registration)
     from envs.baselines import evaluate, make_baseline
     from envs.sb3 import SB3VecEnv
+
+    if (sde_sample_freq or bc_steps) and algo != "ppo":
+        raise ValueError(f"sde_sample_freq={sde_sample_freq}, bc_steps={bc_steps}: PPO options (algo={algo!r}); "
+                         "give algo='ppo' or leave them 0")
 
     torch.set_num_threads(1)
     ref_env = gym.make(env_id)
@@ -63,9 +71,13 @@ def train(env_id: str, steps: int, num_envs: int, eval_every: int, episodes: int
     gamma = 0.98
     if algo == "ppo":
         venv = VecNormalize(SB3VecEnv(env_id, num_envs=num_envs, seed=seed), norm_reward=True, gamma=gamma)
+        sde = dict(use_sde=True, sde_sample_freq=sde_sample_freq) if sde_sample_freq else {}
+        # fine-tuning a cloned policy: a smaller step and narrower noise, so the first updates (from a value
+        # head fitted to the script's returns, not the policy's) do not undo what was cloned
+        lr, log_std = (1e-4, -2.5) if bc_steps else (1e-3, -0.5)
         model = PPO("MlpPolicy", venv, n_steps=n_steps, batch_size=256, n_epochs=10, gamma=gamma,
-                    gae_lambda=0.95, learning_rate=1e-3, ent_coef=0.0, clip_range=0.2, seed=seed, verbose=0,
-                    policy_kwargs=dict(net_arch=[128, 128], log_std_init=-0.5))
+                    gae_lambda=0.95, learning_rate=lr, ent_coef=0.0, clip_range=0.2, seed=seed, verbose=0,
+                    policy_kwargs=dict(net_arch=[128, 128], log_std_init=log_std), **sde)
     elif algo == "sac":
         venv = VecNormalize(SB3VecEnv(env_id, num_envs=num_envs, seed=seed), norm_reward=False, gamma=gamma)
         model = SAC("MlpPolicy", venv, learning_rate=3e-4, buffer_size=max(steps, 1), batch_size=256,
@@ -73,12 +85,91 @@ def train(env_id: str, steps: int, num_envs: int, eval_every: int, episodes: int
                     gradient_steps=num_envs, seed=seed, verbose=0, policy_kwargs=dict(net_arch=[256, 256]))
     else:
         raise ValueError(f"algo={algo!r}: use 'ppo' or 'sac'")
+    bc = behaviour_clone(model, venv, make_baseline(env_id, ref_env), bc_steps, gamma, bc_rounds) if bc_steps else None
     model.learn(total_timesteps=steps, callback=Curve())
     final = curve[-1]["mean_return"]
     gap = (final - random_ret) / (scripted_ret - random_ret) if scripted_ret != random_ret else float("nan")
     print(f"  final {final:.3f}: {100 * gap:.0f}% of the random-to-scripted gap closed", flush=True)
+    if sde_sample_freq:
+        algo = f"{algo}-gsde"
+    if bc_steps:
+        algo = f"bc+{algo}"
     return {"algo": algo, "random": random_ret, "scripted": scripted_ret, "curve": curve, "gap_closed": gap,
-            "steps": steps, "num_envs": num_envs, "n_steps": n_steps, "seed": seed, "episodes": episodes}
+            "steps": steps, "num_envs": num_envs, "n_steps": n_steps, "seed": seed, "episodes": episodes,
+            "learning_rate": model.learning_rate, "log_std_init": model.policy_kwargs.get("log_std_init"),
+            "sde_sample_freq": sde_sample_freq, "bc": bc}
+
+
+def behaviour_clone(model, venv, script, steps: int, gamma: float, rounds: int = 3, epochs: int = 100,
+                    batch: int = 256, lr: float = 1e-3) -> dict:
+    """Warm start for PPO from the scripted baseline: behaviour cloning with DAgger (Ross et al. 2011), as
+    Rajeswaran et al. 2018 and Nair et al. 2018 start from demonstrations where exploration alone does not
+    find the task.
+
+    Round 0 runs ``script`` on the training copies for ``steps`` env steps; each of the ``rounds`` further
+    rounds runs the policy's own mean action for ``steps`` env steps, labelled with the script's action
+    for the observations it reaches (the script reads the observation alone, so it labels any state). After
+    each round the policy's mean action is fitted to all labels so far (mean squared error) and its value
+    head to the discounted returns of the normalised rewards of the rollouts (episode ends as in the
+    rollouts), ``epochs`` passes of minibatches of ``batch`` with the policy's own optimiser at learning rate
+    ``lr`` (PPO sets its own again when it trains). The normalisation statistics follow these rollouts, as
+    they would in training; the observations are kept raw and normalised with the latest statistics at
+    each fit. The env steps spent here, ``steps * (rounds + 1)``, are reported beside the curve, which
+    counts only PPO's own steps (its first evaluation, at the first env step, is the clone's). Returns
+    ``{"steps", "rounds", "action_mse", "value_mse"}``.
+    """
+    import numpy as np
+    import torch
+
+    policy = model.policy
+
+    def mean_action(o):
+        with torch.no_grad():
+            return policy.get_distribution(torch.as_tensor(o, dtype=torch.float32)).distribution.mean.numpy()
+
+    def rollout(own: bool):
+        obs, labels, rews, dones = [], [], [], []
+        venv.reset()
+        for _ in range(-(-steps // venv.num_envs)):
+            raw = venv.get_original_obs()
+            label = np.asarray(script(raw), np.float32)
+            _, r, done, _ = venv.step(np.clip(mean_action(venv.normalize_obs(raw)), -1, 1) if own else label)
+            obs.append(raw)
+            labels.append(label)
+            rews.append(r)
+            dones.append(done)
+        rews, dones = np.stack(rews), np.stack(dones)
+        ret, acc = np.zeros_like(rews), np.zeros(rews.shape[1], rews.dtype)
+        for k in range(len(rews) - 1, -1, -1):
+            acc = rews[k] + gamma * acc * (1.0 - dones[k])
+            ret[k] = acc
+        flat = lambda v: torch.as_tensor(np.stack(v).reshape(len(v) * venv.num_envs, -1), dtype=torch.float32)
+        return flat(obs), flat(labels), torch.as_tensor(ret.reshape(-1), dtype=torch.float32)
+
+    for group in policy.optimizer.param_groups:
+        group["lr"] = lr
+    gen = torch.Generator().manual_seed(0)
+    data = None
+    for rnd in range(rounds + 1):
+        new = rollout(own=rnd > 0)
+        data = new if data is None else tuple(torch.cat(pair) for pair in zip(data, new))
+        raw, a, g = data
+        o = torch.as_tensor(venv.normalize_obs(raw.numpy()), dtype=torch.float32)  # with the latest statistics
+        for _ in range(epochs):
+            for idx in torch.randperm(len(o), generator=gen).split(batch):
+                mean = policy.get_distribution(o[idx]).distribution.mean
+                value = policy.predict_values(o[idx]).flatten()
+                loss = ((mean - a[idx]) ** 2).mean() + 0.5 * ((value - g[idx]) ** 2).mean()
+                policy.optimizer.zero_grad()
+                loss.backward()
+                policy.optimizer.step()
+        with torch.no_grad():
+            a_mse = float(((policy.get_distribution(o).distribution.mean - a) ** 2).mean())
+            v_mse = float(((policy.predict_values(o).flatten() - g) ** 2).mean())
+        print(f"  behaviour cloning round {rnd}: {len(o)} labels, action mse {a_mse:.4f}, value mse {v_mse:.4f}",
+              flush=True)
+    venv.reset()
+    return {"steps": steps * (rounds + 1), "rounds": rounds, "action_mse": a_mse, "value_mse": v_mse}
 
 
 def chart(results: dict, png: str) -> None:
@@ -120,6 +211,14 @@ def main(argv=None) -> int:
     p.add_argument("--eval-every", type=int, default=10_000)
     p.add_argument("--episodes", type=int, default=10)
     p.add_argument("--n-steps", type=int, default=128, help="rollout length per copy")
+    p.add_argument("--sde-sample-freq", type=int, default=0, metavar="N",
+                   help="PPO only: generalised state-dependent exploration (gSDE, Raffin et al. 2022), its noise "
+                        "matrix redrawn every N steps, so a copy's exploration stays correlated in time; 0: off "
+                        "(Gaussian noise drawn afresh each step)")
+    p.add_argument("--bc-steps", type=int, default=0, metavar="N",
+                   help="PPO only: first clone the scripted baseline (policy mean and value; DAgger rounds of N env "
+                        "steps each, behaviour_clone), then train; 0: off")
+    p.add_argument("--bc-rounds", type=int, default=3, help="DAgger rounds after the first (--bc-steps each)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default="curves.json", help="JSON file the runs are merged into")
     p.add_argument("--chart", metavar="JSON", help="draw the curves of this JSON file instead of training")
@@ -136,9 +235,12 @@ def main(argv=None) -> int:
         with open(args.out) as fh:
             results = json.load(fh)
     for env_id in args.env:
-        key = env_id if args.algo == "ppo" else f"{env_id} ({args.algo})"
+        if (args.sde_sample_freq or args.bc_steps) and args.algo != "ppo":
+            p.error("--sde-sample-freq and --bc-steps are PPO options")
+        algo = ("bc+" if args.bc_steps else "") + args.algo + ("-gsde" if args.sde_sample_freq else "")
+        key = env_id if algo == "ppo" else f"{env_id} ({algo})"
         results[key] = train(env_id, args.steps, args.num_envs, args.eval_every, args.episodes, args.n_steps,
-                             args.seed, args.algo)
+                             args.seed, args.algo, args.sde_sample_freq, args.bc_steps, args.bc_rounds)
         with open(args.out, "w") as fh:
             json.dump(results, fh, indent=2)
     return 0

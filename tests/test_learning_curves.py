@@ -1,0 +1,51 @@
+"""demos/learning_curves.py: the behaviour-cloning warm start (DAgger rounds on the scripted baseline).
+
+Marked ``rl`` (Stable-Baselines3 and torch): ``python -m pytest -q -m rl``.
+"""
+
+import importlib.util
+import pathlib
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.rl
+
+
+def _demo():
+    path = pathlib.Path(__file__).resolve().parents[1] / "demos" / "learning_curves.py"
+    spec = importlib.util.spec_from_file_location("learning_curves", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_behaviour_clone_recovers_most_of_the_scripted_return():
+    """Cloning ArmReach-v0's IK-PD script from 2 rounds of 2,048 env steps: the cloned policy's deterministic
+    return closes at least 80 % of the random-to-scripted gap on fresh episodes (measured: 93 %; zero actions,
+    near which an untrained policy's mean starts, close none of it)."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    import envs  # noqa: F401
+    from envs.baselines import evaluate, make_baseline
+    from envs.sb3 import SB3VecEnv
+
+    torch.set_num_threads(1)
+    env_id = "tianim/ArmReach-v0"
+    venv = VecNormalize(SB3VecEnv(env_id, num_envs=8, seed=0), gamma=0.98)
+    model = PPO("MlpPolicy", venv, n_steps=64, seed=0, policy_kwargs=dict(net_arch=[128, 128], log_std_init=-1.5))
+    env = gym.make(env_id)
+    script = make_baseline(env_id, env)
+    out = _demo().behaviour_clone(model, venv, script, steps=2048, gamma=0.98, rounds=1, epochs=100)
+    assert out["steps"] == 4096 and out["rounds"] == 1 and np.isfinite(out["action_mse"])
+
+    def cloned(obs):
+        return model.predict(venv.normalize_obs(obs), deterministic=True)[0]
+
+    random_ret = evaluate(env, None, 4, seed=500).mean()
+    scripted_ret = evaluate(env, script, 4, seed=500).mean()
+    cloned_ret = evaluate(env, cloned, 4, seed=500).mean()
+    assert cloned_ret > random_ret + 0.8 * (scripted_ret - random_ret), (random_ret, scripted_ret, cloned_ret)
