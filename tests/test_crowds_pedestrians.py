@@ -203,13 +203,13 @@ _OUT = ("x", "v", "heading", "t", "ticks", "arrival_time", "closest")
 
 @pytest.mark.parametrize("batch", [1, 5])
 def test_orca_serial_copy_kernel_equals_the_parallel_copy_kernel_bit_for_bit(batch):
-    """One copy, or a small batch (under SERIAL_MAX_AGENT_STEPS), steps in the serial variant of the copy
+    """One copy, or a small batch (under SERIAL_MAX_ORCA_LINES), steps in the serial variant of the copy
     kernel (threads="auto": no thread-pool dispatch): the same bits as the parallel variant
     (threads="parallel", copies spread over the threads), with dt and substeps changing between calls."""
     from tianim.crowds import _orca_kernels
-    from tianim.crowds.orca import SERIAL_MAX_AGENT_STEPS
+    from tianim.crowds.orca import SERIAL_MAX_ORCA_LINES
 
-    assert batch * 7 * 3 < SERIAL_MAX_AGENT_STEPS  # 'auto' takes the serial variant for every call here
+    assert batch * 7 * 6 * 3 < SERIAL_MAX_ORCA_LINES  # 'auto' takes the serial variant for every call here
     fast = _one_copy_run(_CALLS, model_kw={"path": "copy"}, batch=batch)
     parallel = _one_copy_run(_CALLS, model_kw={"path": "copy", "threads": "parallel"}, batch=batch)
     serial = _one_copy_run(_CALLS, model_kw={"path": "copy", "threads": "serial"}, batch=batch)

@@ -48,11 +48,14 @@ MAX_STEPS_PER_LAUNCH = 4
 #: more than such agents do). Both kernels give bit-identical results.
 COPY_KERNEL_MAX_AGENTS = 1024
 #: The copy kernel's ``threads="auto"`` runs its loop over copies serially (in the launching thread, no
-#: thread-pool dispatch) for one copy or below this many agent-steps a call (copies x agents x steps):
-#: waking the second thread costs more than it saves there. Measured on 2 vCPUs, ms a call serial /
-#: parallel: 16 copies x 5 agents x 1 step (CrowdNav's batch) 0.33 / 0.44, 64 x 10 x 1 0.57 / 0.80;
-#: 16 x 50 x 1 1.28 / 0.92, 64 x 10 x 16 4.05 / 2.95, 64 x 50 x 1 5.0 / 3.4.
-SERIAL_MAX_AGENT_STEPS = 1024
+#: thread-pool dispatch) for one copy or below this many ORCA lines a call, copies x agents x
+#: min(agents - 1, max_neighbors) x steps (an agent's work is one line per neighbour it considers, and the
+#: linear program over them): waking the second thread costs more than it saves there. Measured on
+#: 2 vCPUs, ms a call serial / parallel (copies x agents x steps: lines): 16 x 5 x 1 (CrowdNav's batch:
+#: 320) 0.33 / 0.44; 16 x 5 x 16 (5,120) 0.33 / 0.39; 64 x 10 x 1 (5,760) 0.47 / 0.53-0.69; 16 x 10 x 4
+#: (5,760) 0.25 / 0.31; 16 x 50 x 1 (8,000) 1.45-1.53 / 1.01-1.58; 8 x 100 x 1 (8,000) 1.39-1.60 / 0.99-1.04;
+#: 32 x 25 x 1 (8,000) 0.83-1.14 / 0.73-0.75; 64 x 10 x 16 (92,160) 4.05 / 2.95; 64 x 50 x 1 (32,000) 5.0 / 3.4.
+SERIAL_MAX_ORCA_LINES = 7000
 
 
 class ORCA(PedestrianModel):
@@ -78,7 +81,7 @@ class ORCA(PedestrianModel):
     unrolled steps a launch, default :data:`MAX_STEPS_PER_LAUNCH`) or ``"auto"`` (copy up to
     :data:`COPY_KERNEL_MAX_AGENTS`); ``threads``: the copy kernel's loop over copies, ``"serial"`` (one
     thread: no thread-pool dispatch), ``"parallel"`` or ``"auto"`` (serial for one copy or below
-    :data:`SERIAL_MAX_AGENT_STEPS` agent-steps a call); bit-identical.
+    :data:`SERIAL_MAX_ORCA_LINES` a call); bit-identical.
     """
 
     METHOD = "orca"
@@ -165,8 +168,9 @@ class ORCA(PedestrianModel):
                 w["out"], state.arrival_time, state.closest, geom, dims, cell, start, order, xs)
 
         copy = self.path == "copy" or (self.path == "auto" and state.n <= COPY_KERNEL_MAX_AGENTS)
+        lines = state.batch * state.n * min(state.n - 1, self.max_neighbors) * steps  # ORCA lines this call
         serial = self.threads == "serial" or (self.threads == "auto" and (
-            state.batch == 1 or state.batch * state.n * steps < SERIAL_MAX_AGENT_STEPS))
+            state.batch == 1 or lines < SERIAL_MAX_ORCA_LINES))
         k = self.steps_per_launch  # agent path: k unrolled steps a launch; copy path: all steps in one launch
         chunks = [steps] if copy else [k] * (steps // k) + [1] * (steps % k)
         for chunk in chunks:
