@@ -73,7 +73,7 @@ def train(env_id: str, steps: int, num_envs: int, eval_every: int, episodes: int
         venv = VecNormalize(SB3VecEnv(env_id, num_envs=num_envs, seed=seed), norm_reward=True, gamma=gamma)
         sde = dict(use_sde=True, sde_sample_freq=sde_sample_freq) if sde_sample_freq else {}
         # fine-tuning a cloned policy: a smaller step and narrower noise, so the first updates (from a value
-        # head fitted to the script's returns, not the policy's) do not undo what was cloned
+        # head fitted to the returns of the script's and the clone's rollouts) do not undo what was cloned
         lr, log_std = (1e-4, -2.5) if bc_steps else (1e-3, -0.5)
         model = PPO("MlpPolicy", venv, n_steps=n_steps, batch_size=256, n_epochs=10, gamma=gamma,
                     gae_lambda=0.95, learning_rate=lr, ent_coef=0.0, clip_range=0.2, seed=seed, verbose=0,
