@@ -2,7 +2,7 @@
 
     python demos/learning_curves.py --env tianim/ArmReach-v1 --steps 100000 --out curves.json
     python demos/learning_curves.py --algo sac --env tianim/RopeFlatten-v1 --steps 100000 --out curves.json
-    python demos/learning_curves.py --env tianim/ClothFold-v0 --bc-steps 16000 --steps 100000 --out curves.json
+    python demos/learning_curves.py --env tianim/ClothFold-v0 --bc-steps 16000 --bc-coef 1.0 --steps 100000 --out curves.json
     python demos/learning_curves.py --chart curves.json --png docs/media/learning_curves.png
 
 Trains on the batched environment through :class:`envs.sb3.SB3VecEnv` (all copies stepped in one
@@ -13,7 +13,8 @@ on-policy with one set of hyperparameters for every env; ``--algo sac`` is off-p
 SoftGym's own state-based baselines, Lin et al. 2020), with one gradient step per collected transition.
 Two PPO options for tasks that random exploration does not find: ``--sde-sample-freq N``
 (time-correlated exploration, gSDE) and ``--bc-steps N`` (a warm start cloned from the scripted baseline
-with DAgger, :func:`behaviour_clone`; fine-tuned at learning rate 1e-4 and noise std 0.08). Results of several runs
+with DAgger, :func:`behaviour_clone`; fine-tuned at learning rate 1e-4 and noise std 0.08), with ``--bc-coef C``
+keeping a decaying demonstration loss in PPO's updates (:func:`demo_regularised`). Results of several runs
 (one per ``--env``) are merged into ``--out``; ``--chart`` draws one panel per env: mean return
 against environment steps, with the random and scripted returns as horizontal lines. Needs the
 ``rl`` extra (``pip install torch==2.13.0 -e ".[rl]"``) and matplotlib.
@@ -28,7 +29,8 @@ import time
 
 
 def train(env_id: str, steps: int, num_envs: int, eval_every: int, episodes: int, n_steps: int, seed: int,
-          algo: str = "ppo", sde_sample_freq: int = 0, bc_steps: int = 0, bc_rounds: int = 3) -> dict:
+          algo: str = "ppo", sde_sample_freq: int = 0, bc_steps: int = 0, bc_rounds: int = 3,
+          bc_coef: float = 0.0, bc_decay: float = 0.95) -> dict:
     import gymnasium as gym
     import torch
     from stable_baselines3 import PPO, SAC
@@ -39,6 +41,8 @@ def train(env_id: str, steps: int, num_envs: int, eval_every: int, episodes: int
     from envs.baselines import evaluate, make_baseline
     from envs.sb3 import SB3VecEnv
 
+    if bc_coef and not bc_steps:
+        raise ValueError(f"bc_coef={bc_coef}: the demonstration loss needs the clone's labels; give bc_steps > 0")
     if (sde_sample_freq or bc_steps) and algo != "ppo":
         raise ValueError(f"sde_sample_freq={sde_sample_freq}, bc_steps={bc_steps}: PPO options (algo={algo!r}); "
                          "give algo='ppo' or leave them 0")
@@ -86,14 +90,17 @@ def train(env_id: str, steps: int, num_envs: int, eval_every: int, episodes: int
     else:
         raise ValueError(f"algo={algo!r}: use 'ppo' or 'sac'")
     bc = behaviour_clone(model, venv, make_baseline(env_id, ref_env), bc_steps, gamma, bc_rounds) if bc_steps else None
+    if bc is not None and bc_coef > 0:
+        model = demo_regularised(model, bc.pop("data"), bc_coef, bc_decay)
+        venv.training = False  # the clone's input scaling stays: frozen observation and reward statistics
+        bc.update(coef=bc_coef, decay=bc_decay, frozen_normalisation=True)
+    elif bc is not None:
+        bc.pop("data")
     model.learn(total_timesteps=steps, callback=Curve())
     final = curve[-1]["mean_return"]
     gap = (final - random_ret) / (scripted_ret - random_ret) if scripted_ret != random_ret else float("nan")
     print(f"  final {final:.3f}: {100 * gap:.0f}% of the random-to-scripted gap closed", flush=True)
-    if sde_sample_freq:
-        algo = f"{algo}-gsde"
-    if bc_steps:
-        algo = f"bc+{algo}"
+    algo = ("bc+" if bc_steps else "") + algo + ("+demo" if bc_coef else "") + ("-gsde" if sde_sample_freq else "")
     return {"algo": algo, "random": random_ret, "scripted": scripted_ret, "curve": curve, "gap_closed": gap,
             "steps": steps, "num_envs": num_envs, "n_steps": n_steps, "seed": seed, "episodes": episodes,
             "learning_rate": model.learning_rate, "log_std_init": model.policy_kwargs.get("log_std_init"),
@@ -116,7 +123,8 @@ def behaviour_clone(model, venv, script, steps: int, gamma: float, rounds: int =
     they would in training; the observations are kept raw and normalised with the latest statistics at
     each fit. The env steps spent here, ``steps * (rounds + 1)``, are reported beside the curve, which
     counts only PPO's own steps (its first evaluation, at the first env step, is the clone's). Returns
-    ``{"steps", "rounds", "action_mse", "value_mse"}``.
+    ``{"steps", "rounds", "action_mse", "value_mse", "data"}``, ``data`` = (raw observations (M, obs_dim),
+    the script's actions (M, act_dim)) as torch tensors, the labels :func:`demo_regularised` keeps using.
     """
     import numpy as np
     import torch
@@ -169,7 +177,47 @@ def behaviour_clone(model, venv, script, steps: int, gamma: float, rounds: int =
         print(f"  behaviour cloning round {rnd}: {len(o)} labels, action mse {a_mse:.4f}, value mse {v_mse:.4f}",
               flush=True)
     venv.reset()
-    return {"steps": steps * (rounds + 1), "rounds": rounds, "action_mse": a_mse, "value_mse": v_mse}
+    return {"steps": steps * (rounds + 1), "rounds": rounds, "action_mse": a_mse, "value_mse": v_mse,
+            "data": (raw, a)}
+
+
+def demo_regularised(model, data, coef: float, decay: float = 0.95, batch: int = 256):
+    """PPO whose updates keep the demonstrations: after each PPO update (its clipped surrogate, value and
+    entropy terms, unchanged), one pass over the labelled observations ``data`` = (raw obs, actions) of
+    :func:`behaviour_clone` in minibatches of ``batch``, minimising ``coef decay^k`` times the squared error of
+    the policy's mean to the labels, k = PPO updates so far. The demonstration term of DAPG (Rajeswaran et al.
+    2018, eq. 6, weight ``lambda_0 lambda_1^k``) as a behaviour-cloning loss on the mean, the form of Nair et
+    al. 2018 (without their Q-filter); its weight decays so that the reward decides in the end. The
+    observations are normalised with the env's statistics, which the caller freezes (``venv.training =
+    False``) so that the labels keep meaning what they meant when cloned. Returns a PPO model of that class
+    with ``model``'s parameters, environment and settings."""
+    import torch
+    from stable_baselines3 import PPO
+
+    raw, labels = data
+
+    class DemoPPO(type(model)):
+        def train(self):
+            super().train()
+            weight = coef * decay ** self._demo_updates
+            self._demo_updates += 1
+            o = torch.as_tensor(self.get_env().normalize_obs(raw.numpy()), dtype=torch.float32)
+            gen = torch.Generator().manual_seed(self._demo_updates)
+            total = 0.0
+            for idx in torch.randperm(len(o), generator=gen).split(batch):
+                mean = self.policy.get_distribution(o[idx]).distribution.mean
+                loss = weight * ((mean - labels[idx]) ** 2).mean()
+                self.policy.optimizer.zero_grad()
+                loss.backward()
+                self.policy.optimizer.step()
+                total += float(loss.detach()) * len(idx)
+            self.logger.record("train/demo_loss", total / len(o))
+
+    if not isinstance(model, PPO):
+        raise ValueError(f"model is a {type(model).__name__}; the demonstration loss is written for PPO")
+    model.__class__ = DemoPPO
+    model._demo_updates = 0
+    return model
 
 
 def chart(results: dict, png: str) -> None:
@@ -219,6 +267,10 @@ def main(argv=None) -> int:
                    help="PPO only: first clone the scripted baseline (policy mean and value; DAgger rounds of N env "
                         "steps each, behaviour_clone), then train; 0: off")
     p.add_argument("--bc-rounds", type=int, default=3, help="DAgger rounds after the first (--bc-steps each)")
+    p.add_argument("--bc-coef", type=float, default=0.0, metavar="C",
+                   help="with --bc-steps: keep a demonstration loss in PPO's updates (demo_regularised, DAPG's "
+                        "term as behaviour cloning), weight C decay^k after k updates, normalisation frozen; 0: off")
+    p.add_argument("--bc-decay", type=float, default=0.95, help="per-update decay of --bc-coef's weight")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", default="curves.json", help="JSON file the runs are merged into")
     p.add_argument("--chart", metavar="JSON", help="draw the curves of this JSON file instead of training")
@@ -237,10 +289,14 @@ def main(argv=None) -> int:
     for env_id in args.env:
         if (args.sde_sample_freq or args.bc_steps) and args.algo != "ppo":
             p.error("--sde-sample-freq and --bc-steps are PPO options")
-        algo = ("bc+" if args.bc_steps else "") + args.algo + ("-gsde" if args.sde_sample_freq else "")
+        if args.bc_coef and not args.bc_steps:
+            p.error("--bc-coef needs --bc-steps (the demonstration labels)")
+        algo = (("bc+" if args.bc_steps else "") + args.algo + ("+demo" if args.bc_coef else "")
+                + ("-gsde" if args.sde_sample_freq else ""))
         key = env_id if algo == "ppo" else f"{env_id} ({algo})"
         results[key] = train(env_id, args.steps, args.num_envs, args.eval_every, args.episodes, args.n_steps,
-                             args.seed, args.algo, args.sde_sample_freq, args.bc_steps, args.bc_rounds)
+                             args.seed, args.algo, args.sde_sample_freq, args.bc_steps, args.bc_rounds,
+                             args.bc_coef, args.bc_decay)
         with open(args.out, "w") as fh:
             json.dump(results, fh, indent=2)
     return 0
