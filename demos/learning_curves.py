@@ -41,6 +41,8 @@ def train(env_id: str, steps: int, num_envs: int, eval_every: int, episodes: int
     from envs.baselines import evaluate, make_baseline
     from envs.sb3 import SB3VecEnv
 
+    if not (bc_coef >= 0 and 0 < bc_decay <= 1):
+        raise ValueError(f"bc_coef={bc_coef}, bc_decay={bc_decay}: give bc_coef >= 0 and 0 < bc_decay <= 1")
     if bc_coef and not bc_steps:
         raise ValueError(f"bc_coef={bc_coef}: the demonstration loss needs the clone's labels; give bc_steps > 0")
     if (sde_sample_freq or bc_steps) and algo != "ppo":
