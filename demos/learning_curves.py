@@ -94,7 +94,6 @@ def train(env_id: str, steps: int, num_envs: int, eval_every: int, episodes: int
     bc = behaviour_clone(model, venv, make_baseline(env_id, ref_env), bc_steps, gamma, bc_rounds) if bc_steps else None
     if bc is not None and bc_coef > 0:
         model = demo_regularised(model, bc.pop("data"), bc_coef, bc_decay)
-        venv.training = False  # the clone's input scaling stays: frozen observation and reward statistics
         bc.update(coef=bc_coef, decay=bc_decay, frozen_normalisation=True)
     elif bc is not None:
         bc.pop("data")
@@ -189,21 +188,23 @@ def demo_regularised(model, data, coef: float, decay: float = 0.95, batch: int =
     :func:`behaviour_clone` in minibatches of ``batch``, minimising ``coef decay^k`` times the squared error of
     the policy's mean to the labels, k = PPO updates so far. The demonstration term of DAPG (Rajeswaran et al.
     2018, eq. 6, weight ``lambda_0 lambda_1^k``) as a behaviour-cloning loss on the mean, the form of Nair et
-    al. 2018 (without their Q-filter); its weight decays so that the reward decides in the end. The
-    observations are normalised with the env's statistics, which the caller freezes (``venv.training =
-    False``) so that the labels keep meaning what they meant when cloned. Returns a PPO model of that class
-    with ``model``'s parameters, environment and settings."""
+    al. 2018 (without their Q-filter); its weight decays so that the reward decides in the end. Freezes the
+    model's VecNormalize statistics (``training = False``: observations and rewards keep the clone's scaling,
+    so the labels keep meaning what they meant when cloned) and normalises the observations once. Returns a
+    PPO model of that class with ``model``'s parameters, environment and settings."""
     import torch
     from stable_baselines3 import PPO
 
     raw, labels = data
+    venv = model.get_env()
+    venv.training = False
+    o = torch.as_tensor(venv.normalize_obs(raw.numpy()), dtype=torch.float32)
 
     class DemoPPO(type(model)):
         def train(self):
             super().train()
             weight = coef * decay ** self._demo_updates
             self._demo_updates += 1
-            o = torch.as_tensor(self.get_env().normalize_obs(raw.numpy()), dtype=torch.float32)
             gen = torch.Generator().manual_seed(self._demo_updates)
             total = 0.0
             for idx in torch.randperm(len(o), generator=gen).split(batch):
