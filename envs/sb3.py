@@ -5,7 +5,9 @@ in the same step and passes the last observation in
 ``infos[i]["terminal_observation"]`` (with ``infos[i]["TimeLimit.truncated"]``).
 :class:`SB3VecEnv` builds the batched environment with
 ``AutoresetMode.SAME_STEP`` and translates; all copies still step in one kernel
-launch. Requires ``stable-baselines3`` (imported when this module is)::
+launch. Like SB3's ``Monitor``, it writes ``infos[i]["episode"] = {"r": return, "l": length, "t": seconds}``
+when copy i's episode ends, so SB3 logs ``rollout/ep_rew_mean`` and ``ep_len_mean`` (wrapping it in
+``VecMonitor`` as well is harmless: VecMonitor writes the same keys). Requires ``stable-baselines3`` (imported when this module is)::
 
     from envs.sb3 import SB3VecEnv
     venv = SB3VecEnv("tianim/ArmReach-v0", num_envs=16, seed=0)
@@ -13,6 +15,8 @@ launch. Requires ``stable-baselines3`` (imported when this module is)::
 """
 
 from __future__ import annotations
+
+import time
 
 import gymnasium as gym
 import numpy as np
@@ -42,6 +46,9 @@ class SB3VecEnv(VecEnv):
         super().__init__(num_envs, base.single_observation_space, base.single_action_space)
         self._actions = None
         self.render_mode = None
+        self._t_start = time.time()
+        self._episode_return = np.zeros(num_envs)  # float64 sums of the env's rewards, as Monitor keeps them
+        self._episode_length = np.zeros(num_envs, dtype=np.int64)
         if seed is not None:
             self.seed(seed)
 
@@ -52,6 +59,8 @@ class SB3VecEnv(VecEnv):
         self._reset_seeds()  # seed once; later resets continue the random streams
         self._reset_options()
         self.reset_infos = [{} for _ in range(self.num_envs)]
+        self._episode_return[:] = 0.0
+        self._episode_length[:] = 0
         return obs
 
     def step_async(self, actions: np.ndarray) -> None:
@@ -60,6 +69,8 @@ class SB3VecEnv(VecEnv):
     def step_wait(self):
         obs, reward, terminated, truncated, info = self.venv.step(self._actions)
         dones = terminated | truncated
+        self._episode_return += reward
+        self._episode_length += 1
         infos = [{} for _ in range(self.num_envs)]
         for key, value in info.items():  # gymnasium's vector info: arrays with `_key` masks
             if key.startswith("_") or key in ("final_obs", "final_info"):
@@ -72,6 +83,11 @@ class SB3VecEnv(VecEnv):
             for k in np.flatnonzero(dones).tolist():
                 infos[k]["terminal_observation"] = final[k]
                 infos[k]["TimeLimit.truncated"] = bool(truncated[k] and not terminated[k])
+                infos[k]["episode"] = {"r": round(float(self._episode_return[k]), 6),
+                                       "l": int(self._episode_length[k]),
+                                       "t": round(time.time() - self._t_start, 6)}
+            self._episode_return[dones] = 0.0
+            self._episode_length[dones] = 0
         return obs, reward.astype(np.float32), dones, infos
 
     def close(self) -> None:

@@ -56,9 +56,13 @@ def test_sb3_check_env_and_adapter(env_id):
     assert dones.all() and all(i["TimeLimit.truncated"] for i in infos)
     single = gym.make(env_id, max_episode_steps=steps)
     single.reset(seed=6)  # copy 1 of a batch seeded with 5
+    episode_return = 0.0
     for _ in range(steps):
-        last, *_ = single.step(np.zeros(env.action_space.shape, np.float32))
+        last, r, *_ = single.step(np.zeros(env.action_space.shape, np.float32))
+        episode_return += float(r)
     assert np.array_equal(infos[1]["terminal_observation"], last)
+    # Monitor's episode statistics, from the single env's own rewards (SB3 logs ep_rew_mean from these)
+    assert infos[1]["episode"]["r"] == round(episode_return, 6) and infos[1]["episode"]["l"] == steps
     assert np.array_equal(obs[1], single.reset()[0])  # the next episode of the same stream
     venv.close()
 
@@ -221,6 +225,25 @@ def test_sb3_adapter_per_index_semantics():
     with pytest.raises(NotImplementedError, match="all copies"):
         venv.env_method("reset", indices=[0])
     assert venv.env_is_wrapped(gymnasium.wrappers.TimeLimit) == [False] * 3
+    venv.close()
+
+
+@pytest.mark.rl
+def test_sb3_logs_episode_statistics_of_every_episode():
+    """PPO's episode buffer (what SB3 logs as ep_rew_mean / ep_len_mean) holds each finished episode's
+    return and length, the second episode of a copy counted from its own reset."""
+    import stable_baselines3
+
+    from envs.sb3 import SB3VecEnv
+
+    steps = 5
+    venv = SB3VecEnv("tianim/ArmReach-v0", num_envs=2, seed=3, max_episode_steps=steps)
+    model = stable_baselines3.PPO("MlpPolicy", venv, n_steps=2 * steps, batch_size=10, n_epochs=1, seed=0)
+    model.learn(2 * steps)  # one rollout: two episodes per copy
+    episodes = list(model.ep_info_buffer)
+    assert [e["l"] for e in episodes] == [steps] * 4
+    assert all(np.isfinite(e["r"]) and e["r"] < 0 for e in episodes)  # ArmReach's reward is a cost
+    assert len({e["r"] for e in episodes}) == 4  # four different episodes, none counted twice
     venv.close()
 
 
