@@ -23,6 +23,16 @@ from tianim.kernels.tasks import task_funcs
 RADIUS, EXCLUDE_SELF = 0, 0
 
 
+#: Local buffer sizes of the query's stage (``grid_kernels().query``), one compiled variant each; rows of more
+#: than the largest (``max_neighbours`` above it) are written to the output directly.
+STAGE_SIZES = (16, 32, 64)
+
+
+def stage_size(max_neighbours: int) -> int:
+    """The smallest of :data:`STAGE_SIZES` that holds ``max_neighbours`` entries, or 0 (no stage)."""
+    return next((s for s in STAGE_SIZES if s >= max_neighbours), 0)
+
+
 @cached_variants
 def grid_kernels(real_name: str, dim: int):
     """Kernels ``cell_ids``, ``counting_sort`` and ``query`` for ``real_name`` positions in ``dim`` D."""
@@ -65,8 +75,8 @@ def grid_kernels(real_name: str, dim: int):
 
     @ti.kernel
     def query(q: t.vec_arr, xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1,
-              exclude_self: ti.template(), half: ti.template(), sorted_rows: ti.template(), nbr: i32_3,
-              count: i32_2):
+              exclude_self: ti.template(), half: ti.template(), sorted_rows: ti.template(), stage: ti.template(),
+              nbr: i32_3, count: i32_2):
         """For each query point q[b, i]: the indices j with |x_j - q_i|^2 <= r^2 (in ``real``).
 
         geom (D + 2,) float64 = [lower_0 .. lower_{D-1}, cell_size, r] (r [m] at ``D + 1 + RADIUS``), dims (D,)
@@ -78,6 +88,12 @@ def grid_kernels(real_name: str, dim: int):
         particle index. The first K =
         nbr.shape[2] neighbours are stored in nbr[b, i]; count[b, i] is the total (> K: overflow).
         ``exclude_self``, ``half`` and ``sorted_rows`` are compile-time flags (0 or 1: one variant each).
+        ``stage`` (compile time, :func:`stage_size`): 0, or the size S >= K of a local buffer that collects the row's
+        sorted positions (a store to the stack) before the row is written out as ``order`` entries, the hits only.
+        Without it the scan's stores go to ``nbr`` itself, and because LLVM cannot tell that a store to one
+        ndarray leaves the others' pointers and shapes alone (they live in the kernel's argument buffer), every
+        candidate reloads them and redoes its index arithmetic (the optimised IR); the stage keeps the scan's
+        loop free of such stores. The same entries come out either way.
         With ``sorted_rows`` (only with ``exclude_self``) row s of nbr and count belongs to the point at
         sorted position s (point order[b, s]), so rows are written in memory order (``NeighbourGrid.pairs``;
         rows by point index are scattered writes, a fifth of the half query's time at 1 M points).
@@ -104,6 +120,7 @@ def grid_kernels(real_name: str, dim: int):
             if ti.static(sorted_rows != 0):
                 row = s
             n = 0
+            buf = ti.Vector([0] * max(stage, 1), dt=ti.i32)  # the stage (1 unused entry when stage == 0)
             if skip == 0:
                 t, padh = g.cell_units(p, r, geom, dims)
                 lo, hi = g.box_t(t, padh, dims)
@@ -133,8 +150,14 @@ def grid_kernels(real_name: str, dim: int):
                             if ti.static(exclude_self != 0 and half == 0):  # (a half row starts after s)
                                 hit &= ti.cast(k != s, ti.i32)  # k == s: the point itself
                             if n < cap:
-                                nbr[b, row, n] = order[b, k]
+                                if ti.static(stage != 0):
+                                    buf[n] = k
+                                else:
+                                    nbr[b, row, n] = order[b, k]
                             n += hit
+            if ti.static(stage != 0):
+                for m in range(ti.min(n, cap)):
+                    nbr[b, row, m] = order[b, buf[m]]
             count[b, row] = n
 
     return cell_ids, counting_sort, query

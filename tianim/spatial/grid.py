@@ -228,6 +228,13 @@ class NeighbourGrid:
         self._qdims[self.dim + EXCLUDE_SELF] = exclude
         return self._qgeom, self._qdims
 
+    @property
+    def _stage(self) -> int:
+        """The query's local buffer size for this grid's rows (``tianim.spatial._kernels.stage_size``)."""
+        from tianim.spatial._kernels import stage_size
+
+        return stage_size(self.max_neighbours)
+
     def _kernels(self):
         from tianim.spatial._kernels import grid_kernels
 
@@ -328,7 +335,7 @@ class NeighbourGrid:
         nbr, count = self._buffers(q.shape[1])
         _, _, query = self._kernels()
         geom, dims = self._query_args(r)
-        query(q, self.sorted_x, self.order, self.start, geom, dims, exclude, 0, 0, nbr, count)
+        query(q, self.sorted_x, self.order, self.start, geom, dims, exclude, 0, 0, self._stage, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
 
     def query_half(self, radius, on_overflow: str = "raise") -> NeighbourList:
@@ -344,7 +351,7 @@ class NeighbourGrid:
         nbr, count = self._buffers(self.n_points)
         _, _, query = self._kernels()
         geom, dims = self._query_args(r)
-        query(self._built, self.sorted_x, self.order, self.start, geom, dims, 1, 1, 0, nbr, count)
+        query(self._built, self.sorted_x, self.order, self.start, geom, dims, 1, 1, 0, self._stage, nbr, count)
         return self._checked(NeighbourList(nbr, count, self.max_neighbours), on_overflow)
 
     def pairs(self, radius, b: int = 0) -> np.ndarray:
@@ -363,7 +370,7 @@ class NeighbourGrid:
         nbr, count = self._buffers(self.n_points)
         _, _, query = self._kernels()
         geom, dims = self._query_args(r)
-        query(self._built, self.sorted_x, self.order, self.start, geom, dims, 1, 1, 1, nbr, count)
+        query(self._built, self.sorted_x, self.order, self.start, geom, dims, 1, 1, 1, self._stage, nbr, count)
         rows = NeighbourList(nbr, count, self.max_neighbours)
         if rows.overflow:
             b0, s0 = np.argwhere(count > self.max_neighbours)[0]
