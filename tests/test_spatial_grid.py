@@ -185,11 +185,11 @@ _THREAD_SCRIPT = textwrap.dedent("""
 
 
 
-@pytest.mark.parametrize("max_neighbours", [10, 16, 40, 64])
+@pytest.mark.parametrize("max_neighbours", [10, 16, 32, 40, 64])
 def test_staged_rows_equal_direct_writes_bit_for_bit(max_neighbours, monkeypatch):
     """The query's local stage (rows collected on the stack, then written out) stores exactly what direct writes
     to the output store: the same counts and the same first ``max_neighbours`` entries, overflowing rows included,
-    for the full query, the half query and ``pairs``; stage sizes 16 and 64 are both covered."""
+    for the full query, the half query and ``pairs``; every stage size (16, 32, 64) is covered."""
     from tianim.spatial._kernels import stage_size
 
     rng = np.random.default_rng(12)
