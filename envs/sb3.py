@@ -7,7 +7,8 @@ in the same step and passes the last observation in
 ``AutoresetMode.SAME_STEP`` and translates; all copies still step in one kernel
 launch. Like SB3's ``Monitor``, it writes ``infos[i]["episode"] = {"r": return, "l": length, "t": seconds}``
 when copy i's episode ends, so SB3 logs ``rollout/ep_rew_mean`` and ``ep_len_mean`` (wrapping it in
-``VecMonitor`` as well is harmless: VecMonitor writes the same keys). Requires ``stable-baselines3`` (imported when this module is)::
+``VecMonitor`` as well is harmless: VecMonitor writes the same keys). Requires ``stable-baselines3``
+(imported when this module is)::
 
     from envs.sb3 import SB3VecEnv
     venv = SB3VecEnv("tianim/ArmReach-v0", num_envs=16, seed=0)
