@@ -168,6 +168,7 @@ def blocked_sort_kernel(real_name: str, dim: int, blocks: int):
     """``blocked_sort`` with ``blocks`` point blocks per copy (compiled per count: see ``NeighbourGrid._sort_scratch``)."""
     t = kernel_types(real_name, dim)
     ti = t.ti
+    task_stride, item_of = task_funcs()
     i32_2 = ti.types.ndarray(dtype=ti.i32, ndim=2)
     i32_3 = ti.types.ndarray(dtype=ti.i32, ndim=3)
 
@@ -191,24 +192,33 @@ def blocked_sort_kernel(real_name: str, dim: int, blocks: int):
 
         Every entry is written by one thread: deterministic for any thread count. hist (B, S, M + 1),
         rsum (B, G) int32 scratch. O(N + S M) work per copy, about (N + S M) / S per thread.
+        Each parallel step is a spread loop (:mod:`tianim.kernels.tasks`): as plain loops of B S indices
+        with ``block_dim=1`` they ran as one task, so the "parallel" steps ran on one thread (1 M points, 2
+        threads: this sort 54-71 ms, slower than the serial sort's 41-62 ms; spread, 26-32 ms).
         """
         B, N = x.shape[0], x.shape[1]
         S, C, G = blocks, hist.shape[2], rsum.shape[1]  # C = M + 1 cells (the inactive cell last)
-        ti.loop_config(block_dim=1)
-        for b, q in ti.ndrange(B, S):
-            for c in range(C):
-                hist[b, q, c] = 0
-            k0, k1 = part(q, N, S)
-            for i in range(k0, k1):
-                hist[b, q, cell[b, i]] += 1
-        ti.loop_config(block_dim=1)
-        for b, g in ti.ndrange(B, G):
-            tot = 0
-            k0, k1 = part(g, C, G)
-            for c in range(k0, k1):
-                for q in ti.static(range(blocks)):  # unrolled: a loop per cell cost more than the cell
-                    tot += hist[b, q, c]
-            rsum[b, g] = tot
+        stride = task_stride(B * S)
+        for w in range(B * S * stride):  # one task per (copy, block): tianim.kernels.tasks
+            bq = item_of(w, stride)
+            if bq >= 0:
+                b, q = bq // S, bq % S
+                for c in range(C):
+                    hist[b, q, c] = 0
+                k0, k1 = part(q, N, S)
+                for i in range(k0, k1):
+                    hist[b, q, cell[b, i]] += 1
+        stride = task_stride(B * G)
+        for w in range(B * G * stride):  # one task per (copy, cell range)
+            bg = item_of(w, stride)
+            if bg >= 0:
+                b, g = bg // G, bg % G
+                tot = 0
+                k0, k1 = part(g, C, G)
+                for c in range(k0, k1):
+                    for q in ti.static(range(blocks)):  # unrolled: a loop per cell cost more than the cell
+                        tot += hist[b, q, c]
+                rsum[b, g] = tot
         ti.loop_config(serialize=True)
         for b in range(B):
             run = 0
@@ -217,25 +227,30 @@ def blocked_sort_kernel(real_name: str, dim: int, blocks: int):
                 rsum[b, g] = run
                 run += cnt
             start[b, C] = run  # the end of the last cell (N)
-        ti.loop_config(block_dim=1)
-        for b, g in ti.ndrange(B, G):
-            run = rsum[b, g]
-            k0, k1 = part(g, C, G)
-            for c in range(k0, k1):
-                start[b, c] = run
-                for q in ti.static(range(blocks)):  # unrolled: a loop per cell cost more than the cell
-                    cnt = hist[b, q, c]
-                    hist[b, q, c] = run
-                    run += cnt
-        ti.loop_config(block_dim=1)
-        for b, q in ti.ndrange(B, S):
-            k0, k1 = part(q, N, S)
-            for i in range(k0, k1):
-                c = cell[b, i]
-                k = hist[b, q, c]
-                hist[b, q, c] = k + 1
-                order[b, k] = i
-                xs[b, k] = x[b, i]
+        for w in range(B * G * stride):
+            bg = item_of(w, stride)
+            if bg >= 0:
+                b, g = bg // G, bg % G
+                run = rsum[b, g]
+                k0, k1 = part(g, C, G)
+                for c in range(k0, k1):
+                    start[b, c] = run
+                    for q in ti.static(range(blocks)):  # unrolled: a loop per cell cost more than the cell
+                        cnt = hist[b, q, c]
+                        hist[b, q, c] = run
+                        run += cnt
+        stride = task_stride(B * S)
+        for w in range(B * S * stride):
+            bq = item_of(w, stride)
+            if bq >= 0:
+                b, q = bq // S, bq % S
+                k0, k1 = part(q, N, S)
+                for i in range(k0, k1):
+                    c = cell[b, i]
+                    k = hist[b, q, c]
+                    hist[b, q, c] = k + 1
+                    order[b, k] = i
+                    xs[b, k] = x[b, i]
 
     return blocked_sort
 
