@@ -127,7 +127,7 @@ def test_serial_and_blocked_sorts_equal_a_stable_argsort_by_cell(dim, dtype):
     grid.build(x, active)
     from tianim.spatial._kernels import blocked_sort_kernel
 
-    _, counting_sort, _ = grid._kernels()
+    _, counting_sort, _, _ = grid._kernels()
     order = np.argsort(grid.cell, axis=1, kind="stable").astype(np.int32)
     start = np.stack([np.searchsorted(np.sort(c), np.arange(grid.n_cells + 2)) for c in grid.cell]).astype(np.int32)
     ref = start, order, np.take_along_axis(x, order[..., None].astype(np.int64), axis=1)
@@ -324,11 +324,17 @@ def test_half_query_gives_each_pair_once_as_brute_force(dim, dtype):
         assert [sorted(nbrs) for nbrs in both] == full[b]
 
 
+@pytest.mark.parametrize("chunk_rows", [None, 97])
 @pytest.mark.parametrize("dim, dtype", [(2, np.float64), (3, np.float32)])
-def test_grid_pairs_are_the_half_query_rows_in_the_grids_order(dim, dtype):
-    """``NeighbourGrid.pairs`` (rows written by sorted position) gives exactly the rows of
-    ``query_half(r).pairs(b)`` (rows by point index), taken in the grid's order: row order[b, s] for
-    s = 0, 1, ...; so the same pairs as brute force (the test above), with inactive and outside points."""
+def test_grid_pairs_are_the_half_query_rows_in_the_grids_order(dim, dtype, chunk_rows, monkeypatch):
+    """``NeighbourGrid.pairs`` (rows written by sorted position, packed chunk by chunk) gives exactly the rows
+    of ``query_half(r).pairs(b)`` (rows by point index), taken in the grid's order: row order[b, s] for
+    s = 0, 1, ...; so the same pairs as brute force (the test above), with inactive and outside points.
+    ``chunk_rows`` 97: many chunks of the packed query, the last one short (1500 = 15 x 97 + 45)."""
+    import tianim.spatial.grid as grid_module
+
+    if chunk_rows is not None:
+        monkeypatch.setattr(grid_module, "PAIR_CHUNK_ROWS", chunk_rows)
     rng = np.random.default_rng(30 + dim)
     B, N, r = 2, 1500, 0.05 if dim == 2 else 0.1
     x = rng.uniform(-0.1, 1.1, (B, N, dim)).astype(dtype)
