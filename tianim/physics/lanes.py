@@ -35,25 +35,32 @@ The state of a call lives in a pool of ndarrays of L-lane vectors:
   fetch it replaced made LLVM merge per-lane pointers and load each lane on its own: 1.4x slower).
   A lane whose neighbour row lies outside ``[0, ny)`` adds nothing (a select, no branch);
 * one parallel-loop index is a row of packs (``nx`` packs): one integer division per row, none per pack.
-  The row is swept offset by offset (as the vectorising numba kernel of the cloth bench sweeps its row
-  views): the force buffer of the row starts at ``m g`` (minus medium damping), then for each stencil
-  offset, in :data:`GRID_STENCIL` order, one branch-free pass over the columns that have that neighbour
-  (its parameters, row mask and pack offset loaded once per row) adds the spring force; a last pass
-  updates and stores. Against one pass per pack summing the 12 offsets in a runtime loop (a column test
-  per offset, the offset's parameters reloaded per pack) it ran 1.02-1.09x faster on one thread
-  (64^2-256^2) and 1.08x on two (256^2, parallel path), bit-identical, and compiles faster;
+  The row is swept pack by pack, each pack's force in registers: it starts at ``m g`` (minus medium
+  damping), then the 12 offsets of :data:`GRID_STENCIL`, in its order, unrolled at compile time (each
+  offset's parameters, row mask and pack offset computed once per row; a neighbour column outside the
+  grid skipped by a select, no branch), then the pack is updated and stored: no force buffer, so the only
+  stores are the pack's new state. It replaced a sweep offset by offset over the row (as the vectorising
+  numba kernel of the cloth bench sweeps its row views), which kept the force in a buffer: a load and a
+  store per component and offset, and after each store LLVM reloads every ndarray's pointer and shape (they
+  may alias). Same-run A/B on a 2-vCPU AVX2 host (8 lanes, medians, another process on the second core):
+  1.35-1.41x faster on one thread at 128x128, 1.14-1.23x at 256x256, bit-identical. (Halving the square
+  roots, each spring evaluated once and its force reused with the opposite sign, was not faster in a
+  stripped-down copy: the kernel is bound by its loads, not its divisions.) The unrolled stencil makes the
+  substep body large, so the parallel path runs :data:`SUBSTEPS_PER_LAUNCH` = 2 substeps per launch;
 * every operation is that of :func:`tianim.physics.kernels.substep_funcs` in the same order (per pack the
   same terms summed in the same order), so the results are bit-identical to the other layouts (tested),
   for any thread count and batch.
 
-Where the time goes. The inner column loop is straight-line vector code: one vector load per neighbour
-component, one square root and one division per L lanes, no branch and no division of integers. Against the
-cloth bench's vectorising numba kernel (16 float32 lanes in zmm registers, one division per spring, ``s / |d|``,
+Where the time goes. Per pack and offset the body is straight-line vector code: one vector load per
+neighbour component, one square root and one division per L lanes, no branch and no division of integers.
+Against the cloth bench's vectorising numba kernel (its row views, one division per spring, ``s / |d|``,
 where tianim's arithmetic, ``1 / |d|`` then a product per component, is kept for bit-identity with the other
-layouts), one thread of this layout ran about what one thread of numba's does on an AVX-512 host (128x128:
-5.6 ns per particle-substep); on a 2-vCPU AVX2 host (8 lanes) about 0.65x (33 against 21 ns per
-particle-substep at 128x128), and the gap grows with the grid (0.36-0.44x on two threads at 256x256 and
-512x512, where numba's row views stream and the packs' neighbour rows do not).
+layouts): on the 2-vCPU AVX2 host at 128x128, one thread 22.8 ns per particle-substep against numba's 18.9
+(0.83x; 0.6x before the per-pack body); on two threads numba runs 10.4 ns and this layout does not halve its
+time (its parallel path pays Taichi's barrier per substep, workers that sleep between loops, where numba's
+OpenMP workers spin: a numba ``prange`` call costs 5 us there, a Taichi parallel loop about 30 us), so two
+threads give about 0.45x numba's. An earlier AVX-512 host (16 lanes, the offset-by-offset sweep) ran one
+thread at about numba's rate (128x128: 5.6 ns per particle-substep).
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
 the pool, and unpacks. Up to :data:`SERIAL_MAX_PACKS` (batch x band rows x nx) one thread runs every
@@ -79,8 +86,10 @@ beside it one run fell to 0.15x (128x128) and 0.47x (256x256) the serial path, a
 as a descheduled worker stalls the others for a time slice, so ``"auto"`` (training runs several
 processes per machine) takes the serial path up to :data:`SERIAL_MAX_PACKS` and the parallel path
 above it; on a GPU always the parallel path.
-The stencil loop and the serial path's substep loop are runtime loops (the source buffer a runtime
-value: one substep body to compile) so that compiling stays short. The pool grows by doubling (one compile
+The serial and ticket paths' substep loops are runtime loops (the source buffer a runtime value: one
+substep body to compile) and the parallel path unrolls 2 substeps, so that compiling stays short (128x128,
+cold: serial 1.4 s, parallel 3.5 s, against 2.5 s and 5.4 s for the offset-by-offset sweep with 8 substeps
+per launch). The pool grows by doubling (one compile
 of the kernels per growth); the kernels take sizes as arguments, so a second scene or another batch
 size compiles nothing new.
 """
@@ -112,7 +121,7 @@ AUTO_MAX_BYTES = 32
 #: 1.9k); their cold compile 2.1 s against 1.1 s (64x64, damping and a ground).
 LAYOUT_MAX_BYTES = 64
 #: Substeps per launch of the main kernel (even: the ping-pong ends in the first buffer).
-SUBSTEPS_PER_LAUNCH = 8  # 16 ran ~2% faster at 128x128 but compiled 17 s cold (0.9 s per unrolled substep)
+SUBSTEPS_PER_LAUNCH = 2  # the per-pack body unrolls the stencil: 8 per launch compiled 29 s cold (128x128), 2 in 3.5 s, as fast
 #: Most packs (batch x band rows x nx: L particles each) that "auto" runs on one thread, every substep in
 #: one launch: up to it a barrier per substep (about 0.14 ms on 2 vCPUs) costs more than the second thread
 #: gives. In packs, not particles, since a substep's time follows the packs (one vector op per pack): on a
@@ -196,18 +205,14 @@ def supports(model, dtype, lanes="auto") -> bool:
 
 class _Pool:
     """The ndarrays of one (float type, dimension): state (4 D, cap) lanes [x, v, xs, vs components],
-    mass (3, cap) lanes [mass, inverse mass, 1 free / 0 pinned], force (D, cap) lanes [the force sum of a
-    substep], prm [gravity, rho, k, rest, damp], off [(d_col, d_row) of :data:`GRID_STENCIL`]. Ndarrays,
-    not fields: the run kernels compile with vector code generation (:mod:`tianim.kernels.simd`)."""
+    mass (3, cap) lanes [mass, inverse mass, 1 free / 0 pinned], prm [gravity, rho, k, rest, damp] (a pack's
+    force sum stays in registers). Ndarrays, not fields: the run kernels compile with vector code generation (:mod:`tianim.kernels.simd`)."""
 
     def __init__(self, ti, real, dim, lanes, capacity):
         lane_vec = ti.types.vector(lanes, real)
         self.state = ti.ndarray(lane_vec, (4 * dim, capacity))
         self.mass = ti.ndarray(lane_vec, (3, capacity))
-        self.force = ti.ndarray(lane_vec, (dim, capacity))
         self.prm = ti.ndarray(real, dim + 1 + 3 * _N_OFF)
-        self.off = ti.ndarray(ti.i32, 2 * _N_OFF)
-        self.off.from_numpy(np.array([a for dc, dr, _ in GRID_STENCIL for a in (dc, dr)], dtype=np.int32))
         self.tickets = ti.ndarray(ti.i32, 2 * TICKET_LINE)  # the ticket path's counters: taken, rows finished
         self.capacity = capacity
 
@@ -331,69 +336,74 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
         return f
 
     @ti.func
-    def substep_row(S: ti.template(), M: ti.template(), prm: ti.template(), off: ti.template(), coll: ti.template(),
-                    F: ti.template(), src, q, nx, ny, H, dt):
-        """One substep of pack row q, stencil offset by offset: for each offset of GRID_STENCIL (in its order)
-        one branch-free pass over the columns that have that neighbour, adding to the force buffer F; then
-        one pass that updates and stores. Every pack sums the same terms in the same order as
-        :func:`substep` (same bits); the offset's parameters and the row mask are loaded once per row."""
+    def substep_row(S: ti.template(), M: ti.template(), prm: ti.template(), coll: ti.template(), src, q, nx, ny, H,
+                    dt):
+        """One substep of pack row q, pack by pack: each pack's force starts at m g (minus medium damping) and
+        adds the 12 terms of GRID_STENCIL in its order, in registers (the stencil unrolled at compile time; each
+        offset's parameters, row mask and pack offset computed once per row), then the pack is updated and
+        stored. The same operations in the same order as :func:`substep` (same bits): a term whose neighbour
+        column lies outside the grid is skipped (``select(ok, f + t, f)``), one whose neighbour row does adds
+        zero, as there."""
         b = q // H
         r = q - b * H
         k0 = b * (H + 4) * nx + (r + 2) * nx  # pack_index of column 0
         xs = src * 2 * dim
         zero = lane_vec(0)
+        lane_row = ti.Vector([lane * H for lane in range(L)])
+        ko = [prm[h + o] for o in ti.static(range(_N_OFF))]
+        lo = [prm[h + _N_OFF + o] for o in ti.static(range(_N_OFF))]
+        do = [prm[h + 2 * _N_OFF + o] for o in ti.static(range(_N_OFF))]
+        dj = [GRID_STENCIL[o][1] * nx + GRID_STENCIL[o][0] for o in ti.static(range(_N_OFF))]
+        valid = [(lane_row + r + GRID_STENCIL[o][1] >= 0) & (lane_row + r + GRID_STENCIL[o][1] < ny)
+                 for o in ti.static(range(_N_OFF))]
+        g = [prm[a] for a in ti.static(range(dim))]
+        rho = prm[dim]
         for c in range(nx):
             kp = k0 + c
             m = M[0, kp]
-            f = [m * prm[a] for a in ti.static(range(dim))]  # m g
+            xi = [S[xs + a, kp] for a in ti.static(range(dim))]
+            vi = [S[xs + dim + a, kp] for a in ti.static(range(dim))]
+            f = [m * g[a] for a in ti.static(range(dim))]  # m g
             if ti.static(medium_damping):
                 for a in ti.static(range(dim)):
-                    f[a] = f[a] - prm[dim] * S[xs + dim + a, kp]
-            for a in ti.static(range(dim)):
-                F[a, kp] = f[a]
-        lane_row = ti.Vector([lane * H for lane in range(L)])
-        for o in range(_N_OFF):
-            dc = off[2 * o]
-            dr = off[2 * o + 1]
-            g_row = lane_row + r + dr
-            valid = (g_row >= 0) & (g_row < ny)
-            ko = prm[h + o]
-            lo = prm[h + _N_OFF + o]
-            do = prm[h + 2 * _N_OFF + o]
-            dj = dr * nx + dc  # the neighbour pack (a ghost pack across a band edge)
-            for c in range(ti.max(0, -dc), ti.min(nx, nx - dc)):
-                kp = k0 + c
-                j = kp + dj
-                d = [S[xs + a, kp] - S[xs + a, j] for a in ti.static(range(dim))]
+                    f[a] = f[a] - rho * vi[a]
+            for o in ti.static(range(_N_OFF)):
+                dc = ti.static(GRID_STENCIL[o][0])
+                j = kp + dj[o]  # the neighbour pack (a ghost pack across a band edge)
+                d = [xi[a] - S[xs + a, j] for a in ti.static(range(dim))]
                 len2 = d[0] * d[0]
                 for a in ti.static(range(1, dim)):
                     len2 += d[a] * d[a]
                 length = ti.sqrt(len2)
                 inv_len = ti.select(length > 0, 1 / length, zero)
-                sv = -ko * (length - lo)
+                sv = -ko[o] * (length - lo[o])
                 nrm = [d[a] * inv_len for a in ti.static(range(dim))]
                 dot = zero
                 if ti.static(spring_damping):
-                    dv = [S[xs + dim + a, kp] - S[xs + dim + a, j] for a in ti.static(range(dim))]
+                    dv = [vi[a] - S[xs + dim + a, j] for a in ti.static(range(dim))]
                     dot = dv[0] * nrm[0]
                     for a in ti.static(range(1, dim)):
                         dot += dv[a] * nrm[a]
-                for a in ti.static(range(dim)):  # a load and a store (`+=` on a field would be an atomic add)
-                    F[a, kp] = F[a, kp] + ti.select(valid, spring_force(sv, nrm[a], do, dot), zero)
-        for c in range(nx):
-            update(S, M, prm, coll, F, src, k0 + c, r, nx, H, dt)
+                for a in ti.static(range(dim)):
+                    t = ti.select(valid[o], spring_force(sv, nrm[a], do[o], dot), zero)
+                    if ti.static(dc == 0):
+                        f[a] = f[a] + t
+                    else:
+                        f[a] = ti.select((c + dc >= 0) & (c + dc < nx), f[a] + t, f[a])
+            update(S, M, prm, coll, f, src, kp, r, nx, H, dt)
 
     @ti.func
-    def update(S: ti.template(), M: ti.template(), prm: ti.template(), coll: ti.template(), F: ti.template(),
+    def update(S: ti.template(), M: ti.template(), prm: ti.template(), coll: ti.template(), f: ti.template(),
                src, kp, r, nx, H, dt):
-        """The velocity and position update of pack kp from its summed force F, contacts, ghosts."""
+        """The velocity and position update of pack kp from its summed force f (dim lane vectors), contacts,
+        ghosts."""
         xs = src * 2 * dim
         xd = (1 - src) * 2 * dim
         zero = lane_vec(0)
         free = M[2, kp] > 0
         im = M[1, kp]
         for a in ti.static(range(dim)):
-            vn = S[xs + dim + a, kp] + dt * ti.select(free, F[a, kp] * im, zero)
+            vn = S[xs + dim + a, kp] + dt * ti.select(free, f[a] * im, zero)
             S[xd + dim + a, kp] = vn
             S[xd + a, kp] = S[xs + a, kp] + dt * vn
         if ti.static(colliders):  # the L lanes at once, on the stored values (exact: a float32 store and load)
@@ -406,8 +416,8 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     def make_run(nsub):
         @ti.kernel
-        def run(S: lanes_arr, M: lanes_arr, prm: t.real_arr, off: t.int_arr, coll: t.real2_arr,
-                F: lanes_arr, I: t.int_arr, dt: real, workers: ti.i32):
+        def run(S: lanes_arr, M: lanes_arr, prm: t.real_arr, coll: t.real2_arr, I: t.int_arr, dt: real,
+                workers: ti.i32):
             rows, nx, ny, H = I[I_ROWS], I[I_NX], I[I_NY], I[I_BAND]
             stride = task_stride(workers)
             for s in ti.static(range(nsub)):  # each top-level loop ends in a barrier
@@ -415,7 +425,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
                     q = item_of(w, stride)
                     if q >= 0:
                         while q < rows:  # rows w, w + workers, ...
-                            substep_row(S, M, prm, off, coll, F, s % 2, q, nx, ny, H, dt)
+                            substep_row(S, M, prm, coll, s % 2, q, nx, ny, H, dt)
                             q += workers
 
         return vector_codegen(run)
@@ -423,21 +433,21 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
     runs = {n: make_run(n) for n in (1, 2, SUBSTEPS_PER_LAUNCH)}
 
     @ti.kernel
-    def run_serial(S: lanes_arr, M: lanes_arr, prm: t.real_arr, off: t.int_arr, coll: t.real2_arr,
-                   F: lanes_arr, I: t.int_arr, dt: real, nsub: ti.i32):
+    def run_serial(S: lanes_arr, M: lanes_arr, prm: t.real_arr, coll: t.real2_arr, I: t.int_arr, dt: real,
+                   nsub: ti.i32):
         # One thread, every substep of the call in one launch: no barriers, no worker wake-ups; the substep
         # loop is a runtime loop and the source buffer a runtime value (one substep body to compile).
         rows, nx, ny, H = I[I_ROWS], I[I_NX], I[I_NY], I[I_BAND]
         ti.loop_config(serialize=True)
         for s in range(nsub):
             for q in range(rows):
-                substep_row(S, M, prm, off, coll, F, s % 2, q, nx, ny, H, dt)
+                substep_row(S, M, prm, coll, s % 2, q, nx, ny, H, dt)
 
     runs["serial"] = vector_codegen(run_serial)
 
     @ti.kernel
-    def run_tickets(S: lanes_arr, M: lanes_arr, prm: t.real_arr, off: t.int_arr, coll: t.real2_arr,
-                    F: lanes_arr, I: t.int_arr, dt: real, nsub: ti.i32, workers: ti.i32, C: t.int_arr):
+    def run_tickets(S: lanes_arr, M: lanes_arr, prm: t.real_arr, coll: t.real2_arr, I: t.int_arr, dt: real,
+                    nsub: ti.i32, workers: ti.i32, C: t.int_arr):
         # Every substep of the call in one launch on `workers` tasks. Ticket g
         # is pack row g % rows of substep g // rows; the workers take tickets in order from C[0] and start a
         # ticket's row once every row of the previous substep is done (C[TICKET_LINE] counts finished rows).
@@ -455,7 +465,7 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
                     s = g // rows
                     while ti.atomic_add(C[TICKET_LINE], 0) < s * rows:  # the previous substep's rows
                         pass
-                    substep_row(S, M, prm, off, coll, F, s % 2, g - s * rows, nx, ny, H, dt)
+                    substep_row(S, M, prm, coll, s % 2, g - s * rows, nx, ny, H, dt)
                     ti.atomic_add(C[TICKET_LINE], 1)
                     g = ti.atomic_add(C[0], 1)
 
@@ -487,12 +497,12 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     if path == "tickets" and not cpu:
         raise ValueError(f"layout='lanes_tickets' spins on counters shared by CPU threads; got arch "
                          f"{current_arch()!r}; use layout='lanes' or 'lanes_parallel' there")
-    S, M, prm, off = pool.state, pool.mass, pool.prm, pool.off
+    S, M, prm = pool.state, pool.mass, pool.prm
     _, I = pack_params(state.dtype, model.dim, nx=g.nx, ny=g.ny, band=H, rows=state.batch * H,
                        src=substeps % 2)  # src: the buffer the last substep writes
     pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], I)
     dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
-    args = (S, M, prm, off, data["coll"], pool.force, I, dt)
+    args = (S, M, prm, data["coll"], I, dt)
     if path == "auto":  # on a GPU always parallel: one GPU thread would crawl
         path = "serial" if cpu and state.batch * H * g.nx <= SERIAL_MAX_PACKS else "parallel"
     if path == "serial":
