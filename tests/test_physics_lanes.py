@@ -80,6 +80,16 @@ def test_host_lanes_equal_the_substep_layout_bit_for_bit(dtype, lanes_mode):
     _lanes_equal_the_substep_layout(dtype, lanes_mode, ["auto"], substeps=5)
 
 
+@pytest.mark.parametrize("patience", [0, 3])
+def test_ticket_workers_that_leave_early_change_nothing(patience, monkeypatch):
+    """The ticket path with workers that leave their launch after ``patience`` looks without a ticket ready
+    (0: at the first; the default waits about 0.1 ms): whoever stays runs the rest, and the result is the
+    substep layout's, bit for bit, for a call of many substeps over few rows (most looks find the previous
+    substep unfinished)."""
+    monkeypatch.setattr(lanes, "TICKET_PATIENCE", patience)
+    _lanes_equal_the_substep_layout(np.float32, "lanes_tickets", ["auto"], substeps=23)
+
+
 @pytest.mark.slow  # compiles the layout's kernels for every lane count (minutes cold)
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 def test_every_lane_count_equals_the_substep_layout_bit_for_bit(dtype, lanes_mode):

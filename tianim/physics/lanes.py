@@ -78,7 +78,9 @@ w + T, ... and ends each substep in Taichi's barrier between loops (its workers 
 gently when other processes share the cores). The ticket path (``"tickets"``, opt-in) puts every substep
 of the call in one launch: a worker takes the next (substep, row) ticket from an atomic counter and starts
 it once every row of the previous substep is done (a second counter on its own cache line,
-:data:`TICKET_LINE`); no worker waits on a ticket not yet taken, so it cannot deadlock. Measured on an idle
+:data:`TICKET_LINE`); no worker waits on a ticket not yet taken, so it cannot deadlock, and a worker that
+finds no ticket ready for :data:`TICKET_PATIENCE` looks in a row leaves the launch holding none (the others
+finish the call; at worst one worker runs the rest alone). Measured on an idle
 2-vCPU AVX2 host against the serial path (interleaved rounds, medians): parallel 1.36x at 128x128, 1.13x at
 256x256, 1.2x at 512x512, 0.55x at 64x64; tickets 1.47-1.7x from 128x128 on (1.45-1.48x at 256x256 and
 512x512 on an AVX-512 host, 0.77x at 128x128 there). But the ticket workers spin: with two busy processes
@@ -132,6 +134,10 @@ SERIAL_MAX_PACKS = 1 << 10
 #: Offset [int32] of the ticket path's finished-rows counter from its tickets-taken counter: 64 bytes, one
 #: cache line each, so the workers polling one do not slow the one taking a ticket.
 TICKET_LINE = 16
+#: Looks at the next ticket without finding it ready after which a worker of the ticket path leaves its launch
+#: (holding no ticket: the others finish the call). About 0.1 ms of spinning at 50 ns a look (a locked add on a
+#: cache line the other workers write): longer than a row takes, shorter than a time slice.
+TICKET_PATIENCE = 2000
 #: CPU archs: where the ticket path can run (threads that each take one task and spin on shared counters),
 #: where "auto" may take the serial path and the parallel path has one worker per thread.
 CPU_ARCHES = ("x64", "arm64")
@@ -447,12 +453,16 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     @ti.kernel
     def run_tickets(S: lanes_arr, M: lanes_arr, prm: t.real_arr, coll: t.real2_arr, I: t.int_arr, dt: real,
-                    nsub: ti.i32, workers: ti.i32, C: t.int_arr):
-        # Every substep of the call in one launch on `workers` tasks. Ticket g
-        # is pack row g % rows of substep g // rows; the workers take tickets in order from C[0] and start a
-        # ticket's row once every row of the previous substep is done (C[TICKET_LINE] counts finished rows).
-        # No worker ever waits on a ticket not yet taken, so this is deadlock-free however the tasks are
-        # scheduled: a worker alone takes every ticket in order.
+                    nsub: ti.i32, workers: ti.i32, patience: ti.i32, C: t.int_arr):
+        # Every substep of the call in one launch on `workers` tasks. Ticket g is pack row g % rows of substep
+        # g // rows; C[0] counts the tickets taken, C[TICKET_LINE] the rows finished. A worker looks at the next
+        # ticket and takes it (an atomic add: it may get a later one) once every row of its previous substep is
+        # done; then it waits, if it must, for the previous substep of the ticket it got, runs the row and
+        # counts it. Deadlock-free however the tasks are scheduled: no worker waits on a ticket not yet taken,
+        # and a worker alone takes every ticket in order. A worker that looks `patience` times in a row without
+        # finding a ticket ready (another worker holds the rows it needs, or the tickets are all taken) leaves the
+        # launch holding no ticket: the rest finish without it, so a worker descheduled by another process
+        # stalls the others for at most that long instead of a time slice of spinning.
         rows, nx, ny, H = I[I_ROWS], I[I_NX], I[I_NY], I[I_BAND]
         C[0] = 0
         C[TICKET_LINE] = 0
@@ -460,14 +470,22 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
         stride = task_stride(workers)
         for w in range(workers * stride):  # one task per worker (tianim.kernels.tasks)
             if item_of(w, stride) >= 0:
-                g = ti.atomic_add(C[0], 1)
-                while g < total:
-                    s = g // rows
-                    while ti.atomic_add(C[TICKET_LINE], 0) < s * rows:  # the previous substep's rows
-                        pass
-                    substep_row(S, M, prm, coll, s % 2, g - s * rows, nx, ny, H, dt)
-                    ti.atomic_add(C[TICKET_LINE], 1)
-                    g = ti.atomic_add(C[0], 1)
+                idle = 0
+                while idle <= patience:
+                    g = ti.atomic_add(C[0], 0)
+                    if g >= total:
+                        idle = patience + 1  # every ticket taken: leave
+                    elif ti.atomic_add(C[TICKET_LINE], 0) >= (g // rows) * rows:
+                        g = ti.atomic_add(C[0], 1)
+                        if g < total:
+                            s = g // rows
+                            while ti.atomic_add(C[TICKET_LINE], 0) < s * rows:  # the previous substep's rows
+                                pass
+                            substep_row(S, M, prm, coll, s % 2, g - s * rows, nx, ny, H, dt)
+                            ti.atomic_add(C[TICKET_LINE], 1)
+                        idle = 0
+                    else:
+                        idle += 1
 
     runs["tickets"] = vector_codegen(run_tickets)
     return pack, runs, unpack
@@ -511,7 +529,7 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
         return
     workers = max(1, min(num_threads() or 1, state.batch * H)) if cpu else state.batch * H  # GPU: a row each
     if path == "tickets":
-        runs["tickets"](*args, substeps, workers, pool.tickets)
+        runs["tickets"](*args, substeps, workers, TICKET_PATIENCE, pool.tickets)
         unpack(S, state.x, state.v, I)
         return
     for _ in range(substeps // SUBSTEPS_PER_LAUNCH):
