@@ -133,6 +133,30 @@ def test_bad_lane_counts_are_refused_and_change_nothing():
     assert tp.SymplecticEuler().options() == {"layout": "auto"}
 
 
+@pytest.mark.parametrize("threads, batch, path", [(2, 1, "serial"), (2, 3, "tickets"), (1, 3, "serial")])
+def test_auto_path_is_one_thread_for_small_calls_and_tickets_above(threads, batch, path, monkeypatch):
+    """``layout="lanes"`` on a CPU: one thread up to SERIAL_MAX_PACKS packs (a 64 x 64 cloth, 8 lanes: 512)
+    or when there is one thread; the ticket path above (3 copies: 1,536 packs), never the parallel loops."""
+    called = []
+    real = lanes.lane_kernels
+
+    class Spy(dict):
+        def __getitem__(self, key):
+            called.append(key)
+            return dict.__getitem__(self, key)
+
+    def spied(*args):
+        pack, runs, unpack = real(*args)
+        return pack, Spy(runs), unpack
+
+    monkeypatch.setattr(lanes, "lane_kernels", spied)
+    monkeypatch.setattr(lanes, "num_threads", lambda: threads)
+    model = tp.cloth(64, 64)
+    s = loaded(model, batch, 3)
+    tp.step(model, s, 1e-4, substeps=4, layout="lanes", lanes=8, check=False)
+    assert called == [path]
+
+
 def test_auto_chooses_lanes_for_large_grids_under_symplectic_euler():
     big, rope = tp.cloth(32, 32), tp.rope(2000)
     assert tp.choose_layout(big, 1, "symplectic_euler", 16) == "lanes"

@@ -14,8 +14,9 @@ tianim before anything is timed, then timed in the same process:
 tianim runs as a user would call it (``tp.step``, layout ``"auto"``, watchdog on: the ``"lanes"``
 layout of :mod:`tianim.physics.lanes` from 32x32 up); ``substep_layout_substeps_per_s`` is the same
 call with ``layout="substep"`` (the one-particle-per-thread kernel it replaced) and
-``tickets_substeps_per_s`` with ``layout="lanes_tickets"`` (every thread in one launch: opt-in, as it spins
-and slows badly when other processes compete for the cores; checked bit-identical to ``"auto"`` first;
+``tickets_substeps_per_s`` with ``layout="lanes_tickets"`` (every thread in one launch, rows taken from a
+counter: what ``"auto"`` runs from 1,024 packs on, so at 128x128 and above it is the same path; checked
+bit-identical to ``"auto"`` first;
 ``tickets_speedup_vs_numba_vector`` compares it with numba on the same threads). The candidates are
 timed in turn within each round (medians over rounds), so load from other processes slows them alike.
 
@@ -240,7 +241,7 @@ def run(sizes=(128, 256, 512), repeats=5, numpy_max=256) -> dict:
             "substeps_per_s": k / t["tianim"],
             "spring_updates_per_s": k / t["tianim"] * model.n_springs,
             "substep_layout_substeps_per_s": k / t["tianim_substep"],
-            "tickets_substeps_per_s": k / t["tianim_tickets"],  # opt-in: every thread (tianim.physics.lanes)
+            "tickets_substeps_per_s": k / t["tianim_tickets"],  # every thread (tianim.physics.lanes)
         }
         row["bandwidth_fraction"] = row["substeps_per_s"] * model.n_particles * 4 * model.dim * 4 / bandwidth
         row["numpy_substeps_per_s"] = kr / t["numpy"]

@@ -35,9 +35,11 @@ class _Explicit(Solver):
     layout : str
         ``"auto"`` (:func:`choose_layout`), ``"serial"``, ``"frame"``, ``"substep"`` or ``"lanes"``
         (symplectic Euler on a cloth grid: :mod:`tianim.physics.lanes`; ``"lanes_serial"`` /
-        ``"lanes_parallel"``: its one-thread or its parallel path, instead of the choice from the
-        scene size; ``"lanes_tickets"``: every thread in one launch, opt-in: 1.5-1.7x the one-thread
-        path on an idle 2-core machine, 0.15-1.0x when other processes compete for the cores, CPU only);
+        ``"lanes_parallel"``: its one-thread path or its parallel loops (one barrier per substep: the GPU's
+        path), instead of the choice from the scene size; ``"lanes_tickets"``: every thread in one launch,
+        rows taken from a counter, what ``"lanes"`` runs on a CPU above one thread's scenes: 1.2-1.7x the
+        one-thread path on an idle 2-core machine, 0.9-1.1x when other processes compete for the cores, CPU
+        only);
         all give bit-identical results. With passes (below), ``"serial"`` and ``"lanes_serial"`` run
         the passes' loops serially, ``"substep"``, ``"lanes_parallel"`` and ``"lanes_tickets"`` in
         parallel; otherwise the scene size decides.

@@ -56,16 +56,17 @@ neighbour component, one square root and one division per L lanes, no branch and
 Against the cloth bench's vectorising numba kernel (its row views, one division per spring, ``s / |d|``,
 where tianim's arithmetic, ``1 / |d|`` then a product per component, is kept for bit-identity with the other
 layouts): on the 2-vCPU AVX2 host at 128x128, one thread 22.8 ns per particle-substep against numba's 18.9
-(0.83x; 0.6x before the per-pack body); on two threads numba runs 10.4 ns and this layout does not halve its
-time (its parallel path pays Taichi's barrier per substep, workers that sleep between loops, where numba's
-OpenMP workers spin: a numba ``prange`` call costs 5 us there, a Taichi parallel loop about 30 us), so two
-threads give about 0.45x numba's. An earlier AVX-512 host (16 lanes, the offset-by-offset sweep) ran one
+(0.83x; 0.6x before the per-pack body). On two threads (a quiet run) numba's OpenMP workers spin between its
+``prange`` calls (5 us a call there, a Taichi parallel loop about 30 us): numba 12.1 ns, the ticket path
+13.9 ns (0.87x; 256x256: 13.0 against 10.2 ns, 0.78x; 512x512: 0.39x, where numba's row views stream from
+memory and the packs' neighbour rows do not), the parallel path 22.9 ns (0.53x). An earlier AVX-512 host (16 lanes, the offset-by-offset sweep) ran one
 thread at about numba's rate (128x128: 5.6 ns per particle-substep).
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
 the pool, and unpacks. Up to :data:`SERIAL_MAX_PACKS` (batch x band rows x nx) one thread runs every
-substep of the call in one launch (path ``"serial"``, a runtime loop over the substeps); above it (and on a
-GPU), :data:`SUBSTEPS_PER_LAUNCH` substeps per launch, one parallel loop each (path ``"parallel"``). The
+substep of the call in one launch (path ``"serial"``, a runtime loop over the substeps); above it every
+thread runs every substep in one launch, taking rows from a counter (path ``"tickets"``); on a GPU,
+:data:`SUBSTEPS_PER_LAUNCH` substeps per launch, one parallel loop each (path ``"parallel"``). The
 solver layouts ``"lanes_serial"`` / ``"lanes_parallel"`` / ``"lanes_tickets"`` force a path
 (``launch_lanes(path=)``).
 
@@ -75,19 +76,21 @@ indices (``cpu_block_dim_adaptive`` overrides ``ti.loop_config(block_dim=)``), s
 found). Both parallel paths therefore run T tasks, T = the threads (at most the rows), each one loop index
 of :mod:`tianim.kernels.tasks`. The parallel path gives worker w the rows w,
 w + T, ... and ends each substep in Taichi's barrier between loops (its workers sleep there, so it degrades
-gently when other processes share the cores). The ticket path (``"tickets"``, opt-in) puts every substep
+gently when other processes share the cores). The ticket path (``"tickets"``) puts every substep
 of the call in one launch: a worker takes the next (substep, row) ticket from an atomic counter and starts
 it once every row of the previous substep is done (a second counter on its own cache line,
 :data:`TICKET_LINE`); no worker waits on a ticket not yet taken, so it cannot deadlock, and a worker that
 finds no ticket ready for :data:`TICKET_PATIENCE` looks in a row leaves the launch holding none (the others
 finish the call; at worst one worker runs the rest alone). Measured on an idle
-2-vCPU AVX2 host against the serial path (interleaved rounds, medians): parallel 1.36x at 128x128, 1.13x at
-256x256, 1.2x at 512x512, 0.55x at 64x64; tickets 1.47-1.7x from 128x128 on (1.45-1.48x at 256x256 and
-512x512 on an AVX-512 host, 0.77x at 128x128 there). But the ticket workers spin: with two busy processes
-beside it one run fell to 0.15x (128x128) and 0.47x (256x256) the serial path, another to 0.8x and 1.0x,
-as a descheduled worker stalls the others for a time slice, so ``"auto"`` (training runs several
-processes per machine) takes the serial path up to :data:`SERIAL_MAX_PACKS` and the parallel path
-above it; on a GPU always the parallel path.
+2-vCPU AVX2 host against the serial path (interleaved rounds, medians), with the per-pack body: tickets
+1.66x at 128x128, 1.71x at 256x256, 1.24x at 512x512; the parallel path 1.0x, 1.33x and 1.18x (its barrier
+per substep: Taichi's workers sleep between loops, about 30 us a loop there). With busy processes beside it
+(``while True: pass``), the patience keeps the ticket path near the serial path: two of them, 1.10x
+(128x128) and 0.95x (256x256), the worst round 0.89x; one, 0.94x and 1.0x, the worst round 0.63x; the
+parallel path 0.68-0.94x. (Before the patience, with two busy processes, one run fell to 0.15x and 0.47x.)
+So ``"auto"`` takes the serial path up to :data:`SERIAL_MAX_PACKS` (tickets there: 0.91x at 32x32, 1.06-1.11x
+at 48x48-64x64, 1.34x for 8 copies of 32x32: too close to pay for spinning threads) and the ticket path above
+it; the parallel path stays for GPUs and as ``layout="lanes_parallel"``.
 The serial and ticket paths' substep loops are runtime loops (the source buffer a runtime value: one
 substep body to compile) and the parallel path unrolls 2 substeps, so that compiling stays short (128x128,
 cold: serial 1.4 s, parallel 3.5 s, against 2.5 s and 5.4 s for the offset-by-offset sweep with 8 substeps
@@ -501,7 +504,8 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     ``model.kernel_data(state.dtype)``. ``path``: ``"serial"`` (one thread, the whole call in one
     launch), ``"parallel"`` (parallel loops, :data:`SUBSTEPS_PER_LAUNCH` substeps per launch),
     ``"tickets"`` (every substep in one launch on all threads, rows taken from a counter; CPU only) or
-    ``"auto"`` (serial up to :data:`SERIAL_MAX_PACKS` packs on a CPU, else parallel). ``lanes``:
+    ``"auto"`` (on a CPU serial up to :data:`SERIAL_MAX_PACKS` packs or with one thread, else tickets; on a
+    GPU parallel). ``lanes``:
     particles per vector (:func:`lanes_for`; "auto": from the host CPU). Every path and lane count is
     bit-identical."""
     g = model.grid
@@ -521,8 +525,13 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
     pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], I)
     dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
     args = (S, M, prm, data["coll"], I, dt)
-    if path == "auto":  # on a GPU always parallel: one GPU thread would crawl
-        path = "serial" if cpu and state.batch * H * g.nx <= SERIAL_MAX_PACKS else "parallel"
+    if path == "auto":  # CPU: one thread up to SERIAL_MAX_PACKS, every thread on tickets above; GPU: parallel
+        if not cpu:
+            path = "parallel"  # one GPU thread would crawl
+        elif state.batch * H * g.nx <= SERIAL_MAX_PACKS or (num_threads() or 1) < 2:
+            path = "serial"
+        else:
+            path = "tickets"
     if path == "serial":
         runs["serial"](*args, substeps)
         unpack(S, state.x, state.v, I)
