@@ -59,8 +59,9 @@ layouts): on the 2-vCPU AVX2 host at 128x128, one thread 22.8 ns per particle-su
 (0.83x; 0.6x before the per-pack body). On two threads (a quiet run) numba's OpenMP workers spin between its
 ``prange`` calls (5 us a call there, a Taichi parallel loop about 30 us): numba 12.1 ns, the ticket path
 13.9 ns (0.87x; 256x256: 13.0 against 10.2 ns, 0.78x; 512x512: 0.39x, where numba's row views stream from
-memory and the packs' neighbour rows do not), the parallel path 22.9 ns (0.53x). An earlier AVX-512 host (16 lanes, the offset-by-offset sweep) ran one
-thread at about numba's rate (128x128: 5.6 ns per particle-substep).
+memory and the packs' neighbour rows do not), the parallel path 22.9 ns (0.53x). An earlier AVX-512 host
+(16 lanes, the offset-by-offset sweep) ran one thread at about numba's rate (128x128: 5.6 ns per
+particle-substep).
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
 the pool, and unpacks. Up to :data:`SERIAL_MAX_PACKS` (batch x band rows x nx) one thread runs every
@@ -126,7 +127,9 @@ AUTO_MAX_BYTES = 32
 #: 1.9k); their cold compile 2.1 s against 1.1 s (64x64, damping and a ground).
 LAYOUT_MAX_BYTES = 64
 #: Substeps per launch of the main kernel (even: the ping-pong ends in the first buffer).
-SUBSTEPS_PER_LAUNCH = 2  # the per-pack body unrolls the stencil: 8 per launch compiled 29 s cold (128x128), 2 in 3.5 s, as fast
+#: (The per-pack body unrolls the stencil: 8 per launch compiled in 29 s cold at 128x128, 2 in 3.5 s, and ran
+#: as fast.)
+SUBSTEPS_PER_LAUNCH = 2
 #: Most packs (batch x band rows x nx: L particles each) that "auto" runs on one thread, every substep in
 #: one launch: up to it a barrier per substep (about 0.14 ms on 2 vCPUs) costs more than the second thread
 #: gives. In packs, not particles, since a substep's time follows the packs (one vector op per pack): on a
@@ -215,7 +218,8 @@ def supports(model, dtype, lanes="auto") -> bool:
 class _Pool:
     """The ndarrays of one (float type, dimension): state (4 D, cap) lanes [x, v, xs, vs components],
     mass (3, cap) lanes [mass, inverse mass, 1 free / 0 pinned], prm [gravity, rho, k, rest, damp] (a pack's
-    force sum stays in registers). Ndarrays, not fields: the run kernels compile with vector code generation (:mod:`tianim.kernels.simd`)."""
+    force sum stays in registers). Ndarrays, not fields: the run kernels compile with vector code generation
+    (:mod:`tianim.kernels.simd`)."""
 
     def __init__(self, ti, real, dim, lanes, capacity):
         lane_vec = ti.types.vector(lanes, real)
