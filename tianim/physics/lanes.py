@@ -109,7 +109,7 @@ from tianim.kernels.simd import vector_codegen
 from tianim.kernels.tasks import task_funcs
 from tianim.physics.model import GRID_STENCIL
 from tianim.runtime import current_arch, num_threads
-from tianim.physics.packed import I_BAND, I_NX, I_NY, I_ROWS, I_SRC, pack_params
+from tianim.physics.packed import I_BAND, I_NX, I_NY, I_PATIENCE, I_ROWS, I_SRC, pack_params
 
 #: Vector register width [bytes] of the host's widest float SIMD, by CPU flag (``/proc/cpuinfo``); SSE2 (16)
 #: is the x86-64 baseline. Taichi compiles kernel bodies for the host CPU, so a vector of that many bytes
@@ -460,17 +460,17 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     @ti.kernel
     def run_tickets(S: lanes_arr, M: lanes_arr, prm: t.real_arr, coll: t.real2_arr, I: t.int_arr, dt: real,
-                    nsub: ti.i32, workers: ti.i32, patience: ti.i32, C: t.int_arr):
+                    nsub: ti.i32, workers: ti.i32, C: t.int_arr):
         # Every substep of the call in one launch on `workers` tasks. Ticket g is pack row g % rows of substep
         # g // rows; C[0] counts the tickets taken, C[TICKET_LINE] the rows finished. A worker looks at the next
         # ticket and takes it (an atomic add: it may get a later one) once every row of its previous substep is
         # done; then it waits, if it must, for the previous substep of the ticket it got, runs the row and
         # counts it. Deadlock-free however the tasks are scheduled: no worker waits on a ticket not yet taken,
-        # and a worker alone takes every ticket in order. A worker that looks `patience` times in a row without
+        # and a worker alone takes every ticket in order. A worker that looks ``I[I_PATIENCE]`` times in a row without
         # finding a ticket ready (another worker holds the rows it needs, or the tickets are all taken) leaves the
         # launch holding no ticket: the rest finish without it, so a worker descheduled by another process
         # stalls the others for at most that long instead of a time slice of spinning.
-        rows, nx, ny, H = I[I_ROWS], I[I_NX], I[I_NY], I[I_BAND]
+        rows, nx, ny, H, patience = I[I_ROWS], I[I_NX], I[I_NY], I[I_BAND], I[I_PATIENCE]
         C[0] = 0
         C[TICKET_LINE] = 0
         total = nsub * rows
@@ -525,7 +525,7 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
                          f"{current_arch()!r}; use layout='lanes' or 'lanes_parallel' there")
     S, M, prm = pool.state, pool.mass, pool.prm
     _, I = pack_params(state.dtype, model.dim, nx=g.nx, ny=g.ny, band=H, rows=state.batch * H,
-                       src=substeps % 2)  # src: the buffer the last substep writes
+                       src=substeps % 2, patience=TICKET_PATIENCE)  # src: the buffer the last substep writes
     pack(S, M, prm, state.x, state.v, state.pinned.view(np.uint8), data["params"], I)
     dt = float(state.dtype.type(dt))  # a Python float of the state dtype's value (quadrants caches on primitives)
     args = (S, M, prm, data["coll"], I, dt)
@@ -542,7 +542,7 @@ def launch_lanes(model, state, dt: float, substeps: int, data, path: str = "auto
         return
     workers = max(1, min(num_threads() or 1, state.batch * H)) if cpu else state.batch * H  # GPU: a row each
     if path == "tickets":
-        runs["tickets"](*args, substeps, workers, TICKET_PATIENCE, pool.tickets)
+        runs["tickets"](*args, substeps, workers, pool.tickets)
         unpack(S, state.x, state.v, I)
         return
     for _ in range(substeps // SUBSTEPS_PER_LAUNCH):

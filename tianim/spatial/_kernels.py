@@ -21,6 +21,8 @@ from tianim.kernels.tasks import task_funcs
 #: (float64, ``query`` and ``query_nearest``) and the exclude-self flag (int32, 0 or 1, ``query_nearest``;
 #: ``query`` takes it as a compile-time flag).
 RADIUS, EXCLUDE_SELF = 0, 0
+#: Named offset past the grid's own entries of ``dims`` of ``query_chunks``: the sorted rows per chunk (int32).
+CHUNK_ROWS = 1
 
 
 #: Local buffer sizes of the query's stage (``grid_kernels().query``), one compiled variant each; rows of more
@@ -172,10 +174,10 @@ def grid_kernels(real_name: str, dim: int):
 
     @ti.kernel
     def query_chunks(xs: t.vec_arr, order: i32_2, start: i32_2, geom: f64_1, dims: i32_1, stage: ti.template(),
-                     rows: ti.i32, nbr: i32_3, flat: i32_2, count: i32_2):
+                     nbr: i32_3, flat: i32_2, count: i32_2):
         """``query`` of the built points with ``exclude_self``, ``half`` and ``sorted_rows`` (what
-        ``NeighbourGrid.pairs`` asks for), the output packed: the sorted rows are cut into chunks of ``rows``
-        rows, one task each (:mod:`tianim.kernels.tasks`), and chunk c of copy b writes its rows' first
+        ``NeighbourGrid.pairs`` asks for), the output packed: the sorted rows are cut into chunks of ``rows`` =
+        ``dims[D + CHUNK_ROWS]`` rows, one task each (:mod:`tianim.kernels.tasks`), and chunk c of copy b writes its rows' first
         min(n, K) entries one after the other from flat[b, c rows K] on (``flat`` (B, Q K) is ``nbr`` (B, Q, K)
         flattened: the same memory). The entries and counts are those of ``query``; only where they lie
         differs: a row's hits take their own length instead of a K-slot row, so the writes and the pair
@@ -183,6 +185,7 @@ def grid_kernels(real_name: str, dim: int):
         128 bytes). Needs a stage (``stage != 0``)."""
         r = geom[dim + 1 + RADIUS]
         r2 = ti.cast(r, real) * ti.cast(r, real)
+        rows = dims[dim + CHUNK_ROWS]
         B, Q, cap = xs.shape[0], xs.shape[1], nbr.shape[2]
         chunks = (Q + rows - 1) // rows
         stride = task_stride(B * chunks)
@@ -375,12 +378,15 @@ def chunk_pair_kernels():
     @ti.kernel
     def chunk_pairs(flat: ti.types.ndarray(dtype=ti.i32, ndim=1), count: ti.types.ndarray(dtype=ti.i32, ndim=1),
                     order: ti.types.ndarray(dtype=ti.i32, ndim=1), first: ti.types.ndarray(dtype=ti.i64, ndim=1),
-                    rows: ti.i32, cap: ti.i32, out: ti.types.ndarray(dtype=ti.i64, ndim=2)):
-        """Chunk c's rows s (sorted positions c rows .. ) hold count[s] entries j each, packed from flat[c rows cap]
-        on; they go to out[first[c] ..] as (min(i, j), max(i, j)), i = order[s] (no row overflows: the caller
+                    chunk_rows: ti.types.ndarray(dtype=ti.i32, ndim=1), out: ti.types.ndarray(dtype=ti.i64, ndim=2)):
+        """Chunk c's rows s (sorted positions c rows .., rows = chunk_rows[0]) hold count[s] entries j each,
+        packed from flat[c rows K] on (K = flat.shape[0] // count.shape[0]: ``query_chunks``'s rows of K slots);
+        they go to out[first[c] ..] as (min(i, j), max(i, j)), i = order[s] (no row overflows: the caller
         checked). One task per chunk."""
         Q = count.shape[0]
         chunks = first.shape[0]
+        rows = chunk_rows[0]
+        cap = flat.shape[0] // Q
         stride = task_stride(chunks)
         for w in range(chunks * stride):
             c = item_of(w, stride)

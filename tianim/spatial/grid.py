@@ -187,12 +187,13 @@ class NeighbourGrid:
         self.n_cells = n_cells
         self._geom = np.concatenate([lo, [h]]).astype(np.float64)
         # the queries' packed grid arguments (kernels.grid.pack_grid): geom then the radius, dims then the
-        # exclude-self flag, at the named offsets of tianim.spatial._kernels (written per query, not reallocated)
+        # exclude-self flag and the chunk rows of pairs(), at the named offsets of tianim.spatial._kernels
+        # (written per query, not reallocated)
         from tianim.kernels.grid import pack_grid
 
         self._qgeom = np.zeros(lo.size + 2, np.float64)
-        self._qdims = np.zeros(lo.size + 1, np.int32)
-        pack_grid(self._qgeom, self._qdims, self._geom, self.dims, (0.0,), (0,))
+        self._qdims = np.zeros(lo.size + 2, np.int32)  # + EXCLUDE_SELF, CHUNK_ROWS (tianim.spatial._kernels)
+        pack_grid(self._qgeom, self._qdims, self._geom, self.dims, (0.0,), (0, PAIR_CHUNK_ROWS))
         B, N, D = self.batch, self.n_points, self.dim
         self.cell = np.zeros((B, N), np.int32)
         self.start = np.zeros((B, n_cells + 2), np.int32)  # + the cell of inactive points
@@ -377,8 +378,11 @@ class NeighbourGrid:
         geom, dims = self._query_args(r)
         stage = self._stage
         if stage:  # the rows packed chunk by chunk (grid_kernels().query_chunks)
-            query_chunks(self.sorted_x, self.order, self.start, geom, dims, stage, PAIR_CHUNK_ROWS, nbr,
-                         nbr.reshape(self.batch, -1), count)
+            from tianim.spatial._kernels import CHUNK_ROWS
+
+            dims[self.dim + CHUNK_ROWS] = PAIR_CHUNK_ROWS  # (read here: a test sets the module's value)
+            query_chunks(self.sorted_x, self.order, self.start, geom, dims, stage, nbr, nbr.reshape(self.batch, -1),
+                         count)
         else:
             query(self._built, self.sorted_x, self.order, self.start, geom, dims, 1, 1, 1, 0, nbr, count)
         rows = NeighbourList(nbr, count, self.max_neighbours)
@@ -398,8 +402,8 @@ class NeighbourGrid:
         np.cumsum(totals[:-1], out=first[1:])
         out = np.empty((int(totals.sum()), 2), np.int64)
         if len(out):
-            chunk_pair_kernels()(nbr[b].reshape(-1), counts, self.order[b], first, PAIR_CHUNK_ROWS,
-                                 self.max_neighbours, out)
+            chunk_pair_kernels()(nbr[b].reshape(-1), counts, self.order[b], first,
+                                 np.array([PAIR_CHUNK_ROWS], np.int32), out)
         return out
 
     def query_nearest(self, k, radius, points: np.ndarray | None = None):
