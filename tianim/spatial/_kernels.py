@@ -177,11 +177,11 @@ def grid_kernels(real_name: str, dim: int):
                      nbr: i32_3, flat: i32_2, count: i32_2):
         """``query`` of the built points with ``exclude_self``, ``half`` and ``sorted_rows`` (what
         ``NeighbourGrid.pairs`` asks for), the output packed: the sorted rows are cut into chunks of ``rows`` =
-        ``dims[D + CHUNK_ROWS]`` rows, one task each (:mod:`tianim.kernels.tasks`), and chunk c of copy b writes its rows' first
-        min(n, K) entries one after the other from flat[b, c rows K] on (``flat`` (B, Q K) is ``nbr`` (B, Q, K)
-        flattened: the same memory). The entries and counts are those of ``query``; only where they lie
-        differs: a row's hits take their own length instead of a K-slot row, so the writes and the pair
-        pass's reads touch about a fifth of the cache lines at 1 M points (5 hits per row, K = 32: 20 of
+        ``dims[D + CHUNK_ROWS]`` rows, one task each (:mod:`tianim.kernels.tasks`), and chunk c of copy b writes
+        its rows' first min(n, K) entries one after the other from flat[b, c rows K] on (``flat`` (B, Q K) is
+        ``nbr`` (B, Q, K) flattened: the same memory). The entries and counts are those of ``query``; only
+        where they lie differs: a row's hits take their own length instead of a K-slot row, so the writes and
+        the pair pass's reads touch about a fifth of the cache lines at 1 M points (5 hits per row, K = 32: 20 of
         128 bytes). Needs a stage (``stage != 0``)."""
         r = geom[dim + 1 + RADIUS]
         r2 = ti.cast(r, real) * ti.cast(r, real)
