@@ -341,10 +341,18 @@ def nearest_kernels(real_name: str, dim: int):
 
 @cached_variants
 def pair_kernels():
-    """``pairs``: the neighbour rows of one copy written out as (min, max) index pairs in row order."""
+    """``(pairs, chunk_pairs)``: neighbour rows of one copy written out as (min, max) index pairs in row order,
+    from K-slot rows (``pairs``) or from the packed rows of ``query_chunks`` (``chunk_pairs``)."""
     from tianim import _ti
 
     ti = _ti.get()
+    task_stride, item_of = task_funcs()
+
+    @ti.func
+    def write_pair(out: ti.template(), o, i, j):
+        """out[o] = (min(i, j), max(i, j)) as int64."""
+        out[o, 0] = ti.cast(ti.min(i, j), ti.i64)
+        out[o, 1] = ti.cast(ti.max(i, j), ti.i64)
 
     @ti.kernel
     def pairs(nbr: ti.types.ndarray(dtype=ti.i32, ndim=2), count: ti.types.ndarray(dtype=ti.i32, ndim=1),
@@ -358,22 +366,7 @@ def pair_kernels():
                 i = rows[r]
             o = offsets[r]
             for k in range(count[r]):
-                j = nbr[r, k]
-                out[o + k, 0] = ti.cast(ti.min(i, j), ti.i64)
-                out[o + k, 1] = ti.cast(ti.max(i, j), ti.i64)
-
-    return pairs
-
-
-@cached_variants
-def chunk_pair_kernels():
-    """``chunk_pairs``: the packed rows of ``query_chunks`` (one copy) written out as (min, max) index pairs in
-    row order."""
-    from tianim import _ti
-    from tianim.kernels.tasks import task_funcs
-
-    ti = _ti.get()
-    task_stride, item_of = task_funcs()
+                write_pair(out, o + k, i, nbr[r, k])
 
     @ti.kernel
     def chunk_pairs(flat: ti.types.ndarray(dtype=ti.i32, ndim=1), count: ti.types.ndarray(dtype=ti.i32, ndim=1),
@@ -396,10 +389,8 @@ def chunk_pair_kernels():
                 for s in range(c * rows, ti.min(Q, (c + 1) * rows)):
                     i = order[s]
                     for m in range(count[s]):
-                        j = flat[src + m]
-                        out[o + m, 0] = ti.cast(ti.min(i, j), ti.i64)
-                        out[o + m, 1] = ti.cast(ti.max(i, j), ti.i64)
+                        write_pair(out, o + m, i, flat[src + m])
                     src += count[s]
                     o += count[s]
 
-    return chunk_pairs
+    return pairs, chunk_pairs

@@ -118,7 +118,8 @@ class NeighbourList:
         np.cumsum(counts[:-1], out=offsets[1:])
         out = np.empty((int(offsets[-1] + counts[-1]) if counts.size else 0, 2), np.int64)
         if len(out):
-            pair_kernels()(self.indices[b], counts, offsets, counts if rows is None else rows, rows is None, out)
+            pair_kernels()[0](self.indices[b], counts, offsets, counts if rows is None else rows, rows is None,
+                              out)
         return out
 
 
@@ -193,7 +194,7 @@ class NeighbourGrid:
 
         self._qgeom = np.zeros(lo.size + 2, np.float64)
         self._qdims = np.zeros(lo.size + 2, np.int32)  # + EXCLUDE_SELF, CHUNK_ROWS (tianim.spatial._kernels)
-        pack_grid(self._qgeom, self._qdims, self._geom, self.dims, (0.0,), (0, PAIR_CHUNK_ROWS))
+        pack_grid(self._qgeom, self._qdims, self._geom, self.dims, (0.0,), (0, 0))  # filled by _query_args
         B, N, D = self.batch, self.n_points, self.dim
         self.cell = np.zeros((B, N), np.int32)
         self.start = np.zeros((B, n_cells + 2), np.int32)  # + the cell of inactive points
@@ -224,12 +225,14 @@ class NeighbourGrid:
         return self._geom, self.dims, self.cell, self.start, self.order, self.sorted_x
 
     def _query_args(self, r: float, exclude: int = 0) -> tuple:
-        """``(geom, dims)`` of the query kernels: the grid's with the radius ``r`` [m] and the exclude-self flag
-        (0 or 1) written at their named offsets (``tianim.spatial._kernels.RADIUS``, ``EXCLUDE_SELF``)."""
-        from tianim.spatial._kernels import EXCLUDE_SELF, RADIUS
+        """``(geom, dims)`` of the query kernels: the grid's with the radius ``r`` [m], the exclude-self flag
+        (0 or 1) and the chunk rows of ``pairs`` (:data:`PAIR_CHUNK_ROWS`) written at their named offsets
+        (``tianim.spatial._kernels.RADIUS``, ``EXCLUDE_SELF``, ``CHUNK_ROWS``)."""
+        from tianim.spatial._kernels import CHUNK_ROWS, EXCLUDE_SELF, RADIUS
 
         self._qgeom[self.dim + 1 + RADIUS] = r
         self._qdims[self.dim + EXCLUDE_SELF] = exclude
+        self._qdims[self.dim + CHUNK_ROWS] = PAIR_CHUNK_ROWS
         return self._qgeom, self._qdims
 
     @property
@@ -378,9 +381,6 @@ class NeighbourGrid:
         geom, dims = self._query_args(r)
         stage = self._stage
         if stage:  # the rows packed chunk by chunk (grid_kernels().query_chunks)
-            from tianim.spatial._kernels import CHUNK_ROWS
-
-            dims[self.dim + CHUNK_ROWS] = PAIR_CHUNK_ROWS  # (read here: a test sets the module's value)
             query_chunks(self.sorted_x, self.order, self.start, geom, dims, stage, nbr, nbr.reshape(self.batch, -1),
                          count)
         else:
@@ -394,16 +394,16 @@ class NeighbourGrid:
                 "max_neighbours or a smaller radius")
         if not stage:
             return rows._pair_rows(b, self.order[b])
-        from tianim.spatial._kernels import chunk_pair_kernels
+        from tianim.spatial._kernels import CHUNK_ROWS, pair_kernels
 
         counts = count[b]
-        totals = np.add.reduceat(counts, np.arange(0, counts.size, PAIR_CHUNK_ROWS), dtype=np.int64)
+        chunk_rows = dims[self.dim + CHUNK_ROWS:]  # (1,): the kernels' chunk size, as _query_args wrote it
+        totals = np.add.reduceat(counts, np.arange(0, counts.size, int(chunk_rows[0])), dtype=np.int64)
         first = np.zeros(totals.size, np.int64)
         np.cumsum(totals[:-1], out=first[1:])
         out = np.empty((int(totals.sum()), 2), np.int64)
         if len(out):
-            chunk_pair_kernels()(nbr[b].reshape(-1), counts, self.order[b], first,
-                                 np.array([PAIR_CHUNK_ROWS], np.int32), out)
+            pair_kernels()[1](nbr[b].reshape(-1), counts, self.order[b], first, chunk_rows, out)
         return out
 
     def query_nearest(self, k, radius, points: np.ndarray | None = None):
