@@ -190,25 +190,25 @@ def lane_contact_funcs(real_name: str, dim: int, lanes: int):
 
 @cached_variants
 def lane_contact_response(real_name: str, dim: int, lanes: int):
-    """A ``ti.func lane_respond(S, xrow, vrow, p, free, coll, g_norm, dt)``: :func:`contact_response`'s
-    ``respond`` on ``lanes`` particles at once, in the SIMD-lane layouts (:mod:`tianim.physics.lanes`,
+    """A ``ti.func lane_respond(x, v, free, coll, g_norm, dt)``: :func:`contact_response`'s ``respond`` on
+    ``lanes`` particles at once, in the SIMD-lane layouts (:mod:`tianim.physics.lanes`,
     :mod:`tianim.physics.xpbd_lanes`), from :func:`lane_contact_funcs`.
 
-    ``S`` is a field or ndarray of L-lane vectors; the particle positions are rows ``xrow .. xrow + dim - 1`` of column
-    ``p``, the velocities rows ``vrow ..``; ``free`` (an L-lane mask) selects the lanes that respond (the
-    others keep every bit). ``respond``'s branch on ``phi < 0`` is a select; a collider's kind is the same
-    for every lane (a branch outside the vector code). One vector copy of the response, where a response per
-    lane inlines L scalar copies (half the XPBD lanes kernel's compile time at 8 lanes)."""
+    ``x`` and ``v`` are lists of ``dim`` L-lane vectors (the positions and velocities, one per axis), passed as
+    template arguments and updated in place (the caller loads and stores them, whatever its pool's layout);
+    ``free`` (an L-lane mask) selects the lanes that respond (the others keep every bit). ``respond``'s branch
+    on ``phi < 0`` is a select; a collider's kind is the same for every lane (a branch outside the vector
+    code). One vector copy of the response, where a response per lane inlines L scalar copies (half the XPBD
+    lanes kernel's compile time at 8 lanes)."""
     t = kernel_types(real_name, dim)
     ti, real = t.ti, t.real
+    T = ti.template()
     _, lane_surface, lane_bounce = lane_contact_funcs(real_name, dim, lanes)
 
     @ti.func
-    def lane_respond(S: ti.template(), xrow, vrow, p, free, coll: ti.template(), g_norm, dt):
+    def lane_respond(x: T, v: T, free, coll: T, g_norm, dt):
         v_rest = 2 * g_norm * dt
         zero = ti.Vector.zero(real, lanes)
-        x = [S[xrow + a, p] for a in ti.static(range(dim))]
-        v = [S[vrow + a, p] for a in ti.static(range(dim))]
         n = [zero for _ in ti.static(range(dim))]
         vb = [zero for _ in ti.static(range(dim))]
         for c in range(coll.shape[0]):
@@ -221,8 +221,5 @@ def lane_contact_response(real_name: str, dim: int, lanes: int):
             lane_bounce(v, n, coll[c, 1], coll[c, 2], v_rest, vb)
             for a in ti.static(range(dim)):
                 v[a] = ti.select(inside, vb[a], v[a])
-        for a in ti.static(range(dim)):
-            S[xrow + a, p] = x[a]
-            S[vrow + a, p] = v[a]
 
     return lane_respond

@@ -270,7 +270,12 @@ def lane_funcs(real_name, L, spring_damping, medium_damping, colliders):
             for a in ti.static(range(dim)):
                 S[ROW_V + a, p] = ti.select(free, S[ROW_DX + a, p] / h, S[ROW_V + a, p])
             if ti.static(colliders):
-                lane_respond(S, ROW_X, ROW_V, p, free, coll, g_norm, h)
+                xl = [S[ROW_X + a, p] for a in ti.static(range(dim))]
+                vl = [S[ROW_V + a, p] for a in ti.static(range(dim))]
+                lane_respond(xl, vl, free, coll, g_norm, h)
+                for a in ti.static(range(dim)):
+                    S[ROW_X + a, p] = xl[a]
+                    S[ROW_V + a, p] = vl[a]
 
     @ti.func
     def pack_copy(S: T, b, x: T, v: T, pinned: T, inv_mass: T, nx, H):
