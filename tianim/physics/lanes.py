@@ -61,13 +61,16 @@ Where the time goes. Per pack and offset the body is straight-line vector code: 
 neighbour component, one square root and one division per L lanes, no branch and no division of integers.
 Against the cloth bench's vectorising numba kernel (its row views, one division per spring, ``s / |d|``,
 where tianim's arithmetic, ``1 / |d|`` then a product per component, is kept for bit-identity with the other
-layouts): on the 2-vCPU AVX2 host at 128x128, one thread 22.8 ns per particle-substep against numba's 18.9
-(0.83x; 0.6x before the per-pack body). On two threads (a quiet run) numba's OpenMP workers spin between its
-``prange`` calls (5 us a call there, a Taichi parallel loop about 30 us): numba 12.1 ns, the ticket path
-13.9 ns (0.87x; 256x256: 13.0 against 10.2 ns, 0.78x; 512x512: 0.39x, where numba's row views stream from
-memory and the packs' neighbour rows do not), the parallel path 22.9 ns (0.53x). An earlier AVX-512 host
-(16 lanes, the offset-by-offset sweep) ran one thread at about numba's rate (128x128: 5.6 ns per
-particle-substep).
+layouts), on the 2-vCPU AVX2 host, pack-major pool, 2 threads (interleaved rounds, medians, two quiet
+runs): the ticket path 0.97-1.02x numba at 64x64, 0.99-1.00x at 128x128, 0.92-0.96x at 256x256 and
+0.40-0.46x at 512x512 (numba's five row views stay in L1 there, each 512 particles of 12 bytes a
+component; a pack row is 512 packs), the parallel path 0.54-0.56x at 128x128 (numba's OpenMP workers spin
+between ``prange`` calls, 5 us a call, where a Taichi parallel loop costs about 30 us). One thread, before
+the padding of :func:`block_width`: 21.1 against numba's 19.1 ns per particle-substep at 128x128 (0.9x;
+0.6x before the per-pack body). Column strips of 16-128 packs (each substep swept strip by strip, to keep
+the stencil's pack rows in L2) were measured and not kept: within 10 % of full rows, either way. An earlier
+AVX-512 host (16 lanes, the offset-by-offset sweep) ran one thread at about numba's rate (128x128: 5.6 ns
+per particle-substep).
 
 A call packs the state (one parallel loop), runs its substeps ping-ponging between two buffers of
 the pool, and unpacks. Up to :data:`SERIAL_MAX_PACKS` (batch x band rows x nx) one thread runs every
@@ -223,8 +226,10 @@ def supports(model, dtype, lanes="auto") -> bool:
 
 def block_width(dim: int) -> int:
     """L-lane vectors per pack in the pool (:class:`_Pool`): x and v of the two ping-pong buffers, then
-    mass, inverse mass and free."""
-    return 4 * dim + 3
+    mass, inverse mass and free, padded to a multiple of 4 (16 in 3-D, 12 in 2-D): with 32-byte vectors
+    every block then starts on a cache line and a pack's x and v of one buffer fill 3 lines (3-D) instead of
+    3 or 4 (same-run A/B, 2-vCPU AVX2 host, one thread: 1.07-1.08x at 128x128, 1.09-1.13x at 512x512)."""
+    return -(-(4 * dim + 3) // 4) * 4
 
 
 class _Pool:
