@@ -37,9 +37,9 @@ The state of a call lives in a pool of ndarrays of L-lane vectors:
 * the pool is pack-major: each pack's x and v of both ping-pong buffers, its mass, inverse mass and free
   flag are one block of :func:`block_width` vectors (pack kp's vector q at ``kp W + q``, W a compile-time
   constant), so a neighbour is a few consecutive vectors at a constant offset from the pack's own and a
-  row's sweep reads one stream per stencil row. It replaced one ndarray row per component (``S[q, kp]``):
-  30 concurrent streams and a runtime row stride; same-run A/B on a 2-vCPU AVX2 host, one thread,
-  bit-identical: 1.31x faster at 128x128, 1.24x at 256x256;
+  row's sweep reads one stream per stencil row. It replaced one ndarray row per component
+  (``S[q, kp]``): 27 concurrent streams (39 with spring damping) and a runtime row stride; same-run A/B
+  on a 2-vCPU AVX2 host, one thread, bit-identical: 1.31x faster at 128x128, 1.24x at 256x256;
 * one parallel-loop index is a row of packs (``nx`` packs): one integer division per row, none per pack.
   The row is swept pack by pack, each pack's force in registers: it starts at ``m g`` (minus medium
   damping), then the 12 offsets of :data:`GRID_STENCIL`, in its order, unrolled at compile time (each
@@ -341,9 +341,9 @@ def lane_kernels(real_name, dim, L, colliders, spring_damping, medium_damping):
 
     @ti.func
     def write_ghosts(S: ti.template(), q0, kp, r, nx, H):
-        """Copy the x, v components (vectors q0 .. q0 + 2 dim of the block) of pack kp at band row r into the ghost packs
-        that stand for it: band row rr = r - H (r >= H - 2; lane l holds lane l - 1 of pack r, the particle
-        H rows further down) and rr = r + H (r < 2; lane l holds lane l + 1). A neighbour at any band row
+        """Copy the x, v components (vectors q0 .. q0 + 2 dim of the block) of pack kp at band row r into the
+        ghost packs that stand for it: band row rr = r - H (r >= H - 2; lane l holds lane l - 1 of pack r, the
+        particle H rows further down) and rr = r + H (r < 2; lane l holds lane l + 1). A neighbour at any band row
         rr in [-2, H + 2) is then the pack kp + (rr - r) nx, lane for lane: one vector load, no branch.
         The lanes shifted in from beyond the band (lane 0 below, lane L - 1 above) repeat their neighbour and
         are never used (their global row lies outside [0, ny): masked by substep_row)."""
