@@ -14,7 +14,7 @@ from tianim.kernels.contact import contact_response
 from tianim.physics import passes
 from tianim.physics.model import GRID_FORWARD as FORWARD
 from tianim.physics import packed
-from tianim.physics.packed import C_LIM, C_REBUILT, C_RUN, I_KEXCL, I_NY, P_GNORM, P_MARGIN, P_THICK, P_VCAP
+from tianim.physics.packed import C_LIM, C_REBUILT, C_RUN, I_BAND, I_KEXCL, P_GNORM, P_MARGIN, P_THICK, P_VCAP
 from tianim.physics.selfcollision import contact_update_funcs, contacts_for
 from tianim.physics import xpbd_lanes
 from tianim.physics.xpbd import _kernels, scalar_funcs
@@ -74,7 +74,7 @@ def _contact_kernel(real_name, dim, copy_substep, sc_iters, grid, colliders, ser
                          xs: vec_arr, G: f64_1, dims: int_arr):
         g, rho, h, g_norm, nx, n_springs, iters = scalars(P, I)
         thick, g_norm_c, margin, vcap, k_excl = P[P_THICK], P[P_GNORM], P[P_MARGIN], P[P_VCAP], I[I_KEXCL]
-        H = I[I_NY] // ti.static(max(L, 1))  # band rows of the lanes layout
+        H = I[I_BAND]  # band rows of the lanes layout (0 without lanes)
         inv_h = 1 / h
         n = x.shape[1]
         stride = task_stride(x.shape[0])
@@ -151,7 +151,8 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
     # one variant then serves a single env and its vector env (a wake-up costs microseconds a launch)
     kernels = _kernels(dtype.name, model.dim, grid, model.has_spring_damping, model.medium_damping > 0,
                        len(model.colliders) > 0, bool(compensated), sc_iters, False, state.batch == 1 and not L, L)
-    S = xpbd_lanes.pool(dtype.name, L, state.batch * model.grid.nx * (model.grid.ny // L)) if L else 0
+    H = model.grid.ny // L if L else 0  # band rows (xpbd_lanes.supports: ny = L H)
+    S = xpbd_lanes.pool(dtype.name, L, state.batch * model.grid.nx * H) if L else 0
     edges = not grid and model.n_springs > 0
     n_lam = model.n_particles * len(FORWARD) if grid else max(1, model.n_springs)
     lam = buffer("lambda", (state.batch, n_lam), dtype)
@@ -171,7 +172,7 @@ def run_xpbd_contact(model, state, dt: float, substeps: int, iterations: int, se
                            g_norm=float(np.linalg.norm(model.gravity)),
                            margin=self_collision.query_margin * (1 - 1e-5), vcap=0.0 if cap is None else cap,
                            rho=model.medium_damping, g=model.gravity, nx=nx, ny=ny, k_excl=contacts.k_excl,
-                           n_springs=model.n_springs if edges else 0, iters=int(iterations))
+                           n_springs=model.n_springs if edges else 0, iters=int(iterations), band=H)
     cs = buffer("contact_state", (state.batch, 3), np.int32)
     left = np.full(state.batch, int(substeps), np.int64)
     kernel = kernels["per_copy_contact"]
